@@ -1,0 +1,1 @@
+"""Inverse reconstruction with ks_jax (MODEL.md section 6, `ks-jax fit`)."""

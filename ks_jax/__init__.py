@@ -1,0 +1,45 @@
+"""ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
+
+See MODEL.md (the contract) for frames, equations and result names. Public surface:
+``Vehicle``, ``State``, ``Contact``, ``exchange``, ``load_case``, ``solve``, ``units``.
+"""
+
+from . import units
+from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case, load_cases, set_input
+from .exchange import exchange
+from .solve import Solution, solve, solve_inputs
+from .types import (
+    Contact,
+    ContactResult,
+    ExchangeResult,
+    State,
+    Vehicle,
+    VehicleResult,
+    normal_from_angles,
+    status_text,
+)
+
+__all__ = [
+    "Case",
+    "CaseError",
+    "CaseInputs",
+    "Solution",
+    "get_input",
+    "get_output",
+    "load_case",
+    "load_cases",
+    "set_input",
+    "solve",
+    "solve_inputs",
+    "Contact",
+    "ContactResult",
+    "ExchangeResult",
+    "State",
+    "Vehicle",
+    "VehicleResult",
+    "exchange",
+    "normal_from_angles",
+    "status_text",
+    "units",
+]
+__version__ = "0.1.0"

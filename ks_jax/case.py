@@ -1,0 +1,502 @@
+"""Case files <-> pytrees (MODEL.md sections 2 and 6). Units exist only here and in reports.
+
+A case is read into ``CaseInputs``: one pytree of SI arrays (angles in rad, rates in rad/s)
+that holds every scalar a user may vary, sweep or fit. ``to_pytrees`` turns it into the
+kernel's (Vehicle, State, Vehicle, State, Contact); ``input_path``/``set_input`` and
+``output_path`` address single numbers by the paths of MODEL.md ("vehicles[1].speed",
+"contact.point[0]", "vehicles[0].delta_v_body[0]").
+
+Errors name the case, the field path, the value and the rule, and raise ``CaseError``.
+In a file with several cases, a bad case is kept as an invalid ``Case`` (its ``error`` says
+why) so that the others are still solved.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from . import units as U
+from .types import Contact, State, Vehicle, normal_from_angles
+
+
+class CaseError(ValueError):
+    """A user error in a case file or case dict; the message is meant for the user."""
+
+
+class VehicleInputs(NamedTuple):
+    """One vehicle's inputs, SI. inertia is always (3, 3) (body frame); velocity is held as
+    horizontal ``speed``, ``course`` and ``velocity_z``; angular_velocity (3,) rad/s, global."""
+
+    mass: Any
+    inertia: Any
+    length: Any
+    width: Any
+    height: Any
+    cg_to_front: Any
+    cg_height: Any
+    position: Any
+    yaw: Any
+    pitch: Any
+    roll: Any
+    speed: Any
+    course: Any
+    velocity_z: Any
+    angular_velocity: Any
+
+
+class ContactInputs(NamedTuple):
+    """point (3,) m; normal: azimuth (rad); normal_pitch (rad); restitution; friction;
+    penetration_time (s). point/normal are placeholders (zeros) under automatic contact."""
+
+    point: Any
+    normal: Any
+    normal_pitch: Any
+    restitution: Any
+    friction: Any
+    penetration_time: Any
+
+
+class CaseInputs(NamedTuple):
+    vehicles: tuple
+    contact: ContactInputs
+
+
+@dataclass(frozen=True)
+class Case:
+    """One case: its name, its inputs (None if invalid), and which contact parts are automatic."""
+
+    name: str
+    inputs: CaseInputs | None
+    auto_point: bool = False
+    auto_normal: bool = False
+    vehicle_names: tuple = ("vehicle 1", "vehicle 2")
+    error: str | None = None
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+    source: str | None = None
+
+    @property
+    def valid(self) -> bool:
+        return self.error is None
+
+
+# ---------------------------------------------------------------------------------------
+# what each field is
+
+VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
+    "mass": ("mass", None),
+    "weight": ("force", None),
+    "inertia": ("inertia", "inertia"),
+    "length": ("length", None),
+    "width": ("length", None),
+    "height": ("length", None),
+    "cg_to_front": ("length", None),
+    "cg_height": ("length", None),
+    "position": ("length", "vec23"),
+    "yaw": ("angle", None),
+    "pitch": ("angle", None),
+    "roll": ("angle", None),
+    "velocity": ("velocity", "vec23"),
+    "speed": ("velocity", None),
+    "course": ("angle", None),
+    "yaw_rate": ("angular_velocity", None),
+    "angular_velocity": ("angular_velocity", "vec3"),
+}
+CONTACT_FIELDS = {
+    "point": ("length", "vec3"),
+    "normal": ("angle", "normal"),
+    "normal_pitch": ("angle", None),
+    "restitution": ("dimensionless", None),
+    "friction": ("dimensionless", None),
+    "penetration_time": ("time", None),
+}
+TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "contact", "unknowns", "evidence", "options",
+               "reference"}
+
+# kind of every scalar input path's leaf (for unit strings in sweeps and fits)
+INPUT_KINDS = {
+    "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",
+    "cg_to_front": "length", "cg_height": "length", "position": "length", "yaw": "angle", "pitch": "angle",
+    "roll": "angle", "speed": "velocity", "course": "angle", "velocity_z": "velocity",
+    "angular_velocity": "angular_velocity", "yaw_rate": "angular_velocity",
+    "point": "length", "normal": "angle", "normal_pitch": "angle", "restitution": "dimensionless",
+    "friction": "dimensionless", "penetration_time": "time",
+}
+# kind of every output field (section 4); "degrees" = reported in degrees
+OUTPUT_KINDS = {
+    "point": "length", "normal": "dimensionless", "time": "time", "impulse": "impulse",
+    "impulse_magnitude": "impulse", "impulse_normal": "impulse", "impulse_tangential": "impulse",
+    "impulse_azimuth": "degrees", "impulse_elevation": "degrees", "sliding": "dimensionless",
+    "closing_velocity": "velocity", "separation_velocity": "velocity", "energy_loss": "energy",
+    "delta_v": "velocity", "delta_v_magnitude": "velocity", "delta_v_body": "velocity",
+    "delta_yaw_rate": "angular_velocity", "velocity_after": "velocity", "speed_after": "velocity",
+    "course_after": "degrees", "angular_velocity_after": "angular_velocity",
+    "yaw_rate_after": "angular_velocity", "pdof": "degrees", "pdof_clock": "dimensionless",
+    "crush": "length", "ees": "velocity",
+}
+
+
+def _where(case_name, path):
+    return f"case '{case_name}': {path}"
+
+
+def _number(value, kind, path, case_name):
+    try:
+        x = U.parse_quantity(value, kind)
+    except U.UnitError as err:
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: {err}") from None
+    if not math.isfinite(x):
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a finite number")
+    return x
+
+
+def _vector(value, kind, path, case_name, sizes):
+    if not isinstance(value, (list, tuple)) or len(value) not in sizes:
+        want = " or ".join(str(s) for s in sizes)
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a list of {want} quantities")
+    return [_number(v, kind, f"{path}[{i}]", case_name) for i, v in enumerate(value)]
+
+
+def _inertia(value, path, case_name):
+    if isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(r, (list, tuple)) for r in value):
+        m = np.array([_vector(r, "inertia", f"{path}[{i}]", case_name, (3,)) for i, r in enumerate(value)])
+        if not np.allclose(m, m.T, rtol=1e-9, atol=0):
+            raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be symmetric")
+        if np.any(np.linalg.eigvalsh(m) <= 0):
+            raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be positive definite")
+        return m
+    moments = _vector(value, "inertia", path, case_name, (3,))
+    for i, x in enumerate(moments):
+        if x <= 0:
+            raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: principal moments of inertia must be positive")
+    return np.diag(moments)
+
+
+def _check_keys(d, allowed, path, case_name):
+    if not isinstance(d, dict):
+        raise CaseError(f"{_where(case_name, path)}: must be a table/object, got {d!r}")
+    for k in d:
+        if k not in allowed:
+            raise CaseError(f"{_where(case_name, path + '.' + k if path else k)}: unknown field "
+                            f"(known: {', '.join(sorted(allowed - {'...'}))})")
+
+
+def _require(d, key, path, case_name):
+    if key not in d:
+        raise CaseError(f"{_where(case_name, path + '.' + key)}: missing field")
+    return d[key]
+
+
+def _positive(x, raw, path, case_name, rule):
+    if not x > 0:
+        raise CaseError(f"{_where(case_name, path)} = {raw!r}: {rule}")
+
+
+def _vehicle_inputs(d, i, case_name):
+    path = f"vehicles[{i}]"
+    _check_keys(d, set(VEHICLE_FIELDS) | TEXT_FIELDS, path, case_name)
+    num = lambda k: _number(d[k], VEHICLE_FIELDS[k][0], f"{path}.{k}", case_name)  # noqa: E731
+    if "mass" in d and "weight" in d:
+        raise CaseError(f"{_where(case_name, path)}: give mass or weight, not both")
+    if "mass" in d:
+        mass = num("mass")
+        _positive(mass, d["mass"], f"{path}.mass", case_name, "mass must be positive")
+    elif "weight" in d:
+        mass = num("weight") / U.G0
+        _positive(mass, d["weight"], f"{path}.weight", case_name, "weight must be positive")
+    else:
+        raise CaseError(f"{_where(case_name, path + '.mass')}: missing field (give mass or weight)")
+    inertia = _inertia(_require(d, "inertia", path, case_name), f"{path}.inertia", case_name)
+    dims = {}
+    for k in ("length", "width", "height", "cg_to_front", "cg_height"):
+        _require(d, k, path, case_name)
+        dims[k] = num(k)
+    for k in ("length", "width", "height"):
+        _positive(dims[k], d[k], f"{path}.{k}", case_name, f"{k} must be positive")
+    if not 0 <= dims["cg_to_front"] <= dims["length"]:
+        raise CaseError(f"{_where(case_name, path + '.cg_to_front')} = {d['cg_to_front']!r}: "
+                        f"must be between 0 and the length ({dims['length']:.4g} m)")
+    if not 0 <= dims["cg_height"] <= dims["height"]:
+        raise CaseError(f"{_where(case_name, path + '.cg_height')} = {d['cg_height']!r}: "
+                        f"must be between 0 and the height ({dims['height']:.4g} m)")
+    pos = _vector(_require(d, "position", path, case_name), "length", f"{path}.position", case_name, (2, 3))
+    if len(pos) == 2:
+        pos.append(dims["cg_height"])
+    yaw = num("yaw") if "yaw" in d else None
+    if yaw is None:
+        raise CaseError(f"{_where(case_name, path + '.yaw')}: missing field")
+    pitch = num("pitch") if "pitch" in d else 0.0
+    roll = num("roll") if "roll" in d else 0.0
+    if "velocity" in d and ("speed" in d or "course" in d):
+        raise CaseError(f"{_where(case_name, path)}: give velocity, or speed (and course), not both")
+    if "velocity" in d:
+        vel = _vector(d["velocity"], "velocity", f"{path}.velocity", case_name, (2, 3))
+        speed, course = math.hypot(vel[0], vel[1]), math.atan2(vel[1], vel[0])
+        vz = vel[2] if len(vel) == 3 else 0.0
+    elif "speed" in d:
+        speed = num("speed")
+        if speed < 0:
+            raise CaseError(f"{_where(case_name, path + '.speed')} = {d['speed']!r}: speed must be >= 0 "
+                            "(reverse the course for backwards travel)")
+        course = num("course") if "course" in d else yaw
+        vz = 0.0
+    else:
+        raise CaseError(f"{_where(case_name, path + '.speed')}: missing field (give speed or velocity)")
+    if "yaw_rate" in d and "angular_velocity" in d:
+        raise CaseError(f"{_where(case_name, path)}: give yaw_rate or angular_velocity, not both")
+    if "angular_velocity" in d:
+        w = _vector(d["angular_velocity"], "angular_velocity", f"{path}.angular_velocity", case_name, (3,))
+    else:
+        w = [0.0, 0.0, num("yaw_rate") if "yaw_rate" in d else 0.0]
+    return VehicleInputs(mass, inertia, dims["length"], dims["width"], dims["height"], dims["cg_to_front"],
+                         dims["cg_height"], np.array(pos), yaw, pitch, roll, speed, course, vz, np.array(w))
+
+
+def _contact_inputs(d, case_name):
+    path = "contact"
+    _check_keys(d, set(CONTACT_FIELDS) | TEXT_FIELDS, path, case_name)
+    num = lambda k: _number(d[k], CONTACT_FIELDS[k][0], f"contact.{k}", case_name)  # noqa: E731
+    _require(d, "restitution", path, case_name)
+    eps = num("restitution")
+    if not -1 <= eps <= 1:
+        raise CaseError(f"{_where(case_name, 'contact.restitution')} = {d['restitution']!r}: "
+                        "restitution must be in [-1, 1]")
+    _require(d, "friction", path, case_name)
+    mu = num("friction")
+    if mu < 0:
+        raise CaseError(f"{_where(case_name, 'contact.friction')} = {d['friction']!r}: friction must be >= 0")
+    pt = num("penetration_time") if "penetration_time" in d else 0.0
+    if pt < 0:
+        raise CaseError(f"{_where(case_name, 'contact.penetration_time')} = {d['penetration_time']!r}: "
+                        "penetration_time must be >= 0")
+    normal_pitch = num("normal_pitch") if "normal_pitch" in d else 0.0
+    auto_point = "point" not in d
+    point = np.zeros(3) if auto_point else np.array(_vector(d["point"], "length", "contact.point", case_name, (3,)))
+    auto_normal = "normal" not in d
+    azimuth = 0.0
+    if not auto_normal:
+        raw = d["normal"]
+        if isinstance(raw, (list, tuple)):
+            vec = _vector(raw, "dimensionless", "contact.normal", case_name, (2, 3))
+            vec = vec + [0.0] * (3 - len(vec))
+            if math.hypot(*vec) == 0:
+                raise CaseError(f"{_where(case_name, 'contact.normal')} = {raw!r}: the normal must be a non-zero vector")
+            azimuth = math.atan2(vec[1], vec[0])
+            if "normal_pitch" in d:
+                raise CaseError(f"{_where(case_name, 'contact.normal_pitch')}: give the pitch in the vector "
+                                "or use an azimuth for contact.normal, not both")
+            normal_pitch = math.atan2(vec[2], math.hypot(vec[0], vec[1]))
+        else:
+            azimuth = num("normal")
+    return ContactInputs(point, azimuth, normal_pitch, eps, mu, pt), auto_point, auto_normal
+
+
+def case_from_dict(d: dict, default_name: str = "case", source: str | None = None) -> Case:
+    """Read one case (a dict as in a JSON/TOML file). Raises CaseError."""
+    if not isinstance(d, dict):
+        raise CaseError(f"case '{default_name}': a case must be an object/table, got {type(d).__name__}")
+    name = str(d.get("name", default_name))
+    _check_keys(d, CASE_FIELDS, "", name)
+    vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
+    if vehicles is None:
+        raise CaseError(f"case '{name}': vehicles: missing field")
+    if not isinstance(vehicles, list) or len(vehicles) != 2:
+        n = len(vehicles) if isinstance(vehicles, list) else vehicles
+        raise CaseError(f"case '{name}': vehicles = {n!r} vehicles: a case needs exactly two vehicles")
+    if "contact" not in d:
+        raise CaseError(f"case '{name}': contact: missing field")
+    veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
+    contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
+    inputs = CaseInputs(veh, contact)
+    names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
+    return Case(name, inputs, auto_point, auto_normal, names, None, d, source)
+
+
+def _read(path: Path):
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".toml":
+            return tomllib.loads(text)
+        return json.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
+        raise CaseError(f"{path}: cannot be read as {path.suffix.lstrip('.').upper() or 'JSON'}: {err}") from None
+
+
+def cases_from_data(data, source=None) -> list[Case]:
+    """All cases of a loaded file. A file with one case raises CaseError on a bad case; in a
+    file with ``cases``, a bad case becomes an invalid Case and the others are kept."""
+    if isinstance(data, dict) and "cases" in data:
+        if not isinstance(data["cases"], list) or not data["cases"]:
+            raise CaseError(f"{source or 'file'}: cases must be a non-empty list")
+        out = []
+        for i, d in enumerate(data["cases"]):
+            default = d.get("name", f"case {i + 1}") if isinstance(d, dict) else f"case {i + 1}"
+            try:
+                out.append(case_from_dict(d, f"case {i + 1}", source))
+            except CaseError as err:
+                out.append(Case(str(default), None, error=str(err), raw=d if isinstance(d, dict) else {},
+                                source=source))
+        return out
+    return [case_from_dict(data, Path(source).stem if source else "case", source)]
+
+
+def load_cases(path) -> list[Case]:
+    """Every case in a JSON or TOML file (see ``cases_from_data``)."""
+    path = Path(path)
+    if not path.exists():
+        raise CaseError(f"{path}: no such file")
+    return cases_from_data(_read(path), str(path))
+
+
+def load_case(path):
+    """The case in a file: a ``Case`` if the file holds one, a list of Case if it holds ``cases``."""
+    cases = load_cases(path)
+    data = _read(Path(path))
+    return cases if isinstance(data, dict) and "cases" in data else cases[0]
+
+
+# ---------------------------------------------------------------------------------------
+# inputs -> kernel pytrees
+
+
+def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
+    """Every leaf as a jnp array (of ``dtype``, default: JAX's default float)."""
+    import jax
+
+    dtype = dtype or jnp.result_type(float)
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dtype), inputs)
+
+
+def to_pytrees(inputs: CaseInputs):
+    """(Vehicle, State, Vehicle, State, Contact) from CaseInputs. Pure and differentiable."""
+    out = []
+    for v in inputs.vehicles:
+        vehicle = Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height)
+        velocity = jnp.stack([v.speed * jnp.cos(v.course), v.speed * jnp.sin(v.course), v.velocity_z * jnp.ones_like(v.speed)])
+        state = State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
+        out += [vehicle, state]
+    c = inputs.contact
+    contact = Contact(c.point, normal_from_angles(c.normal, c.normal_pitch), c.restitution, c.friction,
+                      c.penetration_time)
+    return (*out, contact)
+
+
+# ---------------------------------------------------------------------------------------
+# paths
+
+_PATH = re.compile(r"^(vehicles)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$|^(contact)\.(\w+)((?:\[\d+\])*)$")
+
+
+class PathError(CaseError):
+    pass
+
+
+def parse_path(path: str):
+    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,))."""
+    m = _PATH.match(path.strip().replace(" ", ""))
+    if not m:
+        raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")
+    if m.group(1):
+        idx = tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
+        vi = int(m.group(2))
+        if vi not in (0, 1):
+            raise PathError(f"path '{path}': vehicle index must be 0 or 1")
+        return "vehicles", vi, m.group(3), idx
+    idx = tuple(int(k) for k in re.findall(r"\d+", m.group(7)))
+    return "contact", None, m.group(6), idx
+
+
+def _input_leaf(path):
+    """(group, vehicle index, field in CaseInputs, index tuple) for an input path."""
+    group, vi, name, idx = parse_path(path)
+    if group == "vehicles":
+        if name == "yaw_rate" and not idx:
+            return group, vi, "angular_velocity", (2,)
+        if name == "inertia" and len(idx) == 1:
+            return group, vi, "inertia", (idx[0], idx[0])
+        if name not in VehicleInputs._fields:
+            hint = " (vary speed and course instead)" if name == "velocity" else ""
+            raise PathError(f"path '{path}': '{name}' is not a vehicle input{hint}; "
+                            f"inputs are {', '.join(VehicleInputs._fields)}, yaw_rate")
+    elif name not in ContactInputs._fields:
+        raise PathError(f"path '{path}': '{name}' is not a contact input; inputs are {', '.join(ContactInputs._fields)}")
+    shapes = {"position": 1, "angular_velocity": 1, "point": 1, "inertia": 2}
+    if len(idx) != shapes.get(name, 0):
+        need = shapes.get(name, 0)
+        raise PathError(f"path '{path}': '{name}' needs {need} index{'es' if need != 1 else ''} to name a number")
+    if any(k > 2 for k in idx):
+        raise PathError(f"path '{path}': index out of range (0..2)")
+    return group, vi, name, idx
+
+
+def input_kind(path) -> str:
+    """The unit kind of an input path (see ``units.SI_UNITS``)."""
+    return INPUT_KINDS[parse_path(path)[2]]
+
+
+def get_input(inputs: CaseInputs, path: str):
+    group, vi, name, idx = _input_leaf(path)
+    leaf = getattr(inputs.vehicles[vi] if group == "vehicles" else inputs.contact, name)
+    return jnp.asarray(leaf)[idx] if idx else leaf
+
+
+def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
+    """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable)."""
+    group, vi, name, idx = _input_leaf(path)
+    holder = inputs.vehicles[vi] if group == "vehicles" else inputs.contact
+    leaf = getattr(holder, name)
+    new = jnp.asarray(leaf).at[idx].set(value) if idx else value
+    holder = holder._replace(**{name: new})
+    if group == "vehicles":
+        vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))
+        return inputs._replace(vehicles=vehicles)
+    return inputs._replace(contact=holder)
+
+
+def check_output_path(path: str):
+    """Raise PathError unless ``path`` names a number among the section 4 results."""
+    from .types import ContactResult, VehicleResult
+
+    group, vi, name, idx = parse_path(path)
+    fields = VehicleResult._fields if group == "vehicles" else ContactResult._fields
+    if name not in fields or name == "status":
+        raise PathError(f"path '{path}': '{name}' is not a {'vehicle' if group == 'vehicles' else 'contact'} result; "
+                        f"results are {', '.join(f for f in fields if f != 'status')}")
+    vector = name in {"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
+                      "delta_v_body", "velocity_after", "angular_velocity_after"}
+    if vector and (len(idx) != 1 or idx[0] > 2):
+        raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]")
+    if not vector and idx:
+        raise PathError(f"path '{path}': '{name}' is a number and takes no index")
+    return group, vi, name, idx
+
+
+def get_output(result, path: str):
+    """The number at an output path of a (possibly batched) ExchangeResult."""
+    group, vi, name, idx = check_output_path(path)
+    leaf = getattr(result.vehicles[vi] if group == "vehicles" else result.contact, name)
+    return leaf[(..., *idx)] if idx else leaf
+
+
+def output_kind(path: str) -> str:
+    """The unit kind of an output path ("degrees" for the results reported in degrees)."""
+    return OUTPUT_KINDS[check_output_path(path)[2]]
+
+
+def parse_output_value(value, path: str, case_name: str = "case", where: str | None = None) -> float:
+    """A measured/reference value for an output path, in the unit the results use (SI, or
+    degrees for pdof, impulse_azimuth, impulse_elevation, course_after)."""
+    kind = output_kind(path)
+    label = where or path
+    if kind == "degrees":
+        return _number(value, "angle", label, case_name) / U.DEG
+    return _number(value, kind, label, case_name)

@@ -1,0 +1,100 @@
+"""`ks-jax`: solve case files, run the seed chapters' demo, fit and sweep.
+
+The command line computes in float64. A user error (bad file, bad field, bad unit) prints one
+message naming the case, the field, the value and the rule, and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from importlib import resources
+
+import jax
+
+from .case import CaseError
+from .units import UnitError
+
+# subcommands that live in their own modules: name -> module with add_arguments(p) and run(args)
+EXTERNAL = {"fit": ("fit.cli", "reconstruct unknown inputs from evidence"),
+            "sweep": ("ks_jax.sweep", "solve a grid or samples of inputs")}
+
+DEMO_CASES = ("seed_000_saturn_pontiac.json", "seed_001_lucid_kia.toml")
+
+
+def _cmd_solve(args) -> int:
+    from .case import load_cases
+    from .report import solution_dict, text_report
+    from .solve import solve
+
+    cases = load_cases(args.file)
+    if len(cases) == 1 and not cases[0].valid:
+        raise CaseError(cases[0].error)
+    solutions = solve(cases, smoothing=args.smoothing)
+    if args.plot:
+        from .plot import save_top_view
+
+        save_top_view(solutions, args.plot)
+    if args.json:
+        print(json.dumps({"cases": [solution_dict(s) for s in solutions]}, indent=1))
+    else:
+        print("\n\n".join(text_report(s) for s in solutions))
+        if args.plot:
+            print(f"\ntop view written to {args.plot}")
+    bad = [s for s in solutions if s.result is None]
+    for s in bad:
+        print(f"ks-jax: case '{s.case.name}' not solved: {s.status}", file=sys.stderr)
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from .case import load_case
+    from .report import text_report
+    from .solve import solve
+
+    print("ks-jax demo: the two Virtual CRASH manual chapters on Kudlich-Slibar impulse data,\n"
+          "solved from the case files shipped in ks_jax/cases, beside the manual's panel values.\n")
+    for name in DEMO_CASES:
+        with resources.as_file(resources.files("ks_jax.cases") / name) as path:
+            case = load_case(path)
+        print(text_report(solve(case)))
+        print(f"\n  (case file: ks_jax/cases/{name})\n" + "-" * 100 + "\n")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ks-jax", description="Kudlich-Slibar impulse-momentum collisions in JAX.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("solve", help="solve the case(s) in a JSON or TOML file")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true", help="print MODEL.md section 4 as JSON (SI units)")
+    p.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1) (default 0: exact)")
+    p.add_argument("--plot", metavar="PNG", help="write a top view of the contact to this file")
+    p.set_defaults(run=_cmd_solve)
+    p = sub.add_parser("demo", help="solve the seed chapters' examples shipped with the package")
+    p.set_defaults(run=_cmd_demo)
+    for name, (module, help_text) in EXTERNAL.items():
+        try:
+            mod = importlib.import_module(module)
+        except ImportError:
+            continue
+        p = sub.add_parser(name, help=help_text)
+        mod.add_arguments(p)
+        p.set_defaults(run=mod.run)
+    return parser
+
+
+def main(argv=None) -> int:
+    jax.config.update("jax_enable_x64", True)
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except (CaseError, UnitError, FileNotFoundError, IsADirectoryError) as err:
+        print(f"ks-jax: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

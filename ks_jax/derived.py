@@ -1,0 +1,122 @@
+"""Everything MODEL.md section 4 derives from one impulse: delta-V, PDOF, crush, EES, angles."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from . import linalg as la
+from .types import ContactResult, ExchangeResult, VehicleResult
+
+
+def pdof_degrees(force_body):
+    """SAE J224 principal direction of force: atan2(F_y, -F_x) mod 360, degrees clockwise from
+    the front (0 = a frontal force, pointing rearward; 90 = right side; 180 = rear)."""
+    return la.degrees_0_360(la.safe_atan2(force_body[1], -force_body[0]))
+
+
+def clock(pdof):
+    """Degrees -> clock position 1..12 (12 = 0 deg, 3 = 90 deg), to the nearest hour."""
+    hour = jnp.mod(jnp.round(pdof / 30.0), 12.0)
+    return jnp.where(hour == 0, 12.0, hour)
+
+
+def crush_depth(point, direction, position, rot, vehicle):
+    """Distance from ``point`` along ``direction`` (unit, global) until it leaves the
+    vehicle's bounding box; 0 if the point is not inside the box (MODEL.md section 4)."""
+    p = la.matvec(rot.T, point - position)
+    d = la.matvec(rot.T, direction)
+    lo = jnp.stack([vehicle.cg_to_front - vehicle.length, -0.5 * vehicle.width, -vehicle.cg_height])
+    hi = jnp.stack([vehicle.cg_to_front, 0.5 * vehicle.width, vehicle.height - vehicle.cg_height])
+    inside = jnp.all((p >= lo) & (p <= hi))
+    exit_dist = jnp.where(d > 0, la.safe_div(hi - p, d, jnp.inf), la.safe_div(lo - p, d, jnp.inf))
+    depth = jnp.min(exit_dist)
+    return jnp.where(inside & jnp.isfinite(depth), depth, 0.0)
+
+
+def ees_pair(energy_loss, crush1, crush2, mass1, mass2):
+    """Burg's EES (MODEL.md section 4): E_i = E C_i / (C_1 + C_2), EES_i = sqrt(2 E_i / m_i).
+    NaN (undefined) when C_1 + C_2 = 0 or the energy loss is negative."""
+    total = crush1 + crush2
+    defined = (total > 0) & (energy_loss >= 0)
+
+    def one(c, m):
+        e_i = la.safe_div(energy_loss * c, total)
+        return jnp.where(defined, la.safe_sqrt(2.0 * e_i / m), jnp.nan)
+
+    return one(crush1, mass1), one(crush2, mass2)
+
+
+def _vehicle(force, body, point, normal_into, j_mag):
+    vehicle, state, rot, inv_inertia, r = body
+    dv = force / vehicle.mass
+    dw = la.matvec(inv_inertia, la.cross(r, force))
+    v_after = state.velocity + dv
+    w_after = state.angular_velocity + dw
+    return VehicleResult(
+        delta_v=dv,
+        delta_v_magnitude=j_mag / vehicle.mass,
+        delta_v_body=la.matvec(rot.T, dv),
+        delta_yaw_rate=dw[2],
+        velocity_after=v_after,
+        speed_after=la.safe_norm(v_after),
+        course_after=la.degrees_0_360(la.safe_atan2(v_after[1], v_after[0])),
+        angular_velocity_after=w_after,
+        yaw_rate_after=w_after[2],
+        pdof=pdof_degrees(la.matvec(rot.T, force)),
+        pdof_clock=jnp.zeros(()),  # filled below, from pdof
+        crush=crush_depth(point, normal_into, state.position, rot, vehicle),
+        ees=jnp.zeros(()),  # filled below, needs both crushes
+    )
+
+
+def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
+    """Assemble the section 4 results from the impulse ``j`` on vehicle 1.
+
+    body_i = (vehicle, state, R, I^-1 global, r = P - x). The energy loss uses
+    E = -J.(u + u')/2, which equals the kinetic-energy difference of both bodies (translation
+    and rotation) and keeps its precision in float32.
+    """
+    j_mag = la.safe_norm(j)
+    v1 = _vehicle(j, body1, p, -n, j_mag)
+    v2 = _vehicle(-j, body2, p, n, j_mag)
+    r1, r2 = body1[4], body2[4]
+    u_after = (v1.velocity_after + la.cross(v1.angular_velocity_after, r1)) - (
+        v2.velocity_after + la.cross(v2.angular_velocity_after, r2)
+    )
+    energy = -0.5 * la.dot(j, u + u_after)
+    ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass)
+    v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
+    v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)
+    jn = la.dot(n, j)
+    contact = ContactResult(
+        point=p,
+        normal=n,
+        time=jnp.zeros_like(energy),
+        impulse=j,
+        impulse_magnitude=j_mag,
+        impulse_normal=jn,
+        impulse_tangential=la.safe_norm(j - jn * n),
+        impulse_azimuth=la.degrees_0_360(la.safe_atan2(j[1], j[0])),
+        impulse_elevation=jnp.degrees(la.safe_atan2(j[2], la.safe_norm(jnp.stack([j[0], j[1], 0.0 * j[2]])))),
+        sliding=sliding,
+        closing_velocity=u,
+        separation_velocity=u_after,
+        energy_loss=energy,
+        status=status,
+    )
+    return ExchangeResult(contact=contact, vehicles=(v1, v2))
+
+
+def mask_invalid(result: ExchangeResult, ok) -> ExchangeResult:
+    """NaN in every numeric result, False in ``sliding``, of a row with invalid inputs; the
+    status code keeps the reason."""
+
+    def mask(x):
+        if x.dtype == jnp.bool_:
+            return x & ok
+        if jnp.issubdtype(x.dtype, jnp.integer):
+            return x
+        return jnp.where(ok, x, jnp.nan)
+
+    return jax.tree_util.tree_map(mask, result)

@@ -1,0 +1,208 @@
+"""The Kudlich-Slibar impulse exchange for one collision (MODEL.md section 3).
+
+``exchange`` is pure and unbatched: the caller jits and vmaps it. Nothing here branches in
+Python on array values, so one bad row in a batch gets its own status code while the others
+are solved; every quantity that could be singular (|T_c| = 0, mu = 0, the cone boundary,
+eps = -1, a separating contact) goes through the double-where helpers of ``linalg``.
+
+The friction-cone limit, written without dividing by N_c or |T_c|
+----------------------------------------------------------------------
+MODEL.md step 5 takes d(s*) = n + s* T_c / N_c with s* = min(1, mu N_c / |T_c|), and
+d = n + mu t when N_c <= 0. Both cases are one formula:
+
+    d = n + mu T_c / M,   M = max(mu max(N_c, 0), |T_c|)
+
+(M = mu N_c gives d = J_c / N_c, the stick impulse; M = |T_c| gives n + mu t, sliding on the
+cone). The smooth mode (``smoothing`` tau > 0) replaces the max by the p-norm
+M_tau = (a^p + b^p)^(1/p), p = 1/tau, which is the smooth minimum s*_tau = ((1)^-p + (mu N_c/|T_c|)^-p)^(-1/p)
+of the model. It never leaves the cone (M_tau >= M, so |T| <= mu N) and
+M <= M_tau <= 2^tau M, so |J_tau - J_0| <= C tau |J_0| with C about ln 2.
+``sliding`` always reports the exact criterion |T_c| > mu N_c.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from . import derived
+from . import linalg as la
+from .types import (
+    INVALID_BOX_1,
+    INVALID_BOX_2,
+    INVALID_FRICTION,
+    INVALID_INERTIA_1,
+    INVALID_INERTIA_2,
+    INVALID_MASS_1,
+    INVALID_MASS_2,
+    INVALID_NONFINITE,
+    INVALID_NORMAL,
+    INVALID_PENETRATION_TIME,
+    INVALID_RESTITUTION,
+    OK,
+    SEPARATING,
+    Contact,
+    ExchangeResult,
+    State,
+    Vehicle,
+)
+
+
+def body_inertia(inertia):
+    """(3,) principal moments or a (3, 3) tensor -> (3, 3) body-frame tensor."""
+    inertia = jnp.asarray(inertia)
+    return jnp.diag(inertia) if inertia.ndim == 1 else inertia
+
+
+def inverse_inertia_world(inertia, yaw, pitch, roll):
+    """I^-1 in the global frame, R I_body^-1 R^T, and R. Closed form, no LAPACK."""
+    inertia = jnp.asarray(inertia)
+    if inertia.ndim == 1:
+        inv_body = jnp.diag(1.0 / inertia)
+    else:
+        inv_body = la.adjugate3(inertia) / la.det3(inertia)
+    rot = la.rotation(yaw, pitch, roll)
+    return la.matmul(la.matmul(rot, inv_body), rot.T), rot
+
+
+def _inertia_ok(inertia):
+    inertia = jnp.asarray(inertia)
+    if inertia.ndim == 1:
+        return jnp.all(inertia > 0)
+    m = inertia
+    scale = jnp.max(jnp.abs(m))
+    symmetric = jnp.all(jnp.abs(m - m.T) <= 1e-6 * scale)
+    minor1 = m[0, 0]
+    minor2 = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    return symmetric & (minor1 > 0) & (minor2 > 0) & (la.det3(m) > 0)
+
+
+def input_status(vehicle1, state1, vehicle2, state2, contact):
+    """() int32: OK, or the first rule an input breaks (codes in ``ks_jax.types``)."""
+    leaves = jax.tree_util.tree_leaves((vehicle1, state1, vehicle2, state2, contact))
+    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
+
+    def box_ok(v):
+        return (v.length > 0) & (v.width > 0) & (v.height > 0)
+
+    checks = [
+        (finite, INVALID_NONFINITE),
+        (vehicle1.mass > 0, INVALID_MASS_1),
+        (vehicle2.mass > 0, INVALID_MASS_2),
+        (_inertia_ok(vehicle1.inertia), INVALID_INERTIA_1),
+        (_inertia_ok(vehicle2.inertia), INVALID_INERTIA_2),
+        (box_ok(vehicle1), INVALID_BOX_1),
+        (box_ok(vehicle2), INVALID_BOX_2),
+        ((contact.restitution >= -1) & (contact.restitution <= 1), INVALID_RESTITUTION),
+        (contact.friction >= 0, INVALID_FRICTION),
+        (la.dot(contact.normal, contact.normal) > 0, INVALID_NORMAL),
+        (contact.penetration_time >= 0, INVALID_PENETRATION_TIME),
+    ]
+    code = jnp.int32(OK)
+    for ok, bad in reversed(checks):  # the first failing rule wins
+        code = jnp.where(ok, code, jnp.int32(bad))
+    return code
+
+
+def _benign(tree, ok):
+    """Replace every leaf by a harmless value where ``ok`` is False (no NaN can leak into
+    values or gradients of a bad row)."""
+    vehicle1, state1, vehicle2, state2, contact = tree
+
+    def veh(v):
+        inertia = jnp.ones_like(v.inertia) if v.inertia.ndim == 1 else jnp.eye(3, dtype=v.inertia.dtype)
+        good = Vehicle(1.0, inertia, 4.0, 2.0, 1.5, 2.0, 0.5)
+        return jax.tree_util.tree_map(lambda x, g: jnp.where(ok, x, g), v, good)
+
+    def st(s):
+        return jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), s)
+
+    good_contact = Contact(jnp.zeros(3), jnp.array([1.0, 0.0, 0.0]), 0.0, 0.0, 0.0)
+    contact = jax.tree_util.tree_map(lambda x, g: jnp.where(ok, x, g), contact, good_contact)
+    return veh(vehicle1), st(state1), veh(vehicle2), st(state2), contact
+
+
+def _cone_scale(a, b, smoothing):
+    """M = max(a, b) (smoothing == 0) or the p-norm (a^p + b^p)^(1/p), p = 1/smoothing.
+    a, b >= 0. Finite gradients everywhere, including a = b and a = b = 0."""
+    hard = jnp.maximum(a, b)
+    if isinstance(smoothing, (int, float)) and smoothing == 0:
+        return hard
+    tau = jnp.asarray(smoothing)
+    p = 1.0 / jnp.where(tau > 0, tau, 1.0)
+    hi, lo = hard, jnp.minimum(a, b)
+    ratio = la.safe_div(lo, hi)
+    smooth = hi * jnp.exp(jnp.log1p(ratio**p) / p)
+    return jnp.where(tau > 0, smooth, hard)
+
+
+def impulse(K, u, n, restitution, friction, smoothing=0.0):
+    """The KS impulse on vehicle 1 (MODEL.md section 3, steps 3-6).
+
+    K: (3, 3) SPD, u: (3,) relative velocity at P, n: (3,) unit normal.
+    Returns (J (3,), sliding (), approaching ()): J = 0 when u.n >= 0.
+    """
+    un = la.dot(n, u)
+    approaching = un < 0
+    j_stick = -la.matvec(la.adjugate3(K), u) / la.det3(K)
+    n_c = la.dot(n, j_stick)
+    t_c = j_stick - n_c * n
+    t_norm = la.safe_norm(t_c)
+    a = friction * jnp.maximum(n_c, 0.0)
+    m = _cone_scale(a, t_norm, smoothing)
+    d = n + la.safe_div(friction, m) * t_c
+    denom = la.dot(n, la.matvec(K, d))
+    normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
+    j = (1.0 + restitution) * normal * d
+    sliding = approaching & (t_norm > a)
+    return j, sliding, approaching
+
+
+def collision_matrix(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
+    """K = (1/m1 + 1/m2) Id - [r1]x I1^-1 [r1]x - [r2]x I2^-1 [r2]x (MODEL.md section 3, step 2)."""
+
+    def arm(r, a):
+        zero = jnp.zeros_like(r[0])
+        rx = jnp.stack(
+            [jnp.stack([zero, -r[2], r[1]]), jnp.stack([r[2], zero, -r[0]]), jnp.stack([-r[1], r[0], zero])]
+        )
+        return la.matmul(la.matmul(rx, a), rx.T)  # = -[r]x A [r]x
+
+    eye = jnp.eye(3, dtype=r1.dtype)
+    return (1.0 / mass1 + 1.0 / mass2) * eye + arm(r1, inv_inertia1) + arm(r2, inv_inertia2)
+
+
+def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
+             smoothing=0.0) -> ExchangeResult:
+    """One KS impulse exchange at an explicit contact (MODEL.md sections 3 and 4).
+
+    Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
+    ``smoothing`` tau >= 0 (dimensionless, < 1): 0 is the exact model; tau > 0 the smooth
+    friction-cone limit, within about 0.7 tau |J| of it. A row whose inputs break a rule gets
+    that rule's status code and NaN in every numeric result; it never affects other rows.
+    """
+    if isinstance(smoothing, (int, float)) and not 0.0 <= smoothing < 1.0:
+        raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    status = input_status(vehicle1, state1, vehicle2, state2, contact)
+    ok = status == OK
+    vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
+
+    n = contact.normal / la.safe_norm(contact.normal)
+    p = contact.point
+    a1, rot1 = inverse_inertia_world(vehicle1.inertia, state1.yaw, state1.pitch, state1.roll)
+    a2, rot2 = inverse_inertia_world(vehicle2.inertia, state2.yaw, state2.pitch, state2.roll)
+    r1 = p - state1.position
+    r2 = p - state2.position
+    u = (state1.velocity + la.cross(state1.angular_velocity, r1)) - (
+        state2.velocity + la.cross(state2.angular_velocity, r2)
+    )
+    K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
+    j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
+
+    status = jnp.where(ok & ~approaching, jnp.int32(SEPARATING), status)
+    result = derived.results(
+        j, n, p, u, sliding, status,
+        (vehicle1, state1, rot1, a1, r1),
+        (vehicle2, state2, rot2, a2, r2),
+    )
+    return derived.mask_invalid(result, ok)

@@ -1,0 +1,126 @@
+"""What people read: the auto-ees style panel (SI and US units) and the JSON of MODEL.md section 4."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import units as U
+from .case import parse_output_value
+from .types import ContactResult, VehicleResult
+
+
+def _plain(x):
+    x = np.asarray(x)
+    if x.dtype == np.bool_:
+        return bool(x) if x.ndim == 0 else [bool(v) for v in x]
+    if x.ndim == 0:
+        v = float(x)
+        return None if not math.isfinite(v) else v
+    return [_plain(v) for v in x]
+
+
+def solution_dict(sol) -> dict:
+    """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, keys of MODEL.md section 4,
+    status as words, NaN as null. An invalid case has only its status."""
+    if sol.result is None:
+        return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
+    c = sol.result.contact
+    contact = {k: _plain(getattr(c, k)) for k in ContactResult._fields if k != "status"}
+    contact["status"] = sol.status
+    vehicles = []
+    for name, v in zip(sol.case.vehicle_names, sol.result.vehicles):
+        d = {"name": name}
+        d.update({k: _plain(getattr(v, k)) for k in VehicleResult._fields})
+        d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
+        vehicles.append(d)
+    return {"name": sol.case.name, "contact": contact, "vehicles": vehicles}
+
+
+def _fmt(x, digits=3):
+    x = float(x)
+    if not math.isfinite(x):
+        return "undefined"
+    if abs(x) < 0.5 * 10.0**-digits:
+        x = 0.0
+    return f"{x:,.{digits}f}"
+
+
+def _row(label, si, us="", width=34):
+    return f"  {label:<{width}}{si:<26}{us}"
+
+
+def text_report(sol, reference: bool = True) -> str:
+    """The auto-ees panel of one solved case, SI beside US units."""
+    lines = [f"Case: {sol.case.name}"]
+    if sol.result is None:
+        lines.append(f"  status: {sol.status}")
+        return "\n".join(lines)
+    c = sol.result.contact
+    v1, v2 = sol.result.vehicles
+    lines += [
+        "",
+        "  contact",
+        _row("status", sol.status),
+        _row("time of exchange", f"{_fmt(c.time)} s"),
+        _row("impulse centroid (x, y, z)", " ".join(_fmt(p) for p in c.point) + " m",
+             " ".join(_fmt(p / U.FT) for p in c.point) + " ft"),
+        _row("normal (azimuth, pitch)", f"{_fmt(math.degrees(math.atan2(c.normal[1], c.normal[0])) % 360, 1)} deg, "
+             f"{_fmt(math.degrees(math.asin(max(-1.0, min(1.0, float(c.normal[2]))))), 1)} deg"),
+        _row("impulse", f"{_fmt(c.impulse_magnitude)} N s", f"{_fmt(c.impulse_magnitude / U.LBF_S)} lbf s"),
+        _row("  normal / tangential", f"{_fmt(c.impulse_normal)} / {_fmt(c.impulse_tangential)} N s",
+             f"{_fmt(c.impulse_normal / U.LBF_S)} / {_fmt(c.impulse_tangential / U.LBF_S)} lbf s"),
+        _row("  azimuth / elevation", f"{_fmt(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
+        _row("deformation energy (loss)", f"{_fmt(c.energy_loss)} J", f"{_fmt(c.energy_loss / U.FT_LBF, 2)} ft lbf"),
+        _row("sliding at separation", "yes" if bool(c.sliding) else "no"),
+        _row("closing speed at centroid", f"{_fmt(np.linalg.norm(c.closing_velocity))} m/s",
+             f"{_fmt(np.linalg.norm(c.closing_velocity) / U.MPH, 2)} mph"),
+        _row("separation speed at centroid", f"{_fmt(np.linalg.norm(c.separation_velocity))} m/s",
+             f"{_fmt(np.linalg.norm(c.separation_velocity) / U.MPH, 2)} mph"),
+    ]
+    for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
+        lines += [
+            "",
+            f"  object {k + 1}: {name}",
+            _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
+            _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
+                 f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
+            _row("PDOF", f"{_fmt(v.pdof, 1)} deg ({int(v.pdof_clock)} o'clock)"),
+            _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
+            _row("EES", f"{_fmt(v.ees)} m/s", f"{_fmt(v.ees / U.MPH)} mph"),
+            _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
+                 f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
+            _row("course after", f"{_fmt(v.course_after, 1)} deg"),
+            _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
+            _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
+        ]
+    if not (v1.crush + v2.crush > 0):
+        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
+    elif not np.isfinite(v1.ees):
+        lines.append("\n  note: EES is undefined: the energy loss is negative.")
+    ref = sol.case.raw.get("reference") if reference else None
+    if ref:
+        lines += ["", reference_table(sol, ref)]
+    return "\n".join(lines)
+
+
+def _output(result, path):
+    from .case import get_output
+
+    return float(np.asarray(get_output(result, path)))
+
+
+def reference_table(sol, reference: dict) -> str:
+    """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units."""
+    lines = ["  reference                              reported            ks-jax              difference"]
+    for path, value in reference.items():
+        want_si = parse_output_value(value, path, sol.case.name, f"reference.{path}")
+        got_si = _output(sol.result, path)
+        unit = value.split(None, 1)[1] if isinstance(value, str) and len(value.split(None, 1)) == 2 else ""
+        scale = want_si / float(value.split()[0]) if unit and float(value.split()[0]) != 0 else 1.0
+        got = got_si / scale
+        want = want_si / scale
+        lines.append(f"  {path:<38} {_fmt(want, 3) + ' ' + unit:<19} {_fmt(got, 3) + ' ' + unit:<19} "
+                     f"{(got - want) / want * 100 if want else got - want:+.4f}{' %' if want else ''}")
+    return "\n".join(lines)

@@ -1,0 +1,77 @@
+"""Solve cases: CaseInputs -> ExchangeResult, batched over the cases of a file."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .case import Case, CaseInputs, as_arrays, to_pytrees
+from .exchange import exchange
+from .types import ExchangeResult, status_text
+
+
+def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
+                 smoothing=0.0) -> ExchangeResult:
+    """One case's results from its inputs (pure, unbatched; jit/vmap/grad at the edge).
+
+    ``auto_point``/``auto_normal`` (static) select automatic contact (MODEL.md section 5) for
+    the centroid and/or the normal; otherwise the exchange is at the case state.
+    """
+    v1, s1, v2, s2, contact = to_pytrees(inputs)
+    if auto_point or auto_normal:
+        from .geometry import automatic_exchange
+
+        return automatic_exchange(v1, s1, v2, s2, contact, inputs.contact.normal_pitch,
+                                  auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
+    return exchange(v1, s1, v2, s2, contact, smoothing)
+
+
+@partial(jax.jit, static_argnames=("auto_point", "auto_normal"))
+def _solve_batch(inputs, smoothing, auto_point, auto_normal):
+    return jax.vmap(lambda x: solve_inputs(x, auto_point, auto_normal, smoothing))(inputs)
+
+
+@dataclass
+class Solution:
+    """A solved case: ``result`` is an ExchangeResult of NumPy arrays (None for an invalid case)."""
+
+    case: Case
+    result: ExchangeResult | None
+    status: str
+
+    def to_dict(self) -> dict:
+        """MODEL.md section 4 as plain JSON-ready data (SI; NaN -> None)."""
+        from .report import solution_dict
+
+        return solution_dict(self)
+
+
+def solve(cases, smoothing: float = 0.0):
+    """Solve a Case (-> Solution) or a list of cases (-> list of Solution).
+
+    Valid cases are solved together in one vmapped call per contact mode; an invalid case
+    (bad input in a multi-case file) gets status "invalid: <reason>" and no numbers.
+    """
+    single = isinstance(cases, Case)
+    cases = [cases] if single else list(cases)
+    if not 0.0 <= smoothing < 1.0:
+        raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    out: list[Solution | None] = [None] * len(cases)
+    groups: dict[tuple, list[int]] = {}
+    for i, c in enumerate(cases):
+        if c.valid:
+            groups.setdefault((c.auto_point, c.auto_normal), []).append(i)
+        else:
+            out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
+    for (auto_point, auto_normal), idx in groups.items():
+        stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
+        res = _solve_batch(as_arrays(stacked), jnp.asarray(smoothing), auto_point, auto_normal)
+        res = jax.tree_util.tree_map(np.asarray, res)
+        for k, i in enumerate(idx):
+            row = jax.tree_util.tree_map(lambda x: x[k], res)
+            out[i] = Solution(cases[i], row, status_text(row.contact.status))
+    return out[0] if single else out

@@ -1,0 +1,230 @@
+"""Inputs and results as pytrees (MODEL.md sections 2 and 4).
+
+All fields are arrays in SI units; the kernel sees one collision (no batch axis), and a
+batch is the same pytree with a leading axis on every leaf (``jax.vmap`` at the edge).
+``Vehicle.create``, ``State.create`` and ``Contact.create`` accept the convenient forms
+(principal moments, speed and course, 2D positions, a normal azimuth) and build the
+canonical arrays.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+Array = jnp.ndarray
+
+
+def _f(x):
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+class Vehicle(NamedTuple):
+    """Constant properties of one vehicle.
+
+    mass: () kg. inertia: (3,) principal moments (Ixx, Iyy, Izz) about the CG in the body
+    frame, kg m^2, or a (3, 3) tensor in the body frame. length, width, height: () m, the
+    bounding box. cg_to_front: () m from the CG to the front face. cg_height: () m above ground.
+    The box in body coordinates is x in [cg_to_front - length, cg_to_front],
+    y in [-width/2, width/2], z in [-cg_height, height - cg_height].
+    """
+
+    mass: Array
+    inertia: Array
+    length: Array
+    width: Array
+    height: Array
+    cg_to_front: Array
+    cg_height: Array
+
+    @classmethod
+    def create(cls, mass, inertia, length, width, height=1.4, cg_to_front=None, cg_height=0.55):
+        """Vehicle from SI values; ``cg_to_front`` defaults to half the length."""
+        if cg_to_front is None:
+            cg_to_front = 0.5 * jnp.asarray(length)
+        return cls(*(_f(a) for a in (mass, inertia, length, width, height, cg_to_front, cg_height)))
+
+
+class State(NamedTuple):
+    """Motion of one vehicle at the start of the case, global frame.
+
+    position: (3,) m, the CG. velocity: (3,) m/s of the CG. yaw, pitch, roll: () rad,
+    R = Rz(yaw) Ry(pitch) Rx(roll). angular_velocity: (3,) rad/s, global frame.
+    """
+
+    position: Array
+    velocity: Array
+    yaw: Array
+    pitch: Array
+    roll: Array
+    angular_velocity: Array
+
+    @classmethod
+    def create(
+        cls,
+        position,
+        yaw=0.0,
+        *,
+        velocity=None,
+        speed=None,
+        course=None,
+        yaw_rate=None,
+        angular_velocity=None,
+        pitch=0.0,
+        roll=0.0,
+        cg_height=None,
+    ):
+        """State from SI values (angles in rad, rates in rad/s).
+
+        position: (2,) or (3,); a 2D position gets z = ``cg_height`` (default 0).
+        Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw).
+        Either ``yaw_rate`` or ``angular_velocity`` (3,).
+        """
+        position = _f(position)
+        if position.shape[-1] == 2:
+            z = _f(0.0 if cg_height is None else cg_height)
+            position = jnp.concatenate([position, jnp.broadcast_to(z, position.shape[:-1])[..., None]], -1)
+        yaw = _f(yaw)
+        if velocity is None:
+            if speed is None:
+                raise ValueError("State.create needs velocity or speed")
+            course = yaw if course is None else _f(course)
+            speed = _f(speed)
+            velocity = jnp.stack([speed * jnp.cos(course), speed * jnp.sin(course), jnp.zeros_like(speed)], -1)
+        velocity = _f(velocity)
+        if velocity.shape[-1] == 2:
+            velocity = jnp.concatenate([velocity, jnp.zeros_like(velocity[..., :1])], -1)
+        if angular_velocity is None:
+            wz = _f(0.0 if yaw_rate is None else yaw_rate)
+            angular_velocity = jnp.stack([jnp.zeros_like(wz), jnp.zeros_like(wz), wz], -1)
+        return cls(position, velocity, yaw, _f(pitch), _f(roll), _f(angular_velocity))
+
+
+def normal_from_angles(azimuth, pitch=0.0):
+    """Unit normal from its azimuth (rad, from +x, counter-clockwise) and pitch (rad, elevation)."""
+    azimuth, pitch = _f(azimuth), _f(pitch)
+    cp = jnp.cos(pitch)
+    return jnp.stack([cp * jnp.cos(azimuth), cp * jnp.sin(azimuth), jnp.sin(pitch)], -1)
+
+
+class Contact(NamedTuple):
+    """One impulse exchange's contact.
+
+    point: (3,) m, the impulse centroid P, global. normal: (3,) n, pointing from vehicle 2
+    into vehicle 1 (normalised inside the kernel). restitution: () eps in [-1, 1].
+    friction: () mu >= 0. penetration_time: () s, used by automatic contact only.
+    """
+
+    point: Array
+    normal: Array
+    restitution: Array
+    friction: Array
+    penetration_time: Array
+
+    @classmethod
+    def create(cls, point, normal=None, restitution=0.0, friction=0.5, *, azimuth=None, normal_pitch=0.0,
+               penetration_time=0.0):
+        """Contact from SI values: give ``normal`` as a vector or ``azimuth`` (rad) and ``normal_pitch`` (rad)."""
+        if normal is None:
+            if azimuth is None:
+                raise ValueError("Contact.create needs normal or azimuth")
+            normal = normal_from_angles(azimuth, normal_pitch)
+        return cls(_f(point), _f(normal), _f(restitution), _f(friction), _f(penetration_time))
+
+
+class ContactResult(NamedTuple):
+    """Per-exchange results (MODEL.md section 4). Shapes are for one exchange.
+
+    point (3,) m; normal (3,) unit; time () s (0 for an explicit contact: the exchange is at
+    the case state); impulse (3,) N s on vehicle 1; impulse_magnitude, impulse_normal (n.J),
+    impulse_tangential () N s; impulse_azimuth () deg in [0, 360); impulse_elevation () deg;
+    sliding () bool; closing_velocity (3,) m/s, u at P before; separation_velocity (3,) m/s,
+    u' at P after; energy_loss () J; status () int32 code (``ks_jax.status_text`` gives the words).
+    """
+
+    point: Array
+    normal: Array
+    time: Array
+    impulse: Array
+    impulse_magnitude: Array
+    impulse_normal: Array
+    impulse_tangential: Array
+    impulse_azimuth: Array
+    impulse_elevation: Array
+    sliding: Array
+    closing_velocity: Array
+    separation_velocity: Array
+    energy_loss: Array
+    status: Array
+
+
+class VehicleResult(NamedTuple):
+    """Per-vehicle results (MODEL.md section 4).
+
+    delta_v (3,) m/s; delta_v_magnitude () m/s = |J|/m; delta_v_body (3,) m/s (longitudinal,
+    lateral left +, vertical); delta_yaw_rate () rad/s; velocity_after (3,) m/s; speed_after ()
+    m/s (|velocity_after|); course_after () deg in [0, 360); angular_velocity_after (3,) rad/s;
+    yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12;
+    crush () m; ees () m/s (NaN when both crushes are 0: undefined).
+    """
+
+    delta_v: Array
+    delta_v_magnitude: Array
+    delta_v_body: Array
+    delta_yaw_rate: Array
+    velocity_after: Array
+    speed_after: Array
+    course_after: Array
+    angular_velocity_after: Array
+    yaw_rate_after: Array
+    pdof: Array
+    pdof_clock: Array
+    crush: Array
+    ees: Array
+
+
+class ExchangeResult(NamedTuple):
+    """``contact``: a ContactResult; ``vehicles``: a pair of VehicleResult (vehicle 1, vehicle 2)."""
+
+    contact: ContactResult
+    vehicles: tuple
+
+
+# Status codes carried per row inside jit (MODEL.md section 4 `status`).
+OK = 0
+SEPARATING = 1
+NO_CONTACT = 2
+INVALID_NONFINITE = 10
+INVALID_MASS_1 = 11
+INVALID_MASS_2 = 12
+INVALID_INERTIA_1 = 13
+INVALID_INERTIA_2 = 14
+INVALID_BOX_1 = 15
+INVALID_BOX_2 = 16
+INVALID_RESTITUTION = 17
+INVALID_FRICTION = 18
+INVALID_NORMAL = 19
+INVALID_PENETRATION_TIME = 20
+
+STATUS_TEXT = {
+    OK: "ok",
+    SEPARATING: "separating",
+    NO_CONTACT: "no_contact",
+    INVALID_NONFINITE: "invalid: an input is NaN or infinite",
+    INVALID_MASS_1: "invalid: vehicles[0].mass must be positive",
+    INVALID_MASS_2: "invalid: vehicles[1].mass must be positive",
+    INVALID_INERTIA_1: "invalid: vehicles[0].inertia must be symmetric positive definite",
+    INVALID_INERTIA_2: "invalid: vehicles[1].inertia must be symmetric positive definite",
+    INVALID_BOX_1: "invalid: vehicles[0] length, width and height must be positive",
+    INVALID_BOX_2: "invalid: vehicles[1] length, width and height must be positive",
+    INVALID_RESTITUTION: "invalid: contact.restitution must be in [-1, 1]",
+    INVALID_FRICTION: "invalid: contact.friction must be >= 0",
+    INVALID_NORMAL: "invalid: contact.normal must be a non-zero vector",
+    INVALID_PENETRATION_TIME: "invalid: contact.penetration_time must be >= 0",
+}
+
+
+def status_text(code) -> str:
+    """The words for a status code (an int or a 0-d array)."""
+    return STATUS_TEXT.get(int(code), f"invalid: unknown status {int(code)}")

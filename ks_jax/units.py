@@ -1,0 +1,142 @@
+"""Named unit constants and conversions (MODEL.md section 1).
+
+Everything inside ks_jax is SI (m, kg, s, N, J, rad). This module is the only place
+that knows about feet, pounds and miles per hour. Multiply by a constant to go to SI,
+divide to come back: ``21 * MPH`` is 21 mph in m/s, ``v / MPH`` is v in mph.
+
+Unit strings in case files ("21 mph", "3496.531 lbf", "2300 lbf*ft*s^2") are parsed by
+:func:`parse_quantity`, which uses pint (the ``units`` extra) and checks the dimension.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+# exact definitions
+FT = 0.3048  # m
+INCH = 0.0254  # m
+MILE = 1609.344  # m
+MPH = MILE / 3600.0  # m/s
+KPH = 1000.0 / 3600.0  # m/s
+FPS = FT  # ft/s in m/s
+G0 = 9.80665  # m/s^2, standard gravity
+G0_FT = G0 / FT  # 32.174... ft/s^2
+LB = 0.45359237  # kg (pound mass)
+LBF = LB * G0  # N (pound force)
+SLUG = LBF / FT  # kg (lbf s^2 / ft)
+LBF_S = LBF  # N s
+FT_LBF = FT * LBF  # J
+DEG = math.pi / 180.0  # rad
+DEG_S = DEG  # rad/s per deg/s
+
+# The dimension each kind of input must have, as pint writes it.
+DIMENSIONS = {
+    "length": "[length]",
+    "mass": "[mass]",
+    "force": "[length] * [mass] / [time] ** 2",
+    "inertia": "[length] ** 2 * [mass]",
+    "velocity": "[length] / [time]",
+    "time": "[time]",
+    "angle": "",
+    "angular_velocity": "1 / [time]",
+    "dimensionless": "",
+    "impulse": "[length] * [mass] / [time]",
+    "energy": "[length] ** 2 * [mass] / [time] ** 2",
+}
+
+# SI unit each kind is converted to; angles go to radians, angular velocity to rad/s.
+SI_UNITS = {
+    "length": "m",
+    "mass": "kg",
+    "force": "N",
+    "inertia": "kg*m^2",
+    "velocity": "m/s",
+    "time": "s",
+    "angle": "rad",
+    "angular_velocity": "rad/s",
+    "dimensionless": "",
+    "impulse": "N*s",
+    "energy": "J",
+}
+
+# What a bare number means, per kind: SI, except angles (degrees) and angular velocities (deg/s).
+BARE_NUMBER_SCALE = {"angle": DEG, "angular_velocity": DEG_S}
+
+
+class UnitError(ValueError):
+    """A quantity string that cannot be read, or has the wrong dimension."""
+
+
+@lru_cache(maxsize=1)
+def _registry():
+    try:
+        import pint
+    except ImportError as err:  # pragma: no cover - exercised only without the extra
+        raise UnitError(
+            "unit strings need pint: pip install 'ks-jax[units]' (or give bare SI numbers)"
+        ) from err
+    ureg = pint.UnitRegistry()
+    return ureg
+
+
+def parse_quantity(value, kind: str) -> float:
+    """A number (SI, or degrees / deg/s for angles and rates) or a "<number> <unit>" string,
+    returned as a float in the SI unit of ``kind`` (see ``SI_UNITS``).
+
+    Raises UnitError with the rule that failed.
+    """
+    if kind not in SI_UNITS:
+        raise KeyError(kind)
+    if isinstance(value, bool):
+        raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
+    if isinstance(value, (int, float)):
+        x = float(value) * BARE_NUMBER_SCALE.get(kind, 1.0)
+        return x
+    if not isinstance(value, str):
+        raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
+    text = value.strip()
+    try:
+        return float(text) * BARE_NUMBER_SCALE.get(kind, 1.0)
+    except ValueError:
+        pass
+    ureg = _registry()
+    import pint
+
+    try:
+        q = ureg.Quantity(text)
+    except (pint.errors.UndefinedUnitError, pint.errors.DefinitionSyntaxError) as err:
+        raise UnitError(f"'{text}': unknown unit ({err})") from None
+    except Exception as err:  # pint raises several kinds for malformed text
+        raise UnitError(f"'{text}' is not a '<number> <unit>' quantity ({err})") from None
+    if not isinstance(q, ureg.Quantity):  # a bare number inside a string, e.g. "3"
+        return float(q) * BARE_NUMBER_SCALE.get(kind, 1.0)
+    if kind in ("angle", "dimensionless", "angular_velocity") and q.dimensionless and kind != "angular_velocity":
+        return float(q.to(SI_UNITS[kind]).magnitude) if kind == "angle" else float(q.to("").magnitude)
+    try:
+        return float(q.to(SI_UNITS[kind]).magnitude)
+    except pint.errors.DimensionalityError:
+        raise UnitError(
+            f"'{text}' has the dimension {q.dimensionality}, not that of a {kind.replace('_', ' ')}"
+            f" ({SI_UNITS[kind] or 'dimensionless'})"
+        ) from None
+
+
+def to_mph(v):
+    """m/s -> mph."""
+    return v / MPH
+
+
+def to_ft(x):
+    """m -> ft."""
+    return x / FT
+
+
+def to_lbf_s(j):
+    """N s -> lbf s."""
+    return j / LBF_S
+
+
+def to_ft_lbf(e):
+    """J -> ft lbf."""
+    return e / FT_LBF
