@@ -1,0 +1,215 @@
+"""Case files, units at the edge, the command line and every class of bad input (MODEL.md section 6)."""
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax import units as U
+from ks_jax.case import CaseError, case_from_dict, load_case
+from ks_jax.cli import main
+
+# A case written in US units; its SI twin below is written by hand from the exact unit definitions.
+US_CASE = {
+    "name": "units check",
+    "vehicles": [
+        {"name": "A", "weight": "3000 lbf", "inertia": ["400 kg*m^2", "1800 kg*m^2", "2000 kg*m^2"],
+         "length": "15 ft", "width": "6 ft", "height": "4.5 ft", "cg_to_front": "7 ft", "cg_height": "1.8 ft",
+         "position": ["0 ft", "0 ft"], "yaw": "90 deg", "speed": "0 mph"},
+        {"name": "B", "mass": "100 slug", "inertia": [[300, 0, 0], [0, 1500, 0], [0, 0, "1200 lbf*ft*s^2"]],
+         "length": "16 ft", "width": "6 ft", "height": "4.5 ft", "cg_to_front": "8 ft", "cg_height": "1.8 ft",
+         "position": ["-10 ft", "-2 ft"], "yaw": 0, "speed": "30 mph", "yaw_rate": "10 deg/s"},
+    ],
+    "contact": {"point": ["-1 ft", "-1.5 ft", "2 ft"], "normal": 15, "normal_pitch": "2 deg",
+                "restitution": 0.2, "friction": 0.4},
+}
+
+
+def si_twin():
+    ft, g0 = 0.3048, 9.80665
+    lbf = 0.45359237 * g0
+    return {
+        "name": "units check (SI)",
+        "vehicles": [
+            {"mass": 3000 * lbf / g0, "inertia": [400, 1800, 2000], "length": 15 * ft, "width": 6 * ft,
+             "height": 4.5 * ft, "cg_to_front": 7 * ft, "cg_height": 1.8 * ft, "position": [0, 0, 1.8 * ft],
+             "yaw": 90, "velocity": [0, 0]},
+            {"mass": 100 * lbf / ft, "inertia": [[300, 0, 0], [0, 1500, 0], [0, 0, 1200 * lbf * ft]],
+             "length": 16 * ft, "width": 6 * ft, "height": 4.5 * ft, "cg_to_front": 8 * ft, "cg_height": 1.8 * ft,
+             "position": [-10 * ft, -2 * ft], "yaw": 0, "speed": 30 * 1609.344 / 3600,
+             "angular_velocity": [0, 0, 10]},
+        ],
+        "contact": {"point": [-1 * ft, -1.5 * ft, 2 * ft], "normal": 15, "normal_pitch": 2,
+                    "restitution": 0.2, "friction": 0.4},
+    }
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_unit_strings_equal_si_numbers():
+    a = ks_jax.solve(case_from_dict(US_CASE)).to_dict()
+    b = ks_jax.solve(case_from_dict(si_twin())).to_dict()
+    assert a["contact"]["status"] == "ok"
+    np.testing.assert_allclose(a["contact"]["impulse"], b["contact"]["impulse"], rtol=1e-12)
+    for va, vb in zip(a["vehicles"], b["vehicles"]):
+        np.testing.assert_allclose(va["velocity_after"], vb["velocity_after"], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(va["angular_velocity_after"], vb["angular_velocity_after"], rtol=1e-12, atol=1e-12)
+
+
+def test_parse_quantity_rules():
+    assert U.parse_quantity("21 mph", "velocity") == pytest.approx(21 * 0.44704, rel=1e-12)
+    assert U.parse_quantity("2300 lbf*ft*s^2", "inertia") == pytest.approx(2300 * 4.4482216152605 * 0.3048, rel=1e-12)
+    assert U.parse_quantity(30, "angle") == pytest.approx(math.radians(30))
+    assert U.parse_quantity("30 deg", "angle") == pytest.approx(math.radians(30))
+    assert U.parse_quantity(45, "angular_velocity") == pytest.approx(math.radians(45))
+    assert U.parse_quantity("0.06 s", "time") == pytest.approx(0.06)
+    assert U.parse_quantity("155.75 slug", "mass") == pytest.approx(155.75 * 14.593902937206364, rel=1e-12)
+    with pytest.raises(U.UnitError, match="dimension"):
+        U.parse_quantity("21 mph", "mass")
+    with pytest.raises(U.UnitError, match="unknown unit"):
+        U.parse_quantity("21 furlongs_per_blink", "velocity")
+
+
+def test_seed_case_files_json_and_toml(capsys):
+    # the manual's panel for chapter 000 and the hand calculation of chapter 001, through the CLI
+    from importlib import resources
+
+    root = resources.files("ks_jax.cases")
+    code, out, _ = run_cli(capsys, "solve", str(root / "seed_000_saturn_pontiac.json"), "--json")
+    assert code == 0
+    res = json.loads(out)["cases"][0]
+    assert res["contact"]["impulse_magnitude"] == pytest.approx(5946.847, abs=1e-3)
+    assert res["contact"]["energy_loss"] == pytest.approx(19141.047, abs=5e-3)
+    assert [v["ees"] / U.MPH for v in res["vehicles"]] == pytest.approx([11.281, 2.213], abs=1e-3)
+    assert [v["crush"] / U.FT for v in res["vehicles"]] == pytest.approx([1.396, 0.059], abs=1e-4)
+    assert [v["pdof"] for v in res["vehicles"]] == pytest.approx([180.0, 0.0])
+    assert [v["pdof_clock"] for v in res["vehicles"]] == [6, 12]
+    code, out, _ = run_cli(capsys, "solve", str(root / "seed_001_lucid_kia.toml"), "--json")
+    res = json.loads(out)["cases"][0]
+    assert res["contact"]["impulse_magnitude"] == pytest.approx(6571.96, rel=1e-3)
+    assert [v["speed_after"] / U.FT for v in res["vehicles"]] == pytest.approx([16.82, 14.62], abs=0.01)
+    assert res["contact"]["energy_loss"] / U.FT_LBF == pytest.approx(14624.38, rel=1e-3)
+
+
+def test_json_keys_are_model_section_4(tmp_path, capsys):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(US_CASE))
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    res = json.loads(out)["cases"][0]
+    assert set(res) == {"name", "contact", "vehicles"}
+    assert set(res["contact"]) == set(ks_jax.ContactResult._fields)
+    assert set(res["vehicles"][0]) == set(ks_jax.VehicleResult._fields) | {"name"}
+    assert res["contact"]["status"] == "ok"
+    # the JSON's impulse is what the Python API gives
+    direct = ks_jax.solve(load_case(path))
+    np.testing.assert_allclose(res["contact"]["impulse"], direct.result.contact.impulse, rtol=1e-12)
+
+
+def test_text_report_has_both_unit_systems(tmp_path, capsys):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(US_CASE))
+    code, out, _ = run_cli(capsys, "solve", str(path))
+    assert code == 0
+    for word in ("impulse", "lbf s", "N s", "ft lbf", "mph", "PDOF", "EES", "crush", "sliding"):
+        assert word in out
+
+
+def test_demo_prints_both_seed_chapters(capsys):
+    code, out, _ = run_cli(capsys, "demo")
+    assert code == 0
+    assert "Saturn L300" in out and "Lucid Air" in out
+    assert "5,946.847 N s" in out and "1,336.904 lbf s" in out
+
+
+def _bad(mutate):
+    d = copy.deepcopy(US_CASE)
+    mutate(d)
+    return d
+
+
+BAD = {
+    "mass <= 0": (lambda d: d["vehicles"][0].update(weight="-1200 lbf"), r"vehicles\[0\]\.weight = '-1200 lbf'.*positive"),
+    "zero mass": (lambda d: d["vehicles"][1].update(mass=0), r"vehicles\[1\]\.mass = 0: mass must be positive"),
+    "inertia <= 0": (lambda d: d["vehicles"][0].update(inertia=[400, -5, 2000]), r"vehicles\[0\]\.inertia\[1\].*positive"),
+    "inertia tensor not PD": (lambda d: d["vehicles"][1].update(inertia=[[1, 2, 0], [2, 1, 0], [0, 0, 1]]),
+                              r"vehicles\[1\]\.inertia.*positive definite"),
+    "restitution": (lambda d: d["contact"].update(restitution=1.5), r"contact\.restitution = 1\.5.*\[-1, 1\]"),
+    "friction": (lambda d: d["contact"].update(friction=-0.1), r"contact\.friction = -0\.1.*>= 0"),
+    "nan": (lambda d: d["vehicles"][1].update(speed=float("nan")), r"vehicles\[1\]\.speed = nan.*finite"),
+    "inf": (lambda d: d["vehicles"][0]["position"].__setitem__(0, float("inf")), r"vehicles\[0\]\.position\[0\].*finite"),
+    "wrong dimension": (lambda d: d["vehicles"][0].update(length="3 kg"), r"vehicles\[0\]\.length = '3 kg'.*dimension"),
+    "unknown unit": (lambda d: d["vehicles"][1].update(speed="30 zorks"), r"vehicles\[1\]\.speed = '30 zorks'.*unknown unit"),
+    "missing field": (lambda d: d["vehicles"][0].pop("width"), r"vehicles\[0\]\.width: missing field"),
+    "missing restitution": (lambda d: d["contact"].pop("restitution"), r"contact\.restitution: missing field"),
+    "one vehicle": (lambda d: d["vehicles"].pop(), r"exactly two vehicles"),
+    "three vehicles": (lambda d: d["vehicles"].append(copy.deepcopy(d["vehicles"][0])), r"exactly two vehicles"),
+    "zero normal": (lambda d: d["contact"].update(normal=[0, 0, 0]), r"contact\.normal.*non-zero"),
+    "unknown field": (lambda d: d["vehicles"][1].update(sped="30 mph"), r"vehicles\[1\]\.sped: unknown field"),
+}
+
+
+@pytest.mark.parametrize("label", list(BAD))
+def test_bad_input_is_refused_with_field_value_and_rule(label, tmp_path, capsys):
+    mutate, pattern = BAD[label]
+    d = _bad(mutate)
+    with pytest.raises(CaseError, match=pattern) as err:
+        case_from_dict(d)
+    assert "case 'units check'" in str(err.value)
+    # the CLI: one line on stderr, no traceback, exit status 2
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(d))
+    code, out, errtext = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 2 and out == ""
+    assert errtext.startswith("ks-jax: error: case 'units check'") and "Traceback" not in errtext
+
+
+def test_bad_case_in_a_batch_is_reported_and_the_others_solved(tmp_path, capsys):
+    good = copy.deepcopy(US_CASE)
+    bad = _bad(BAD["restitution"][0])
+    bad["name"] = "bad one"
+    other = copy.deepcopy(US_CASE)
+    other["name"] = "second good"
+    other["vehicles"][1]["speed"] = "40 mph"
+    path = tmp_path / "many.json"
+    path.write_text(json.dumps({"cases": [good, bad, other]}))
+    code, out, err = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 0
+    res = json.loads(out)["cases"]
+    assert [r["contact"]["status"] for r in res][0] == "ok"
+    assert res[1]["contact"]["status"].startswith("invalid: ") and "restitution" in res[1]["contact"]["status"]
+    assert res[2]["contact"]["status"] == "ok"
+    # the good cases equal their single solves
+    for r, d in ((res[0], good), (res[2], other)):
+        single = ks_jax.solve(case_from_dict(d)).to_dict()
+        np.testing.assert_allclose(r["contact"]["impulse"], single["contact"]["impulse"], rtol=1e-12)
+    assert "bad one" in err
+
+
+def test_toml_case_and_unreadable_file(tmp_path, capsys):
+    path = tmp_path / "c.toml"
+    path.write_text('name = "t"\n[[vehicles]]\nmass = 1000\n')
+    code, _, err = run_cli(capsys, "solve", str(path))
+    assert code == 2 and "exactly two vehicles" in err
+    path = tmp_path / "broken.json"
+    path.write_text("{not json")
+    code, _, err = run_cli(capsys, "solve", str(path))
+    assert code == 2 and "cannot be read" in err
+    code, _, err = run_cli(capsys, "solve", str(tmp_path / "missing.json"))
+    assert code == 2 and "no such file" in err
+
+
+def test_paths_refuse_unknown_names():
+    case = case_from_dict(US_CASE)
+    with pytest.raises(CaseError, match="not a vehicle input"):
+        ks_jax.get_input(case.inputs, "vehicles[0].sped")
+    with pytest.raises(CaseError, match="not a contact result"):
+        ks_jax.get_output(ks_jax.solve(case).result, "contact.impulse_size")
+    new = ks_jax.set_input(case.inputs, "vehicles[1].yaw_rate", 0.5)
+    assert float(ks_jax.get_input(new, "vehicles[1].angular_velocity[2]")) == 0.5

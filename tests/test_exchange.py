@@ -1,0 +1,419 @@
+"""The KS exchange against an independent NumPy reference, physical invariants, Brach's planar
+model, the seed chapters' worked examples, bad rows in a batch, and float32 (MODEL.md 3, 4, 7)."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ks_jax
+import reference as ref
+from ks_jax import types as t
+from ks_jax import units as U
+
+# Named tolerances (float64 unless said otherwise).
+RTOL_REFERENCE = 1e-9  # engine vs reference, relative to each field's natural scale
+RTOL_INVARIANT = 1e-11  # conservation laws and kinematic identities, relative to their scale
+RTOL_SYMMETRY = 1e-10  # swap symmetry
+RTOL_BRACH = 1e-9  # KS in the plane vs Brach's planar formulas
+RTOL_ROWS = 1e-12  # a batch row vs the same case solved alone
+RTOL_FLOAT32 = 2e-4  # float32 vs float64, relative to each field's natural scale (measured worst ~3e-5)
+
+
+@pytest.fixture(scope="module")
+def random_results(kit, random_cases):
+    out = {}
+    for kind, cases in random_cases.items():
+        out[kind] = (cases, kit.solve(cases), kit.reference_batch(cases))
+    return out
+
+
+# --------------------------------------------------------------------------- reference
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_random_cases_match_reference(kit, random_results, kind):
+    cases, eng, refb = random_results[kind]
+    kit.assert_matches(eng, refb, RTOL_REFERENCE, cases)
+
+
+def test_random_sample_covers_sticking_and_sliding(random_results):
+    branches = {"stick": 0, "slide": 0, "pull": 0, "separating": 0}
+    crush_zero = 0
+    pitched = 0
+    for cases, eng, refb in random_results.values():
+        for s in refb["solutions"]:
+            branches[s["_"]["branch"]] += 1
+        np.testing.assert_array_equal(eng["contact"]["sliding"], refb["contact"]["sliding"])
+        crush_zero += int(np.sum(refb["vehicles"][1]["crush"] == 0))
+        pitched += sum(abs(c["contact"]["normal"][2]) > 0.05 for c in cases)
+    # 300 cases: roughly 20 % stick, 70 % slide, 8 % with N_c <= 0 (the "pull" branch)
+    assert branches["stick"] >= 30, branches
+    assert branches["slide"] >= 30, branches
+    assert branches["pull"] >= 5, branches
+    assert branches["separating"] == 0, branches
+    assert crush_zero >= 10 and pitched >= 100
+
+
+def test_separating_contacts(kit):
+    rng = np.random.default_rng(7)
+    cases = []
+    for k in range(12):
+        c = ref.random_case(rng, approaching=False)
+        s = ref.stick_split(c)
+        n, u = s["n"], s["u"]
+        # make u_n = +something, and exactly 0 for the last rows
+        target = 0.0 if k >= 9 else rng.uniform(0.1, 5.0)
+        c["vehicles"][1]["velocity"] = c["vehicles"][1]["velocity"] + (n @ u - target) * n
+        cases.append(c)
+    cases[-1]["contact"]["normal"] = np.array([1.0, 0.0, 0.0])  # exact u_n = 0 on an axis
+    v2 = cases[-1]["vehicles"][1]
+    u = ref.stick_split(cases[-1])["u"]
+    v2["velocity"] = v2["velocity"] + np.array([u[0], 0.0, 0.0])
+    assert ref.stick_split(cases[-1])["u"][0] == 0.0
+    eng = kit.solve(cases)
+    refb = kit.reference_batch(cases)
+    np.testing.assert_array_equal(eng["contact"]["status"], t.SEPARATING)
+    np.testing.assert_array_equal(eng["contact"]["impulse"], 0.0)
+    np.testing.assert_array_equal(eng["contact"]["energy_loss"], 0.0)
+    np.testing.assert_array_equal(eng["contact"]["sliding"], False)
+    for tree in (eng["contact"], *eng["vehicles"]):
+        for name, x in tree.items():
+            if name == "ees":  # undefined (NaN) exactly when both crushes are 0
+                crush0 = (eng["vehicles"][0]["crush"] + eng["vehicles"][1]["crush"]) == 0
+                assert np.array_equal(np.isnan(x), crush0), name
+            else:
+                assert np.all(np.isfinite(np.asarray(x, dtype=float))), name
+    kit.assert_matches(eng, refb, RTOL_REFERENCE, cases)
+
+
+# --------------------------------------------------------------------------- invariants
+def _world_inertia(case, i):
+    return ref.world_inertia(case["vehicles"][i])
+
+
+def test_momentum_conservation(random_results):
+    rng = np.random.default_rng(3)
+    for cases, eng, _ in random_results.values():
+        for b, c in enumerate(cases):
+            v1, v2 = c["vehicles"]
+            va = [eng["vehicles"][i]["velocity_after"][b] for i in range(2)]
+            wa = [eng["vehicles"][i]["angular_velocity_after"][b] for i in range(2)]
+            p0 = v1["mass"] * v1["velocity"] + v2["mass"] * v2["velocity"]
+            p1 = v1["mass"] * va[0] + v2["mass"] * va[1]
+            scale = v1["mass"] * np.linalg.norm(v1["velocity"]) + v2["mass"] * np.linalg.norm(v2["velocity"])
+            assert np.linalg.norm(p1 - p0) <= RTOL_INVARIANT * scale, b
+            origin = rng.normal(0, 30, size=3)  # an arbitrary fixed point
+
+            def ang(vels, omegas):
+                total = np.zeros(3)
+                for i, v in enumerate((v1, v2)):
+                    total += v["mass"] * np.cross(v["position"] - origin, vels[i])
+                    total += _world_inertia(c, i) @ omegas[i]
+                return total
+
+            l0 = ang([v1["velocity"], v2["velocity"]], [v1["angular_velocity"], v2["angular_velocity"]])
+            l1 = ang(va, wa)
+            lscale = sum(v["mass"] * np.linalg.norm(v["position"] - origin) * np.linalg.norm(v["velocity"])
+                         + np.linalg.norm(_world_inertia(c, i) @ v["angular_velocity"])
+                         for i, v in enumerate((v1, v2)))
+            assert np.linalg.norm(l1 - l0) <= RTOL_INVARIANT * lscale, b
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_energy_loss_nonnegative_for_restitution_0_to_1(kit, random_cases, kind):
+    rng = np.random.default_rng(11)
+    cases = copy.deepcopy(random_cases[kind])
+    eps = np.concatenate([[0.0, 1.0, 0.0, 1.0], rng.uniform(0, 1, len(cases) - 4)])
+    for c, e in zip(cases, eps):
+        c["contact"]["restitution"] = float(e)
+    eng = kit.solve(cases)
+    ke = np.array([sum(ref.kinetic_energy(v, v["velocity"], v["angular_velocity"]) for v in c["vehicles"])
+                   for c in cases])
+    energy = eng["contact"]["energy_loss"]
+    assert np.all(energy >= -RTOL_INVARIANT * ke), energy.min()
+    assert np.sum(energy > 1e-3 * ke) > 0.9 * len(cases)  # not trivially zero
+
+
+def test_stick_and_slide_identities(random_results):
+    n_stick = n_slide = 0
+    for cases, eng, refb in random_results.values():
+        con = eng["contact"]
+        for b, c in enumerate(cases):
+            eps, mu = c["contact"]["restitution"], c["contact"]["friction"]
+            n = con["normal"][b]
+            u, u1, j = con["closing_velocity"][b], con["separation_velocity"][b], con["impulse"][b]
+            un = n @ u
+            tol_u = RTOL_INVARIANT * np.linalg.norm(u) * 10
+            if not con["sliding"][b]:
+                n_stick += 1
+                np.testing.assert_allclose(u1, -eps * u, rtol=0, atol=tol_u)
+            else:
+                n_slide += 1
+                assert abs(n @ u1 - (-eps * un)) <= tol_u
+                jn = n @ j
+                jt = np.linalg.norm(j - jn * n)
+                assert abs(jt - mu * abs(jn)) <= RTOL_INVARIANT * 10 * np.linalg.norm(j)
+    assert n_stick >= 30 and n_slide >= 30
+
+
+def test_sliding_impulse_scales_with_one_plus_eps(kit, random_cases):
+    base = [c for c in random_cases["full"][:60]]
+    cases = []
+    for c in base:
+        for e in (0.0, 0.4):
+            cc = copy.deepcopy(c)
+            cc["contact"]["restitution"] = e
+            cases.append(cc)
+    eng = kit.solve(cases)
+    j = eng["contact"]["impulse"].reshape(len(base), 2, 3)
+    np.testing.assert_allclose(j[:, 1], 1.4 * j[:, 0], rtol=0,
+                               atol=RTOL_INVARIANT * np.abs(j).max())
+
+
+def test_swap_symmetry(kit, random_results):
+    for cases, eng, _ in random_results.values():
+        swapped = kit.solve([ref.swap(c) for c in cases])
+        jscale = np.linalg.norm(eng["contact"]["impulse"], axis=-1, keepdims=True)
+        np.testing.assert_array_less(
+            np.abs(swapped["contact"]["impulse"] + eng["contact"]["impulse"]), RTOL_SYMMETRY * jscale + 1e-300)
+        np.testing.assert_array_equal(swapped["contact"]["sliding"], eng["contact"]["sliding"])
+        np.testing.assert_allclose(swapped["contact"]["energy_loss"], eng["contact"]["energy_loss"],
+                                   rtol=RTOL_SYMMETRY, atol=RTOL_SYMMETRY * np.abs(eng["contact"]["energy_loss"]).max())
+        for i in range(2):
+            a, b = swapped["vehicles"][1 - i], eng["vehicles"][i]
+            for name in ("delta_v", "crush", "ees", "delta_v_body", "angular_velocity_after"):
+                np.testing.assert_allclose(a[name], b[name], rtol=RTOL_SYMMETRY,
+                                           atol=RTOL_SYMMETRY * np.nanmax(np.abs(b[name])), err_msg=name)
+
+
+# --------------------------------------------------------------------------- Brach
+def test_planar_sliding_is_brach(kit):
+    rng = np.random.default_rng(5)
+    cases = [ref.planar_case(rng, restitution=float(e)) for e in np.r_[np.zeros(40), rng.uniform(0, 1, 80)]]
+    eng = kit.solve(cases)
+    brach = [ref.brach_planar(c) for c in cases]
+    compared = 0
+    for b, (c, br) in enumerate(zip(cases, brach)):
+        if c["contact"]["restitution"] == 0.0:
+            # with eps = 0 Brach's critical ratio is the KS ratio T_c / N_c: same sliding criterion
+            assert bool(eng["contact"]["sliding"][b]) == br["sliding"], b
+        if not (eng["contact"]["sliding"][b] and br["sliding"]):
+            continue
+        compared += 1
+        jscale = np.linalg.norm(br["impulse"])
+        np.testing.assert_allclose(eng["contact"]["impulse"][b], br["impulse"], rtol=0, atol=RTOL_BRACH * jscale)
+        np.testing.assert_allclose(eng["contact"]["energy_loss"][b], br["energy_loss"], rtol=0,
+                                   atol=RTOL_BRACH * br["kinetic_energy"])
+        for i in range(2):
+            v = c["vehicles"][i]
+            np.testing.assert_allclose(eng["vehicles"][i]["velocity_after"][b][:2], br["velocity_after"][i], rtol=0,
+                                       atol=RTOL_BRACH * (np.linalg.norm(v["velocity"]) + jscale / v["mass"]))
+            np.testing.assert_allclose(eng["vehicles"][i]["yaw_rate_after"][b], br["yaw_rate_after"][i], rtol=0,
+                                       atol=RTOL_BRACH * (abs(br["yaw_rate_after"][i]) + 1.0))
+            assert eng["vehicles"][i]["velocity_after"][b][2] == pytest.approx(0.0, abs=1e-12)
+    assert compared >= 50, compared
+
+
+# --------------------------------------------------------------------------- seed chapters
+def _inline_case(m1, m2, speed1, speed2, x1, x2, point_x, dims1, dims2, eps=0.1, mu=0.5):
+    cg = 1.772 * U.FT
+    inertia = [500.0, 2500.0, 2700.0]
+    veh = []
+    for m, (length, c2f, width) in ((m1, dims1), (m2, dims2)):
+        veh.append(ks_jax.Vehicle.create(m, inertia, length * U.FT, width * U.FT, height=4.6 * U.FT,
+                                         cg_to_front=c2f * U.FT, cg_height=cg))
+    s1 = ks_jax.State.create([x1 * U.FT, 0.0], 0.0, speed=speed1 * U.MPH, cg_height=cg)
+    s2 = ks_jax.State.create([x2 * U.FT, 0.0], 0.0, speed=speed2 * U.MPH, cg_height=cg)
+    contact = ks_jax.Contact.create([point_x * U.FT, 0.0, cg], azimuth=0.0, restitution=eps, friction=mu)
+    return veh[0], s1, veh[1], s2, contact
+
+
+def test_seed_000_saturn_pontiac(kit):
+    m1 = 3183.475 * U.LBF / U.G0
+    m2 = 3496.531 * U.LBF / U.G0
+    args = _inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71), (16.53, 7.283, 6.05))
+    r = ks_jax.exchange(*args)
+    con, (a, b) = r.contact, r.vehicles
+    assert int(con.status) == t.OK and not bool(con.sliding)
+    assert float(con.impulse_magnitude) == pytest.approx(5946.847, abs=1e-3)
+    assert float(con.impulse_magnitude) / U.LBF_S == pytest.approx(1336.904, abs=1e-3)
+    assert float(con.energy_loss) == pytest.approx(19141.047, abs=5e-3)
+    assert float(con.energy_loss) / U.FT_LBF == pytest.approx(14117.71, abs=5e-3)
+    assert float(a.delta_v_magnitude) / U.MPH == pytest.approx(9.21, abs=5e-3)
+    assert float(b.delta_v_magnitude) / U.MPH == pytest.approx(8.39, abs=5e-3)
+    assert float(a.crush) / U.FT == pytest.approx(1.396, abs=1e-4)
+    assert float(b.crush) / U.FT == pytest.approx(0.059, abs=1e-4)
+    assert float(a.ees) / U.MPH == pytest.approx(11.281, abs=1e-3)
+    assert float(b.ees) / U.MPH == pytest.approx(2.213, abs=1e-3)
+    # the struck car is pushed from behind (pdof 180), the bullet car from the front (pdof 0)
+    assert float(a.pdof) == pytest.approx(180.0, abs=1e-9) and float(b.pdof) == pytest.approx(0.0, abs=1e-9)
+    assert float(a.pdof_clock) == 6 and float(b.pdof_clock) == 12
+    np.testing.assert_allclose(np.asarray(a.delta_v_body), np.asarray(a.delta_v), atol=1e-12)  # yaw 0
+
+
+def test_seed_001_lucid_kia(kit):
+    m1 = 155.75 * U.SLUG
+    m2 = 100.38 * U.SLUG
+    args = _inline_case(m1, m2, 5.0, 20.0, 0.0, -16.0, -8.3, (16.3, 8.1, 6.4), (16.0, 7.6, 6.1))
+    r = ks_jax.exchange(*args)
+    con, (a, b) = r.contact, r.vehicles
+    assert int(con.status) == t.OK
+    assert float(con.impulse_magnitude) == pytest.approx(6571.96, rel=1e-3)
+    assert float(con.impulse_magnitude) / U.LBF_S == pytest.approx(1477.21, rel=1e-3)
+    assert float(a.delta_v_magnitude) / U.MPH == pytest.approx(6.47, abs=0.01)
+    assert float(b.delta_v_magnitude) / U.MPH == pytest.approx(10.03, abs=0.01)
+    assert float(a.speed_after) / U.FPS == pytest.approx(16.82, abs=0.01)
+    assert float(b.speed_after) / U.FPS == pytest.approx(14.62, abs=0.01)
+    assert float(con.energy_loss) / U.FT_LBF == pytest.approx(14624.38, rel=1e-3)
+    assert float(con.energy_loss) == pytest.approx(19828, rel=1e-3)
+    np.testing.assert_allclose(np.asarray(con.impulse)[1:], 0.0, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- bad rows
+def _bad_rows(base, rng):
+    """(cases, expected status codes); every case shares the inertia shape of ``base``."""
+    full = np.ndim(base["vehicles"][0]["inertia"]) == 2
+    rows = []
+
+    def row(code, edit):
+        c = copy.deepcopy(base)
+        edit(c)
+        rows.append((c, code))
+
+    def setv(i, k, val):
+        return lambda c: c["vehicles"][i].__setitem__(k, val)
+
+    def setc(k, val):
+        return lambda c: c["contact"].__setitem__(k, val)
+
+    row(t.OK, lambda c: None)
+    row(t.INVALID_MASS_1, setv(0, "mass", 0.0))
+    row(t.INVALID_MASS_2, setv(1, "mass", -1200.0))
+    row(t.INVALID_RESTITUTION, setc("restitution", 1.5))
+    row(t.INVALID_RESTITUTION, setc("restitution", -1.000001))
+    row(t.INVALID_FRICTION, setc("friction", -0.1))
+    row(t.INVALID_NONFINITE, setv(0, "velocity", np.array([np.nan, 0.0, 0.0])))
+    row(t.INVALID_NONFINITE, setc("point", np.array([0.0, np.inf, 0.0])))
+    row(t.INVALID_NONFINITE, setv(1, "mass", np.nan))
+    row(t.INVALID_NORMAL, setc("normal", np.zeros(3)))
+    row(t.INVALID_BOX_1, setv(0, "length", 0.0))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    if full:
+        one_negative = q @ np.diag([900.0, 2500.0, -40.0]) @ q.T
+        two_negative = q @ np.diag([3000.0, -50.0, -60.0]) @ q.T
+        asymmetric = np.array([[500.0, 100.0, 0.0], [0.0, 2500.0, 0.0], [0.0, 0.0, 2700.0]])
+        row(t.INVALID_INERTIA_1, setv(0, "inertia", one_negative))
+        row(t.INVALID_INERTIA_2, setv(1, "inertia", two_negative))
+        row(t.INVALID_INERTIA_1, setv(0, "inertia", asymmetric))
+    else:
+        row(t.INVALID_INERTIA_1, setv(0, "inertia", np.array([500.0, 0.0, 2700.0])))
+        row(t.INVALID_INERTIA_2, setv(1, "inertia", np.array([500.0, 2500.0, -1.0])))
+    row(t.OK, lambda c: c["contact"].__setitem__("friction", 0.0))
+    sep = copy.deepcopy(base)
+    s = ref.stick_split(sep)
+    sep["vehicles"][1]["velocity"] = sep["vehicles"][1]["velocity"] + (s["n"] @ s["u"] - 1.0) * s["n"]
+    rows.append((sep, t.SEPARATING))
+    return [r[0] for r in rows], np.array([r[1] for r in rows])
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_bad_rows_in_a_batch(kit, random_cases, kind):
+    rng = np.random.default_rng(13)
+    cases, codes = _bad_rows(random_cases[kind][0], rng)
+    eng = kit.solve(cases)
+    np.testing.assert_array_equal(eng["contact"]["status"], codes)
+    bad = codes >= 10
+    for tree in (eng["contact"], *eng["vehicles"]):
+        for name, x in tree.items():
+            x = np.asarray(x)
+            if name == "status":
+                continue
+            if x.dtype == bool:
+                assert not np.any(x[bad]), name
+                continue
+            xb = x[bad].reshape(int(bad.sum()), -1)
+            assert np.all(np.isnan(xb)), name
+            if name != "ees":
+                assert np.all(np.isfinite(x[~bad])), name
+    # good rows: the same as solving them alone, and as the reference
+    for b in np.flatnonzero(~bad):
+        single = kit.solve(cases[b])
+        for part_b, part_s in zip((eng["contact"], *eng["vehicles"]), (single["contact"], *single["vehicles"])):
+            for name in part_s:
+                np.testing.assert_allclose(np.asarray(part_b[name][b], dtype=float),
+                                           np.asarray(part_s[name], dtype=float),
+                                           rtol=RTOL_ROWS, atol=RTOL_ROWS * 1e3, err_msg=name)
+    good = [cases[b] for b in np.flatnonzero(~bad)]
+    good_eng = jax.tree_util.tree_map(lambda x: x[~bad], eng)
+    kit.assert_matches(good_eng, kit.reference_batch(good), RTOL_REFERENCE, good)
+    # every bad row also gets the reference's verdict
+    for b in np.flatnonzero(bad):
+        assert kit.status_code(ref.input_status(cases[b])) == codes[b]
+
+
+def test_bad_rows_do_not_poison_gradients(kit, random_cases):
+    rng = np.random.default_rng(17)
+    cases, codes = _bad_rows(random_cases["full"][1], rng)
+    args = kit.inputs(cases)
+
+    def loss(args):
+        r = jax.vmap(lambda *a: ks_jax.exchange(*a))(*args)
+        ok = r.contact.status == t.OK
+        j = jnp.where(ok[:, None], r.contact.impulse, 0.0)
+        e = jnp.where(ok, r.contact.energy_loss, 0.0)
+        return jnp.sum(j[:, 0] + 2.0 * j[:, 1] - j[:, 2]) + 1e-3 * jnp.sum(e)
+
+    grads = jax.jit(jax.grad(loss))(args)
+    bad = codes >= 10
+    for g in jax.tree_util.tree_leaves(grads):
+        g = np.asarray(g)
+        assert np.all(np.isfinite(g))
+        assert np.all(g[bad] == 0.0)
+    # and the good rows really have a gradient
+    assert np.any(np.asarray(grads[1].velocity)[~bad] != 0.0)
+
+
+# --------------------------------------------------------------------------- float32
+def _float32_worst(kit, cases, eng32, refb):
+    """The largest error of any float32 result, relative to the same natural scales as
+    ``assert_matches``, found by bisection on the tolerance it passes."""
+    lo, hi = 0.0, 1.0
+    for _ in range(40):
+        mid = math.sqrt(max(lo, 1e-12) * hi)
+        try:
+            kit.assert_matches(eng32, refb, mid, cases)
+            hi = mid
+        except AssertionError:
+            lo = mid
+    return hi
+
+
+def test_float32_agrees_with_float64(kit, random_cases):
+    m1 = 3183.475 * U.LBF / U.G0
+    m2 = 3496.531 * U.LBF / U.G0
+    seed64 = _inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71), (16.53, 7.283, 6.05))
+    cases = random_cases["principal"][:25] + random_cases["full"][:25]
+    refb = kit.reference_batch(cases)
+    with jax.enable_x64(False):
+        seed32 = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x), dtype=jnp.float32), seed64)
+        r32 = ks_jax.exchange(*seed32)
+        assert r32.contact.impulse.dtype == jnp.float32
+        eng_p = kit.engine_dict(kit.batch(*kit.inputs(cases[:25], np.float32), 0.0))
+        eng_f = kit.engine_dict(kit.batch(*kit.inputs(cases[25:], np.float32), 0.0))
+        assert eng_p["contact"]["impulse"].dtype == np.float32
+    eng32 = jax.tree_util.tree_map(lambda a, b: np.concatenate([a, b]), eng_p, eng_f)
+    kit.assert_matches(eng32, refb, RTOL_FLOAT32, cases)
+    worst = _float32_worst(kit, cases, eng32, refb)
+    print(f"\nfloat32 worst relative error over 50 random cases: {worst:.3g}")
+    r64 = ks_jax.exchange(*seed64)
+    for name in ("impulse_magnitude", "energy_loss"):
+        a, b = float(getattr(r32.contact, name)), float(getattr(r64.contact, name))
+        assert abs(a - b) <= RTOL_FLOAT32 * abs(b), name
+    for i in range(2):
+        for name in ("delta_v_magnitude", "crush", "ees"):
+            a, b = float(getattr(r32.vehicles[i], name)), float(getattr(r64.vehicles[i], name))
+            assert abs(a - b) <= RTOL_FLOAT32 * abs(b), (i, name, a, b)
