@@ -1,0 +1,439 @@
+"""Automatic contact (MODEL.md section 5): footprints, first contact, overlap, centroid, normal.
+
+Everything here is pure and unbatched, built from fixed-size arrays (a rectangle is (4, 2), an
+overlap polygon (8, 2) with a vertex count), so it works under ``jax.jit``, ``jax.vmap`` and
+``jax.grad``; ``automatic_exchange`` is the entry point that ``ks_jax.solve`` calls.
+
+Choices where MODEL.md is silent
+--------------------------------
+- Footprint: the bounding box seen from above, x in [cg_to_front - length, cg_to_front],
+  y in [-width/2, width/2] in the body frame, turned by the yaw only (pitch and roll are
+  ignored for the footprint and the vertical overlap).
+- Free motion: the CG moves with its constant velocity (3D, so z too); the body turns about
+  its CG at the constant yaw rate (z component of the global angular velocity). Pitch and roll
+  stay as given; velocities and angular velocities are unchanged.
+- ``time`` (``contact.time``) reports the first-contact time t_i, as the manual's "timing"
+  panel does; the exchange itself happens at t_i + penetration_time. For an explicit contact
+  (``ks_jax.exchange``) time is 0: the exchange is at the case state.
+- First contact is searched in [0, HORIZON] = [0, 10] s. Where neither vehicle rotates it is
+  exact (closed form: the separating-axis test swept along the relative translation is a set
+  of 8 linear inequalities in t). Where one rotates, the separating-axis function
+  s(t) = max over the 4 edge normals of the gap between the projections (> 0 apart, <= 0
+  touching) is sampled every HORIZON / SCAN_STEPS = 5 ms and the first sign change is refined
+  by BISECTION_STEPS bisections (to far below 1e-6 s). A graze shorter than 5 ms can be
+  missed there.
+- Gradients of t_i are those of the touching condition s(t_i, theta) = 0 (implicit function
+  theorem, applied as one Newton step from a stop_gradient root), so they see speeds,
+  headings, positions and yaw rates in both cases; 0 when the vehicles overlap at t = 0.
+- Overlap: vehicle 1's footprint clipped by vehicle 2's four half-planes (Sutherland-Hodgman,
+  8 vertices at most). Its area centroid is the impulse centroid; z is the middle of the
+  boxes' vertical overlap, [z - cg_height, z - cg_height + height] of each.
+- Degenerate overlap (area below ~1e3 machine epsilons of the footprint areas, e.g. when
+  penetration_time = 0 and the exchange is at the instant of touching): the centroid is the
+  middle of the touching features (the contact manifold along the axis of least penetration),
+  which is the limit of the area centroid as penetration_time -> 0.
+- Normal: perpendicular to the line through the two points where the outlines cross,
+  horizontal, oriented like the axis of least penetration (from vehicle 2 into vehicle 1),
+  then tilted up by ``normal_pitch``: n = (cos p n_x, cos p n_y, sin p). Where the outlines do
+  not cross in exactly two well-separated points (collinear edges, containment, a degenerate
+  overlap) n is the axis of least penetration.
+- Never touching within the horizon: status "no_contact" and no NaN anywhere: zero impulse,
+  zero delta-V, velocity_after = velocity, crush and EES 0, ``time`` = HORIZON, point the
+  midpoint of the CGs and normal the horizontal direction from CG 2 to CG 1, both at t = 0.
+- Inputs that break a rule (``ks_jax.exchange.input_status``) give that status and NaN
+  results, exactly as ``ks_jax.exchange`` does; the geometry of such a row runs on harmless
+  stand-in values so that neither it nor its gradient can produce NaN elsewhere.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import linalg as la
+from .exchange import _benign, exchange, input_status
+from .types import NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
+
+HORIZON = 10.0  # s, search horizon for the first contact
+SCAN_STEPS = 2000  # coarse samples of the horizon where a vehicle rotates (5 ms)
+SCAN_BLOCK = 50  # samples evaluated together per loop step
+BISECTION_STEPS = 48
+MAX_VERTICES = 8  # two convex quadrilaterals overlap in at most an octagon
+
+
+class Contact2D(NamedTuple):
+    """The automatic contact at one instant: point (3,) m, normal (3,) horizontal unit
+    (from vehicle 2 into vehicle 1), overlap polygon (8, 2) m with ``count`` vertices,
+    ``area`` () m^2, ``crossings`` (2, 2) m and ``crossing_ok`` () bool (the two outline
+    crossings and whether the normal came from them)."""
+
+    point: jnp.ndarray
+    normal: jnp.ndarray
+    polygon: jnp.ndarray
+    count: jnp.ndarray
+    area: jnp.ndarray
+    crossings: jnp.ndarray
+    crossing_ok: jnp.ndarray
+
+
+# ---------------------------------------------------------------------------------------
+# footprints and free motion
+
+
+def footprint(vehicle: Vehicle, xy, yaw):
+    """(4, 2) corners (m) of the footprint with CG at ``xy`` (2,) and ``yaw`` (rad),
+    counter-clockwise: rear-right, front-right, front-left, rear-left."""
+    a = vehicle.cg_to_front - vehicle.length
+    b = vehicle.cg_to_front
+    h = 0.5 * vehicle.width
+    bx = jnp.stack([a, b, b, a])
+    by = jnp.stack([-h, -h, h, h])
+    c, s = jnp.cos(yaw), jnp.sin(yaw)
+    return jnp.stack([xy[0] + c * bx - s * by, xy[1] + s * bx + c * by], -1)
+
+
+def advance(state: State, t) -> State:
+    """The state after free motion for ``t`` s: CG moved by velocity * t, yaw turned by the yaw
+    rate * t; everything else unchanged."""
+    return state._replace(position=state.position + state.velocity * t,
+                          yaw=state.yaw + state.angular_velocity[2] * t)
+
+
+def _footprint_at(vehicle, state, t):
+    return footprint(vehicle, state.position[:2] + state.velocity[:2] * t, state.yaw + state.angular_velocity[2] * t)
+
+
+def _axes(yaw1, yaw2):
+    """(4, 2) unit edge normals of both footprints."""
+    c1, s1, c2, s2 = jnp.cos(yaw1), jnp.sin(yaw1), jnp.cos(yaw2), jnp.sin(yaw2)
+    return jnp.stack([jnp.stack([c1, s1]), jnp.stack([-s1, c1]), jnp.stack([c2, s2]), jnp.stack([-s2, c2])])
+
+
+def penetrations(corners1, corners2, axes):
+    """(8,) overlap of the projections on each axis, for vehicle 1 on the + side of vehicle 2
+    (first 4) and on the - side (last 4). All >= 0 iff the footprints touch."""
+    p1 = corners1 @ axes.T  # (4 corners, 4 axes)
+    p2 = corners2 @ axes.T
+    plus = jnp.max(p2, 0) - jnp.min(p1, 0)
+    minus = jnp.max(p1, 0) - jnp.min(p2, 0)
+    return jnp.concatenate([plus, minus])
+
+
+def separation(vehicle1, state1, vehicle2, state2, t):
+    """s(t) () m: the largest gap between the footprints' projections on their edge normals at
+    time t of free motion; > 0 apart, <= 0 touching or overlapping."""
+    c1 = _footprint_at(vehicle1, state1, t)
+    c2 = _footprint_at(vehicle2, state2, t)
+    axes = _axes(state1.yaw + state1.angular_velocity[2] * t, state2.yaw + state2.angular_velocity[2] * t)
+    return -jnp.min(penetrations(c1, c2, axes))
+
+
+def least_penetration_normal(corners1, corners2, axes):
+    """(2,) unit axis of least penetration, from vehicle 2 into vehicle 1 (or, when apart, the
+    most separating axis, pointing the same way), and the penetration depth () m."""
+    pen = penetrations(corners1, corners2, axes)
+    k = jnp.argmin(pen)
+    sign = jnp.where(k < 4, 1.0, -1.0)
+    return sign * axes[k % 4], pen[k]
+
+
+# ---------------------------------------------------------------------------------------
+# first contact
+
+
+def _translation_contact(vehicle1, state1, vehicle2, state2):
+    """Closed form where neither vehicle rotates: (t_i, found). All 8 penetrations are linear
+    in t, f_k(t) = f_k + g_k t, and the footprints touch iff all are >= 0."""
+    c1 = _footprint_at(vehicle1, state1, 0.0)
+    c2 = _footprint_at(vehicle2, state2, 0.0)
+    axes = _axes(state1.yaw, state2.yaw)
+    f = penetrations(c1, c2, axes)
+    rate = axes @ (state1.velocity[:2] - state2.velocity[:2])  # d/dt of vehicle 1's projections
+    g = jnp.concatenate([-rate, rate])
+    root = la.safe_div(-f, g)
+    big = jnp.asarray(1e30, f.dtype)
+    lo = jnp.maximum(0.0, jnp.max(jnp.where(g > 0, root, -big)))
+    hi = jnp.min(jnp.where(g < 0, root, big))
+    feasible = jnp.all((g != 0) | (f >= 0))
+    found = feasible & (lo <= hi) & (lo <= HORIZON)
+    return lo, found
+
+
+def _scan_contact(vehicle1, state1, vehicle2, state2):
+    """Coarse scan of s(t) over [0, HORIZON], then bisection: (t_i, found)."""
+    dtype = state1.position.dtype
+    h = HORIZON / SCAN_STEPS
+    sep = lambda t: separation(vehicle1, state1, vehicle2, state2, t)  # noqa: E731
+    nblocks = SCAN_STEPS // SCAN_BLOCK
+    offsets = jnp.arange(1, SCAN_BLOCK + 1, dtype=dtype) * h
+
+    def cond(carry):
+        block, found, _ = carry
+        return (~found) & (block < nblocks)
+
+    def body(carry):
+        block, _, _ = carry
+        ts = block * (SCAN_BLOCK * h) + offsets
+        hit = jax.vmap(sep)(ts) <= 0
+        first = jnp.argmax(hit)
+        return block + 1, jnp.any(hit), ts[first]
+
+    at_zero = sep(jnp.zeros((), dtype)) <= 0
+    init = (jnp.int32(0), at_zero, jnp.zeros((), dtype))
+    _, found, t_hit = jax.lax.while_loop(cond, body, init)
+
+    def bisect(_, bracket):
+        lo, hi = bracket
+        mid = 0.5 * (lo + hi)
+        touching = sep(mid) <= 0
+        return jnp.where(touching, lo, mid), jnp.where(touching, mid, hi)
+
+    _, t_root = jax.lax.fori_loop(0, BISECTION_STEPS, bisect, (jnp.maximum(t_hit - h, 0.0), t_hit))
+    return jnp.where(at_zero, 0.0, t_root), found
+
+
+def first_contact(vehicle1, state1, vehicle2, state2):
+    """First time t_i >= 0 (s) at which the footprints touch under free motion, and whether
+    they do within HORIZON: ((), bool ()). Differentiable through the touching condition."""
+    params = jax.lax.stop_gradient((vehicle1, state1, vehicle2, state2))
+    translating = (params[1].angular_velocity[2] == 0) & (params[3].angular_velocity[2] == 0)
+    t_lin, found_lin = _translation_contact(*params)
+    t_rot, found_rot = _scan_contact(*params)
+    t0 = jnp.where(translating, t_lin, t_rot)
+    found = jnp.where(translating, found_lin, found_rot)
+    t0 = jnp.where(found, t0, 0.0)
+
+    # implicit differentiation: t = t0 - (s(t0, theta) - s(t0, theta0)) / s_t(t0, theta0)
+    s_theta, s_t = jax.jvp(lambda t: separation(vehicle1, state1, vehicle2, state2, t), (t0,), (jnp.ones_like(t0),))
+    correction = la.safe_div(s_theta - jax.lax.stop_gradient(s_theta), jax.lax.stop_gradient(s_t))
+    t = t0 - jnp.where(found & (t0 > 0), correction, 0.0)
+    return t, found
+
+
+# ---------------------------------------------------------------------------------------
+# overlap polygon
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _next_index(count):
+    idx = jnp.arange(MAX_VERTICES)
+    return idx, jnp.where(idx + 1 < count, idx + 1, 0)
+
+
+def _clip(poly, count, a, b):
+    """Clip the convex polygon (8, 2) with ``count`` vertices by the half-plane left of the
+    directed line a -> b (Sutherland-Hodgman step). Returns (poly, count)."""
+    idx, nxt = _next_index(count)
+    valid = idx < count
+    q = poly[nxt]
+    edge = b - a
+    d0 = _cross2(edge, poly - a)
+    d1 = _cross2(edge, q - a)
+    in0, in1 = d0 >= 0, d1 >= 0
+    crossing = valid & (in0 != in1)
+    s = la.safe_div(d0, d0 - d1)
+    x = poly + s[:, None] * (q - poly)
+    cand = jnp.stack([poly, x], 1).reshape(2 * MAX_VERTICES, 2)
+    keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * MAX_VERTICES)
+    pos = jnp.cumsum(keep) - 1
+    onehot = ((pos[:, None] == jnp.arange(MAX_VERTICES)[None, :]) & keep[:, None]).astype(poly.dtype)
+    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), MAX_VERTICES).astype(jnp.int32)
+
+
+def overlap_polygon(corners1, corners2):
+    """Footprint 1 clipped by footprint 2 (both (4, 2), counter-clockwise): (8, 2) vertices, of
+    which the first ``count`` () are used."""
+    poly = jnp.zeros((MAX_VERTICES, 2), corners1.dtype).at[:4].set(corners1)
+
+    def step(carry, edge):
+        return _clip(*carry, edge[0], edge[1]), None
+
+    edges = jnp.stack([corners2, jnp.roll(corners2, -1, 0)], 1)  # (4, 2 ends, 2)
+    (poly, count), _ = jax.lax.scan(step, (poly, jnp.int32(4)), edges)
+    return poly, count
+
+
+def polygon_area_centroid(poly, count):
+    """Area () m^2 and area centroid (2,) m of the polygon's first ``count`` vertices (the
+    vertex mean where the area is 0)."""
+    idx, nxt = _next_index(count)
+    valid = idx < count
+    w = jnp.where(valid[:, None], poly, 0.0)
+    origin = jnp.sum(w, 0) / jnp.maximum(count, 1)
+    p = jnp.where(valid[:, None], poly - origin, 0.0)
+    q = p[nxt]
+    cr = jnp.where(valid, _cross2(p, q), 0.0)
+    area = 0.5 * jnp.sum(cr)
+    moment = jnp.sum((p + q) * cr[:, None], 0) / 6.0
+    return area, origin + jnp.stack([la.safe_div(moment[0], area), la.safe_div(moment[1], area)])
+
+
+def outline_crossings(corners1, corners2):
+    """Points where the two outlines cross: (16, 2) candidates (edge i of 1 x edge j of 2),
+    (16,) mask: proper crossings only (inside both edges, not at a corner; parallel edges never),
+    so that collinear edges and corners lying on edges do not count."""
+    a = corners1
+    da = jnp.roll(corners1, -1, 0) - corners1
+    b = corners2
+    db = jnp.roll(corners2, -1, 0) - corners2
+    a, da = a[:, None, :], da[:, None, :]
+    b, db = b[None, :, :], db[None, :, :]
+    denom = _cross2(da, db)
+    ab = b - a
+    s = la.safe_div(_cross2(ab, db), denom)
+    t = la.safe_div(_cross2(ab, da), denom)
+    mask = (denom != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
+    pts = a + s[..., None] * da
+    return pts.reshape(16, 2), mask.reshape(16)
+
+
+def _first_two(points, mask):
+    pos = jnp.cumsum(mask) - 1
+    sel = ((pos[:, None] == jnp.arange(2)[None, :]) & mask[:, None]).astype(points.dtype)
+    return sel.T @ points
+
+
+def _manifold_point(corners1, corners2, n, tol):
+    """Middle of the touching features along the axis ``n`` (from 2 into 1): vehicle 1's
+    support toward -n, vehicle 2's toward +n, overlapped along the tangent."""
+    t = jnp.stack([-n[1], n[0]])
+    p1n, p2n = corners1 @ n, corners2 @ n
+    p1t, p2t = corners1 @ t, corners2 @ t
+    lo1, hi2 = jnp.min(p1n), jnp.max(p2n)
+    s1 = p1n <= lo1 + tol
+    s2 = p2n >= hi2 - tol
+    big = jnp.asarray(1e30, corners1.dtype)
+    lo = jnp.maximum(jnp.min(jnp.where(s1, p1t, big)), jnp.min(jnp.where(s2, p2t, big)))
+    hi = jnp.minimum(jnp.max(jnp.where(s1, p1t, -big)), jnp.max(jnp.where(s2, p2t, -big)))
+    return 0.5 * (lo1 + hi2) * n + 0.5 * (lo + hi) * t
+
+
+def contact_geometry(vehicle1, state1, vehicle2, state2) -> Contact2D:
+    """The automatic contact of MODEL.md section 5 for the vehicles as they are in the given
+    states (no motion): centroid of the footprints' overlap (z: middle of the vertical
+    overlap) and the horizontal normal from vehicle 2 into vehicle 1."""
+    dtype = state1.position.dtype
+    c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
+    c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
+    axes = _axes(state1.yaw, state2.yaw)
+    n_sat, _ = least_penetration_normal(c1, c2, axes)
+
+    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
+    eps = jnp.finfo(dtype).eps
+    area_tol = 1e3 * eps * scale2
+    len_tol = 1e3 * eps * jnp.sqrt(scale2)
+
+    poly, count = overlap_polygon(c1, c2)
+    area, centroid = polygon_area_centroid(poly, count)
+    solid = area > area_tol
+    xy = jnp.where(solid, centroid, _manifold_point(c1, c2, n_sat, len_tol))
+
+    pts, mask = outline_crossings(c1, c2)
+    two = _first_two(pts, mask)
+    chord = two[1] - two[0]
+    chord_len = la.safe_norm(chord)
+    crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(area_tol))
+    n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
+    n_line = jnp.where(n_line @ n_sat < 0, -n_line, n_line)
+    n2 = jnp.where(crossing_ok, n_line, n_sat)
+
+    bottom = jnp.maximum(state1.position[2] - vehicle1.cg_height, state2.position[2] - vehicle2.cg_height)
+    top = jnp.minimum(state1.position[2] - vehicle1.cg_height + vehicle1.height,
+                      state2.position[2] - vehicle2.cg_height + vehicle2.height)
+    point = jnp.stack([xy[0], xy[1], 0.5 * (bottom + top)])
+    normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
+    return Contact2D(point, normal, poly, count, area, two, crossing_ok)
+
+
+def tilt(normal, pitch):
+    """Horizontal unit normal (3,) tilted up by ``pitch`` (rad): (cos p n_x, cos p n_y, sin p)."""
+    cp = jnp.cos(pitch)
+    return jnp.stack([cp * normal[0], cp * normal[1], jnp.sin(pitch) * jnp.ones_like(normal[0])])
+
+
+# ---------------------------------------------------------------------------------------
+# the entry point
+
+
+class AutoContact(NamedTuple):
+    """Everything automatic contact decides before the exchange (for plots and checks):
+    time t_i () s, found () bool, states at the exchange instant, the contact used and the
+    overlap geometry (``Contact2D``) at that instant."""
+
+    time: jnp.ndarray
+    found: jnp.ndarray
+    state1: State
+    state2: State
+    contact: Contact
+    geometry: Contact2D
+
+
+def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch, *, auto_point, auto_normal):
+    """Free motion to t_i + penetration_time and the contact there (MODEL.md section 5).
+
+    ``contact.point`` (3,) m (global, at the exchange instant) is used where ``auto_point`` is
+    False, ``contact.normal`` (3,) where ``auto_normal`` is False; ``normal_pitch`` () rad tilts
+    the automatic normal. Returns an ``AutoContact``; where ``found`` is False the contact is a
+    harmless separating one at t = 0 (see the module docstring)."""
+    t_i, found = first_contact(vehicle1, state1, vehicle2, state2)
+    t_x = jnp.where(found, t_i + contact.penetration_time, 0.0)
+    a1, a2 = advance(state1, t_x), advance(state2, t_x)
+    geo = contact_geometry(vehicle1, a1, vehicle2, a2)
+    point = jnp.where(auto_point, geo.point, contact.point)
+    normal = jnp.where(auto_normal, tilt(geo.normal, normal_pitch), contact.normal)
+
+    # never touching: an exchange that cannot happen (u.n >= 0), at the CGs' midpoint, t = 0
+    mid = 0.5 * (state1.position + state2.position)
+    u = (state1.velocity + la.cross(state1.angular_velocity, mid - state1.position)) - (
+        state2.velocity + la.cross(state2.angular_velocity, mid - state2.position))
+    u_len = la.safe_norm(u)
+    x_axis = jnp.zeros(3, u.dtype).at[0].set(1.0)
+    n_sep = jnp.where(u_len > 0, u / jnp.where(u_len > 0, u_len, 1.0), x_axis)
+    contact = contact._replace(point=jnp.where(found, point, mid), normal=jnp.where(found, normal, n_sep))
+    return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo)
+
+
+def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
+                       normal_pitch, *, auto_point: bool, auto_normal: bool, smoothing=0.0) -> ExchangeResult:
+    """The KS exchange at the automatic contact (MODEL.md sections 3-5).
+
+    Vehicles (mass kg, inertia kg m^2, box m) and states (position m, velocity m/s, yaw rad,
+    angular_velocity rad/s) are those of the case start; ``contact`` as for ``exchange``
+    (restitution, friction, penetration_time s; point (3,) m and normal (3,) where not
+    automatic); ``normal_pitch`` () rad. ``auto_point``/``auto_normal`` are static bools (they
+    may also be traced bool arrays: the choice is a select, so one compiled program can serve
+    rows with different user overrides).
+    Returns ``ks_jax.exchange``'s result at t_i + penetration_time with ``contact.time`` = t_i
+    (s); status "no_contact" and no NaN when the footprints do not touch within HORIZON.
+    Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
+    """
+    status = input_status(vehicle1, state1, vehicle2, state2, contact)
+    ok = status == OK
+    bv1, bs1, bv2, bs2, bc = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
+    normal_pitch = jnp.where(ok & jnp.isfinite(normal_pitch), normal_pitch, 0.0)
+    auto = automatic_contact(bv1, bs1, bv2, bs2, bc, normal_pitch, auto_point=auto_point, auto_normal=auto_normal)
+
+    pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, old)  # noqa: E731
+    result = exchange(vehicle1, pick(auto.state1, state1), vehicle2, pick(auto.state2, state2),
+                      pick(auto.contact, contact), smoothing)
+
+    none = ok & ~auto.found
+    c = result.contact
+    towards1 = bs1.position - bs2.position
+    towards1 = towards1.at[2].set(0.0)
+    length = la.safe_norm(towards1)
+    x_axis = jnp.zeros(3, towards1.dtype).at[0].set(1.0)
+    n_none = jnp.where(length > 0, towards1 / jnp.where(length > 0, length, 1.0), x_axis)
+    c = c._replace(
+        time=jnp.where(ok, auto.time, c.time),
+        normal=jnp.where(none, n_none, c.normal),
+        status=jnp.where(none, jnp.int32(NO_CONTACT), c.status),
+    )
+    vehicles = tuple(v._replace(crush=jnp.where(none, 0.0, v.crush), ees=jnp.where(none, 0.0, v.ees))
+                     for v in result.vehicles)
+    return ExchangeResult(c, vehicles)

@@ -1,0 +1,438 @@
+"""Automatic contact (MODEL.md section 5): first-contact time, overlap centroid, normal, crush.
+
+Every case is worked by hand (or by a second formulation: ``ks_jax.exchange`` at the hand-made
+contact). One compiled program serves every test here: ``automatic_exchange`` and its JVP,
+vmapped over a batch padded to BATCH rows, with the user-override flags as per-row arrays.
+Single calls are checked against it without jit (``jax.disable_jit``).
+"""
+
+import io
+import json
+import math
+from contextlib import redirect_stdout
+from importlib import resources
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import ks_jax  # noqa: E402
+from ks_jax import geometry as G  # noqa: E402
+from ks_jax import units as U  # noqa: E402
+from ks_jax.case import as_arrays, load_case, set_input, to_pytrees  # noqa: E402
+from ks_jax.types import NO_CONTACT, OK  # noqa: E402
+
+BATCH = 96
+TIME_TOL = 1e-9  # s: closed form and bisection are both far below the 1e-6 s asked for
+LEN_TOL = 1e-9  # m
+
+
+def _auto(args, flags):
+    return G.automatic_exchange(*args, auto_point=flags[0], auto_normal=flags[1])
+
+
+def _auto_jvp(args, tangents):
+    return jax.jvp(lambda *a: _auto(a, (True, True)), args, tangents)
+
+
+def _contact_jvp(args, tangents):
+    """Only the automatic-contact part (time, point, normal): a smaller program to differentiate."""
+
+    def f(v1, s1, v2, s2, c, pitch):
+        a = G.automatic_contact(v1, s1, v2, s2, c, pitch, auto_point=True, auto_normal=True)
+        normal = jnp.where(a.found, a.contact.normal, 0.0)  # never touching: a stand-in normal
+        return jnp.concatenate([a.time[None], a.contact.point, normal])
+
+    return jax.jvp(f, args, tangents)
+
+
+AUTO = jax.jit(jax.vmap(_auto))
+AUTO_JVP = jax.jit(jax.vmap(_auto_jvp))
+CONTACT_JVP = jax.jit(jax.vmap(_contact_jvp))
+EXCHANGE = jax.jit(ks_jax.exchange)
+
+
+def veh(length=4.5, width=1.8, height=1.4, cg_to_front=None, mass=1500.0, inertia=(500.0, 2500.0, 2700.0),
+        cg_height=0.55):
+    return ks_jax.Vehicle.create(mass, jnp.asarray(inertia, float), length, width, height, cg_to_front, cg_height)
+
+
+def st(x, y, yaw_deg=0.0, speed=0.0, yaw_rate=0.0, cg_height=0.55):
+    yaw = math.radians(yaw_deg)
+    return ks_jax.State.create([x, y], yaw, speed=speed, yaw_rate=yaw_rate, cg_height=cg_height)
+
+
+def con(penetration_time, restitution=0.1, friction=0.5, point=(0.0, 0.0, 0.0), normal=(1.0, 0.0, 0.0)):
+    return ks_jax.Contact.create(jnp.asarray(point, float), jnp.asarray(normal, float), restitution, friction,
+                                 penetration_time=penetration_time)
+
+
+def _zeros(tree):
+    return jax.tree_util.tree_map(lambda x: jnp.zeros_like(jnp.asarray(x, float)), tree)
+
+
+def stack(items):
+    items = list(items) + [items[0]] * (BATCH - len(items))
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *items)
+
+
+def row_of(tree, i):
+    return jax.tree_util.tree_map(lambda x: np.asarray(x[i]), tree)
+
+
+def _args(rows):
+    return [tuple(r[:5]) + (jnp.asarray(r[5], float),) for r in rows]
+
+
+def run(rows, flags=None):
+    """AUTO over rows (padded to BATCH), NumPy results per row. rows: (vehicle1, state1,
+    vehicle2, state2, contact, pitch); flags: (auto_point, auto_normal) per row."""
+    rows = _args(rows)
+    flags = flags or [(True, True)] * len(rows)
+    out = AUTO(stack(rows), stack([jnp.array(f) for f in flags]))
+    return [row_of(out, i) for i in range(len(rows))]
+
+
+def run_jvp(fn, rows, tangents):
+    rows = _args(rows)
+    out, tan = fn(stack(rows), stack(tangents))
+    return [row_of(out, i) for i in range(len(rows))], [row_of(tan, i) for i in range(len(rows))]
+
+
+# ---------------------------------------------------------------------------------------
+# the hand cases
+
+V1 = veh(length=4.6, width=1.8, height=1.4, cg_to_front=2.1)
+V2 = veh(length=4.8, width=1.9, height=1.5, cg_to_front=2.6, mass=1800.0)
+V2T = veh(length=4.8, width=1.9, height=1.5, cg_to_front=2.4, mass=1800.0)
+VS = veh(length=4.5, width=1.8, height=1.4, cg_to_front=2.25)
+
+# oblique: vehicle 2 at 60 deg, 10 m/s; its front-left corner reaches (0.3, -0.9) at t = 0.3 s
+OBL_YAW = math.radians(60.0)
+OBL_CORNER = np.array([2.4 * math.cos(OBL_YAW) - 0.95 * math.sin(OBL_YAW),
+                       2.4 * math.sin(OBL_YAW) + 0.95 * math.cos(OBL_YAW)])
+OBL_V = 10.0 * np.array([math.cos(OBL_YAW), math.sin(OBL_YAW)])
+OBL_X2 = np.array([0.3, -0.9]) - OBL_CORNER - 0.3 * OBL_V
+
+# spinning: vehicle 1 turns at 2 rad/s about its CG at the origin; vehicle 2 parked sideways, face at x = 2.35
+SPIN_W, SPIN_X = 2.0, 2.35
+SPIN_R, SPIN_PHI = math.hypot(2.25, 0.9), math.atan2(0.9, 2.25)
+SPIN_T = (SPIN_PHI - math.acos(SPIN_X / SPIN_R)) / SPIN_W  # front-right corner reaches x = SPIN_X
+
+
+def seed_row(name, x1_ft, x2_ft, penetration_time):
+    with resources.as_file(resources.files("ks_jax.cases") / name) as path:
+        case = load_case(path)
+    inp = as_arrays(case.inputs)
+    inp = set_input(inp, "vehicles[0].position[0]", x1_ft * U.FT)
+    inp = set_input(inp, "vehicles[1].position[0]", x2_ft * U.FT)
+    inp = set_input(inp, "contact.penetration_time", penetration_time)
+    v1, s1, v2, s2, c = to_pytrees(inp)
+    v1 = v1._replace(inertia=jnp.diag(v1.inertia))  # principal moments: one batch shape
+    v2 = v2._replace(inertia=jnp.diag(v2.inertia))
+    return (v1, s1, v2, s2, c, 0.0), inp
+
+
+SEED0, SEED0_IN = seed_row("seed_000_saturn_pontiac.json", 10.0, -10.0, 0.06)
+SEED1, SEED1_IN = seed_row("seed_001_lucid_kia.toml", 0.0, -20.0, 0.06)
+
+CASES = {
+    "rear": (V1, st(10.0, 0.0, 0, 5.0), V2, st(0.0, 0.0, 0, 15.0), con(0.03), 0.0),
+    "tbone": (V1, st(0.0, 0.0), V2T, st(0.5, -6.0, 90, 10.0), con(0.02), 0.0),
+    "oblique": (V1, st(0.0, 0.0), V2T, st(OBL_X2[0], OBL_X2[1], 60, 10.0), con(0.01), 0.0),
+    "spin": (VS, st(0.0, 0.0, yaw_rate=SPIN_W), VS, st(SPIN_X + 0.9, 0.0, 90), con(0.0), 0.0),
+    "never": (VS, st(0.0, 0.0, 0, 5.0), VS, st(0.0, 5.0, 0, 5.0), con(0.02), 0.0),
+    "overlap": (VS, st(0.0, 0.0), VS, st(-4.0, 0.0, 0, 3.0), con(0.02), 0.0),
+    "seed0": SEED0,
+    "seed1": SEED1,
+    "pitched": (V1, st(10.0, 0.0, 0, 5.0), V2, st(0.0, 0.0, 0, 15.0), con(0.03), math.radians(10.0)),
+}
+
+
+USER_N = jnp.array([math.cos(math.radians(80)), math.sin(math.radians(80)), 0.0])
+USER_P = jnp.array([0.2, -0.85, 0.6])
+OVERRIDES = {  # oblique case with a user normal (automatic point) / a user point (automatic normal)
+    "point_only": ((*CASES["oblique"][:4], CASES["oblique"][4]._replace(normal=USER_N), 0.0), (True, False)),
+    "normal_only": ((*CASES["oblique"][:4], CASES["oblique"][4]._replace(point=USER_P), 0.0), (False, True)),
+}
+
+
+@pytest.fixture(scope="module")
+def res():
+    names = list(CASES) + list(OVERRIDES)
+    rows = [CASES[n] for n in CASES] + [OVERRIDES[n][0] for n in OVERRIDES]
+    flags = [(True, True)] * len(CASES) + [OVERRIDES[n][1] for n in OVERRIDES]
+    return dict(zip(names, run(rows, flags=flags)))
+
+
+def second_formulation(case, t_exchange, point, normal):
+    """ks_jax.exchange with the vehicles moved by hand and the contact written by hand."""
+    v1, s1, v2, s2, c, _ = case
+    adv = lambda s: s._replace(position=s.position + s.velocity * t_exchange,  # noqa: E731
+                               yaw=s.yaw + s.angular_velocity[2] * t_exchange)
+    c = c._replace(point=jnp.asarray(point, float), normal=jnp.asarray(normal, float))
+    return jax.tree_util.tree_map(np.asarray, EXCHANGE(v1, adv(s1), v2, adv(s2), c))
+
+
+def assert_same_exchange(r, ref, rtol=1e-9):
+    for name in ("impulse", "energy_loss", "closing_velocity", "separation_velocity"):
+        a, b = getattr(r.contact, name), getattr(ref.contact, name)
+        np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * (1 + np.max(np.abs(b))), err_msg=name)
+    for i in range(2):
+        for name in ("delta_v", "velocity_after", "angular_velocity_after", "crush", "ees", "pdof"):
+            a, b = getattr(r.vehicles[i], name), getattr(ref.vehicles[i], name)
+            np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * (1 + np.max(np.abs(b))),
+                                       err_msg=f"vehicles[{i}].{name}")
+
+
+def test_aligned_rear_impact(res):
+    r = res["rear"]
+    # gap: rear of 1 at 10 + 2.1 - 4.6 = 7.5, front of 2 at 2.6; closing 10 m/s
+    assert r.contact.status == OK
+    assert abs(r.contact.time - 0.49) < TIME_TOL
+    # at 0.52 s: rear of 1 at 10.1, front of 2 at 10.4; vertical overlap [0, 1.4] -> z = 0.7
+    np.testing.assert_allclose(r.contact.point, [10.25, 0.0, 0.7], atol=LEN_TOL)
+    np.testing.assert_allclose(r.contact.normal, [1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose([v.crush for v in r.vehicles], [0.15, 0.15], atol=LEN_TOL)
+    assert [float(v.pdof_clock) for v in r.vehicles] == [6.0, 12.0]
+    assert_same_exchange(r, second_formulation(CASES["rear"], 0.52, [10.25, 0.0, 0.7], [1.0, 0.0, 0.0]))
+
+
+def test_normal_pitch_tilts_the_automatic_normal(res):
+    r, p = res["pitched"], math.radians(10.0)
+    np.testing.assert_allclose(r.contact.normal, [math.cos(p), 0.0, math.sin(p)], atol=1e-12)
+    np.testing.assert_allclose(r.contact.point, res["rear"].contact.point, atol=LEN_TOL)
+
+
+def test_tbone_into_the_right_side(res):
+    r = res["tbone"]
+    # front of 2 at -6 + 2.4 = -3.6, right side of 1 at -0.9, closing 10 m/s
+    assert abs(r.contact.time - 0.27) < TIME_TOL
+    # at 0.29 s the front of 2 is at y = -0.7: overlap x in [0.5 -+ 0.95], y in [-0.9, -0.7]
+    np.testing.assert_allclose(r.contact.point, [0.5, -0.8, 0.7], atol=LEN_TOL)
+    np.testing.assert_allclose(r.contact.normal, [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose([v.crush for v in r.vehicles], [0.1, 0.1], atol=LEN_TOL)
+    assert float(r.vehicles[0].pdof_clock) == 3.0  # struck from its right
+    assert float(r.vehicles[1].pdof_clock) == 12.0  # frontal
+    assert_same_exchange(r, second_formulation(CASES["tbone"], 0.29, [0.5, -0.8, 0.7], [0.0, 1.0, 0.0]))
+
+
+def test_oblique_corner_impact(res):
+    r = res["oblique"]
+    assert abs(r.contact.time - 0.3) < TIME_TOL
+    # the corner has gone delta = 10 sin60 * 0.01 past y = -0.9: a triangle cut by that line
+    delta = 10.0 * math.sin(OBL_YAW) * 0.01
+    apex = np.array([0.3, -0.9]) + OBL_V * 0.01
+    side = -np.array([math.cos(OBL_YAW), math.sin(OBL_YAW)])  # along the left side, rearwards
+    front = np.array([math.sin(OBL_YAW), -math.cos(OBL_YAW)])  # along the front face, to the right
+    p1 = apex + delta / math.sin(OBL_YAW) * side
+    p2 = apex + delta / math.cos(OBL_YAW) * front
+    centroid = (apex + p1 + p2) / 3.0
+    np.testing.assert_allclose(r.contact.point[:2], centroid, atol=LEN_TOL)
+    np.testing.assert_allclose(r.contact.normal, [0.0, 1.0, 0.0], atol=1e-12)  # through p1, p2
+    assert abs(r.vehicles[0].crush - delta / 3.0) < LEN_TOL
+    assert_same_exchange(r, second_formulation(CASES["oblique"], 0.31, [*centroid, 0.7], [0.0, 1.0, 0.0]))
+
+
+def test_spinning_car_reaches_a_parked_one(res):
+    r = res["spin"]
+    assert abs(r.contact.time - SPIN_T) < TIME_TOL
+    # penetration_time 0: the exchange is at the touching corner, n along -x (from 2 into 1)
+    angle = -SPIN_PHI + SPIN_W * SPIN_T
+    corner = SPIN_R * np.array([math.cos(angle), math.sin(angle)])
+    np.testing.assert_allclose(r.contact.point, [corner[0], corner[1], 0.7], atol=1e-8)
+    np.testing.assert_allclose(r.contact.normal, [-1.0, 0.0, 0.0], atol=1e-12)
+    assert r.contact.status == OK and r.contact.impulse[0] < 0  # pushed back, away from the parked car
+    assert_same_exchange(r, second_formulation(CASES["spin"], SPIN_T, [corner[0], corner[1], 0.7],
+                                               [-1.0, 0.0, 0.0]), rtol=1e-7)
+
+
+def test_never_touching(res):
+    r = res["never"]
+    assert r.contact.status == NO_CONTACT and ks_jax.status_text(r.contact.status) == "no_contact"
+    assert r.contact.time == G.HORIZON
+    assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
+    np.testing.assert_array_equal(r.contact.impulse, 0.0)
+    for v, s in zip(r.vehicles, (CASES["never"][1], CASES["never"][3])):
+        np.testing.assert_array_equal(v.delta_v, 0.0)
+        np.testing.assert_allclose(v.velocity_after, s.velocity)
+        assert v.crush == 0 and v.ees == 0
+
+
+def test_already_overlapping(res):
+    r = res["overlap"]
+    assert r.contact.time == 0.0
+    # rear of 1 at -2.25; front of 2 at -4 + 2.25 + 3 * 0.02 = -1.69
+    np.testing.assert_allclose(r.contact.point, [-1.97, 0.0, 0.7], atol=LEN_TOL)
+    np.testing.assert_allclose([v.crush for v in r.vehicles], [0.28, 0.28], atol=LEN_TOL)
+
+
+def test_seed_chapter_stagings(res):
+    # 000: Saturn rear at 10 + 6.86067 - 15.87 ft, Pontiac front at -10 + 7.283 ft, closing 16 mph
+    gap0 = (10 + 6.86067 - 15.87) - (-10 + 7.283)
+    t0 = gap0 * U.FT / (16 * U.MPH)
+    r0 = res["seed0"]
+    assert abs(r0.contact.time - t0) < TIME_TOL and abs(r0.contact.time - 0.16) < 0.005  # manual's timing
+    # the middle of the overlap: crush split equally, 1/2 of 16 mph * 0.06 s each
+    np.testing.assert_allclose([v.crush for v in r0.vehicles], [0.5 * 16 * U.MPH * 0.06] * 2, rtol=1e-9)
+    np.testing.assert_allclose(r0.contact.point[2], 2.3 * U.FT, rtol=1e-12)  # middle of two 4.6 ft boxes
+    # 001: Lucid rear at 8.1 - 16.3 = -8.2 ft, Kia front at -20 + 6.85 = -13.15 ft, closing 15 mph
+    r1 = res["seed1"]
+    assert abs(r1.contact.time - 4.95 * U.FT / (15 * U.MPH)) < TIME_TOL
+    assert abs(r1.contact.time - 0.225) < 1e-9
+    for r, inp in ((r0, SEED0_IN), (r1, SEED1_IN)):
+        np.testing.assert_allclose(r.contact.normal, [1.0, 0.0, 0.0], atol=1e-12)
+        assert [float(v.pdof_clock) for v in r.vehicles] == [6.0, 12.0]
+
+
+def test_user_contact_overrides_one_part(res):
+    auto = res["oblique"].contact
+    point_only, normal_only = res["point_only"], res["normal_only"]
+    np.testing.assert_allclose(point_only.contact.point, auto.point, atol=1e-12)
+    np.testing.assert_allclose(point_only.contact.normal, USER_N, atol=1e-12)
+    np.testing.assert_allclose(normal_only.contact.point, USER_P, atol=1e-12)
+    np.testing.assert_allclose(normal_only.contact.normal, auto.normal, atol=1e-12)
+    for r in (point_only, normal_only):
+        assert abs(r.contact.time - 0.3) < TIME_TOL
+        assert_same_exchange(r, second_formulation(CASES["oblique"], 0.31, r.contact.point, r.contact.normal))
+    # the overrides matter: the crush is measured along the user normal, the lever arms from the user point
+    delta = 10.0 * math.sin(OBL_YAW) * 0.01
+    assert abs(point_only.vehicles[0].crush - delta / 3.0 / math.sin(math.radians(80))) < LEN_TOL
+    assert not np.allclose(normal_only.contact.impulse, auto.impulse, rtol=1e-3)
+
+
+def test_vmap_equals_single_calls(res):
+    """The batched, jitted kernel row by row against plain single calls (no jit at all)."""
+    with jax.disable_jit():
+        for name in ("spin",):  # rotation: the scan, the bisection and the implicit step
+            args = CASES[name][:5] + (jnp.asarray(CASES[name][5], float),)
+            single = G.automatic_exchange(*args, auto_point=True, auto_normal=True)
+            for a, b in zip(jax.tree_util.tree_leaves(single), jax.tree_util.tree_leaves(res[name])):
+                np.testing.assert_allclose(np.asarray(a), b, rtol=1e-9, atol=1e-9, err_msg=name)
+
+
+# ---------------------------------------------------------------------------------------
+# gradients against central differences
+
+THETA = ("speed1", "speed2", "yaw2", "x2", "y2", "penetration_time", "yaw_rate1")
+
+
+def build(theta, base):
+    """(vehicle1, state1, vehicle2, state2, contact, pitch) from theta (7,) (see THETA) and the
+    constant rest of a case; heading = yaw = course of vehicle 2."""
+    v1, s1, v2, s2, c = base
+    vel1 = theta[0] * jnp.stack([jnp.cos(s1.yaw), jnp.sin(s1.yaw), 0.0 * theta[0]])
+    vel2 = theta[1] * jnp.stack([jnp.cos(theta[2]), jnp.sin(theta[2]), 0.0 * theta[1]])
+    s1 = s1._replace(velocity=vel1, angular_velocity=jnp.stack([0.0 * theta[6], 0.0 * theta[6], theta[6]]))
+    s2 = s2._replace(velocity=vel2, yaw=theta[2], position=jnp.stack([theta[3], theta[4], s2.position[2]]))
+    return v1, s1, v2, s2, c._replace(penetration_time=theta[5]), jnp.zeros_like(theta[0])
+
+
+def outputs(r):
+    c, (a, b) = r.contact, r.vehicles
+    return jnp.stack([c.time, c.point[0], c.point[1], c.normal[0], c.normal[1], c.impulse[0], c.impulse[1],
+                      a.delta_v_magnitude, b.delta_v_magnitude, a.crush, b.crush, c.energy_loss, a.yaw_rate_after])
+
+
+GRAD_CASES = {  # theta and base; away from feature changes
+    "oblique": ([3.0, 10.0, OBL_YAW, *OBL_X2, 0.01, 0.0], CASES["oblique"][:5]),
+    "tbone": ([2.0, 10.0, math.radians(88.0), 0.5, -6.0, 0.02, 0.0], CASES["tbone"][:5]),
+    "spin": ([0.0, 0.0, math.pi / 2, SPIN_X + 0.9, 0.1, 0.01, SPIN_W], CASES["spin"][:5]),
+    "never": ([5.0, 5.0, 0.0, 0.0, 5.0, 0.02, 0.0], CASES["never"][:5]),
+}
+
+
+def _gradient_check(fn, value, names):
+    """fn's forward-mode derivatives along each theta direction against central differences of
+    ``value`` (a function of AUTO's per-row result), for the GRAD_CASES in ``names``."""
+    n_theta, h = len(THETA), 1e-6
+    rows, tangents, fd_rows = [], [], []
+    for name in names:
+        theta, base = np.array(GRAD_CASES[name][0], float), GRAD_CASES[name][1]
+        for j in range(n_theta):
+            e = jnp.asarray(np.eye(n_theta)[j])
+            primal, tangent = jax.jvp(lambda th: build(th, base), (jnp.asarray(theta),), (e,))
+            rows.append(primal)
+            tangents.append(tangent)
+        for j in range(n_theta):
+            for sgn in (1.0, -1.0):
+                fd_rows.append(build(jnp.asarray(theta + sgn * h * np.eye(n_theta)[j]), base))
+    assert len(rows) <= BATCH and len(fd_rows) <= BATCH
+    out, tan = run_jvp(fn, rows, [jax.tree_util.tree_map(lambda x: jnp.asarray(x, float), t) for t in tangents])
+    fd_out = [value(r) for r in run(fd_rows)]
+    for k, name in enumerate(names):
+        for j in range(n_theta):
+            f0 = np.asarray(out[k * n_theta + j] if not hasattr(out[0], "contact") else value(out[k * n_theta + j]))
+            t = tan[k * n_theta + j]
+            jac = np.asarray(t if not hasattr(t, "contact") else value(t))
+            fd = (fd_out[2 * (k * n_theta + j)] - fd_out[2 * (k * n_theta + j) + 1]) / (2 * h)
+            assert np.all(np.isfinite(jac)), name
+            tol = 1e-6 * (1 + np.abs(f0)) + 1e-5 * np.abs(fd)
+            bad = np.abs(jac - fd) > tol
+            assert not np.any(bad), (f"{name}, d/d{THETA[j]}: outputs {np.flatnonzero(bad)}: "
+                                     f"derivative {jac[bad]} vs differences {fd[bad]}")
+            if name == "never":  # finite, and the time stays at the horizon
+                assert jac[0] == 0
+            if name == "oblique":  # by hand: the corner's y reaches -0.9 at t = 0.3 s
+                want = {"speed1": 0.0, "speed2": -0.3 / 10.0, "y2": -1.0 / (10.0 * math.sin(OBL_YAW)),
+                        "penetration_time": 0.0}.get(THETA[j])
+                if want is not None:
+                    assert abs(jac[0] - want) < 1e-9, THETA[j]
+
+
+def _contact_value(r):
+    normal = r.contact.normal if r.contact.status != NO_CONTACT else np.zeros(3)
+    return np.concatenate([[r.contact.time], r.contact.point, normal])
+
+
+def test_contact_gradients_match_central_differences():
+    """Time, centroid and normal: implicit differentiation of the touching condition and the
+    overlap geometry, against central differences of the full kernel."""
+    _gradient_check(CONTACT_JVP, _contact_value, list(GRAD_CASES))
+
+
+@pytest.mark.slow
+def test_result_gradients_match_central_differences():
+    """End to end: impulse, delta-V, crush, energy, yaw rate after (compiles the JVP of the whole
+    kernel, exchange included)."""
+    _gradient_check(AUTO_JVP, lambda r: np.asarray(outputs(jax.tree_util.tree_map(jnp.asarray, r))),
+                    ["oblique", "spin", "never"])
+
+
+# ---------------------------------------------------------------------------------------
+# shipped case files through the command line
+
+
+def cli_json(path, png):
+    from ks_jax.cli import main
+
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["solve", str(path), "--json", "--plot", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    return json.loads(buf.getvalue())["cases"][0]
+
+
+def test_shipped_automatic_cases_through_the_cli(tmp_path):
+    with resources.as_file(resources.files("ks_jax.cases") / "auto_seed_000.json") as path:
+        d = cli_json(path, tmp_path / "seed0.png")
+    gap = (10 + 6.86067 - 15.87) - (-10 + 7.283)
+    assert d["contact"]["status"] == "ok"
+    assert abs(d["contact"]["time"] - gap * U.FT / (16 * U.MPH)) < TIME_TOL
+    assert d["vehicles"][0]["crush"] == pytest.approx(0.5 * 16 * U.MPH * 0.06, rel=1e-9)
+    assert d["contact"]["normal"] == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)
+
+    with resources.as_file(resources.files("ks_jax.cases") / "auto_tbone.json") as path:
+        d = cli_json(path, tmp_path / "tbone.png")
+    # pickup front at -30 + 8 ft, sedan's right side at -3 ft, pickup at 30 mph = 44 ft/s
+    assert abs(d["contact"]["time"] - 19.0 / 44.0) < TIME_TOL
+    assert d["contact"]["normal"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+    # centroid: x of the pickup (6 ft), y in the middle of 2.2 ft of penetration of the side
+    x, y, _ = d["contact"]["point"]
+    assert x == pytest.approx(6.0 * U.FT, abs=1e-9) and y == pytest.approx((-3.0 + 1.1) * U.FT, abs=1e-9)
+    assert 270 < d["vehicles"][1]["pdof"] < 360  # pickup: frontal, dragged to its right by the sedan
+    assert d["vehicles"][0]["pdof"] < 90  # from the right front quarter: the sedan drives into the force
