@@ -17,6 +17,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
+from ks_jax import types as kt  # noqa: E402
 import reference as ref  # noqa: E402
 
 CONTACT_RESULTS = ks_jax.ContactResult._fields
@@ -65,20 +66,124 @@ def engine_dict(result):
     return {"contact": con, "vehicles": veh}
 
 
-def _exchange(v1, s1, v2, s2, c, smoothing):
+TRACES = {"single": 0, "batch": 0, "grad": 0}  # Python side effect: counts (re)traces
+
+
+def _single(v1, s1, v2, s2, c):
+    TRACES["single"] += 1
+    return ks_jax.exchange(v1, s1, v2, s2, c)
+
+
+def _batch_row(v1, s1, v2, s2, c, smoothing):
     return ks_jax.exchange(v1, s1, v2, s2, c, smoothing=smoothing)
 
 
-# One jitted single solve and one jitted batch solve, shared by every test file.
-EXCHANGE = jax.jit(_exchange, static_argnums=5)
-BATCH = jax.jit(jax.vmap(_exchange, in_axes=(0, 0, 0, 0, 0, None)), static_argnums=5)
+def _batch(v1, s1, v2, s2, c, smoothing):
+    TRACES["batch"] += 1
+    return jax.vmap(_batch_row, in_axes=(0, 0, 0, 0, 0, None))(v1, s1, v2, s2, c, smoothing)
+
+
+# Scalar outputs that the gradient tests differentiate: (name, path, length).
+OUTPUTS = (
+    ("impulse", ("contact", "impulse"), 3),
+    ("energy_loss", ("contact", "energy_loss"), 1),
+    ("separation_velocity", ("contact", "separation_velocity"), 3),
+    ("impulse_normal", ("contact", "impulse_normal"), 1),
+    ("impulse_tangential", ("contact", "impulse_tangential"), 1),
+    ("delta_v_1", (0, "delta_v"), 3),
+    ("delta_v_2", (1, "delta_v"), 3),
+    ("delta_v_body_1", (0, "delta_v_body"), 3),
+    ("angular_velocity_after_1", (0, "angular_velocity_after"), 3),
+    ("angular_velocity_after_2", (1, "angular_velocity_after"), 3),
+    ("delta_v_magnitude_1", (0, "delta_v_magnitude"), 1),
+    ("delta_v_magnitude_2", (1, "delta_v_magnitude"), 1),
+    ("crush_1", (0, "crush"), 1),
+    ("crush_2", (1, "crush"), 1),
+    ("ees_1", (0, "ees"), 1),
+    ("ees_2", (1, "ees"), 1),
+)
+OUTPUT_SLICES = {}
+_k = 0
+for _name, _path, _len in OUTPUTS:
+    OUTPUT_SLICES[_name] = slice(_k, _k + _len)
+    _k += _len
+N_OUTPUTS = _k
+
+
+def output_vector(result):
+    """ExchangeResult -> (N_OUTPUTS,) the scalars of ``OUTPUTS``, concatenated."""
+    parts = []
+    for _, (where, field), _ in OUTPUTS:
+        tree = result.contact if where == "contact" else result.vehicles[where]
+        parts.append(jnp.reshape(getattr(tree, field), (-1,)))
+    return jnp.concatenate(parts)
+
+
+def _weighted(args, weights, smoothing):
+    out = output_vector(ks_jax.exchange(*args, smoothing=smoothing))
+    # a zero weight ignores its output even where that output is NaN (EES with no crush)
+    return jnp.sum(jnp.where(weights != 0, weights * jnp.where(weights != 0, out, 0.0), 0.0))
+
+
+def _grad(args, weights, smoothing):
+    TRACES["grad"] += 1
+    return jax.vmap(jax.value_and_grad(_weighted))(args, weights, smoothing)
+
+
+# The jitted entry points, shared by every test file and compiled once per session for each
+# inertia shape and dtype: batches are padded to a fixed number of rows, and ``smoothing`` is
+# a traced argument (tau = 0 takes the exact branch; test_transforms checks that it equals the
+# static ``smoothing=0.0`` path bit for bit).
+# Compilation dominates the suite's run time, so on CPU the batch and gradient programs are
+# compiled with XLA's cheaper settings (the classic CPU emitters instead of the new fusion
+# emitters, LLVM optimisation level 0): about a third of the compile time, the same IEEE
+# arithmetic. The single-case program keeps XLA's defaults (what users get), and
+# test_transforms checks it against the eager path and against the batch rows.
+_CHEAP = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
+_CHEAP = _CHEAP if jax.default_backend() == "cpu" else None
+EXCHANGE = jax.jit(_single)
+BATCH_JIT = jax.jit(_batch, compiler_options=_CHEAP)
+GRAD_JIT = jax.jit(_grad, compiler_options=_CHEAP)
+BATCH_ROWS = 160
+GRAD_ROWS = 128
+
+
+def _chunked(fn, rows, batched, *rest):
+    """Run ``fn`` over a batched pytree in chunks of exactly ``rows`` rows (padding the last by
+    repeating its first row), so that every call has the same shape: one compilation."""
+    leaves, treedef = jax.tree_util.tree_flatten(batched)
+    leaves = [np.asarray(x) for x in leaves]
+    total = leaves[0].shape[0]
+    outs = []
+    for start in range(0, total, rows):
+        part = [x[start:start + rows] for x in leaves]
+        k = part[0].shape[0]
+        if k < rows:
+            part = [np.concatenate([x, np.repeat(x[:1], rows - k, axis=0)]) for x in part]
+        out = fn(jax.tree_util.tree_unflatten(treedef, [jnp.asarray(x) for x in part]), *rest)
+        outs.append(jax.tree_util.tree_map(lambda y, k=k: np.asarray(y)[:k], out))
+    return jax.tree_util.tree_map(lambda *ys: np.concatenate(ys), *outs)
+
+
+def batch_exchange(args, smoothing=0.0):
+    """The engine over a batched tuple of input pytrees, as a (NumPy) ExchangeResult."""
+    return _chunked(lambda a, tau: BATCH_JIT(*a, tau), BATCH_ROWS, args, smoothing)
+
+
+def value_and_grad(args, weights, smoothing):
+    """Per row: (sum_k weights_k * output_k, its gradient pytree w.r.t. every input leaf).
+    ``args`` batched input pytrees, ``weights`` (B, N_OUTPUTS), ``smoothing`` (B,)."""
+    smoothing = np.broadcast_to(np.asarray(smoothing, dtype=float), (np.shape(weights)[0],))
+    return _chunked(lambda t, _: GRAD_JIT(*t), GRAD_ROWS, (args, np.asarray(weights), smoothing), None)
 
 
 def solve(cases, smoothing=0.0, dtype=np.float64):
-    """Engine results for a case or a list of cases, as NumPy dicts (see ``engine_dict``)."""
-    batch = isinstance(cases, (list, tuple))
-    fn = BATCH if batch else EXCHANGE
-    return engine_dict(fn(*inputs(cases, dtype), smoothing))
+    """Engine results for a case (jitted single solve, exact static smoothing = 0) or a list of
+    cases (jitted batch), as NumPy dicts (see ``engine_dict``)."""
+    if isinstance(cases, (list, tuple)):
+        return engine_dict(batch_exchange(inputs(cases, dtype), smoothing))
+    assert smoothing == 0.0
+    return engine_dict(EXCHANGE(*inputs(cases, dtype)))
 
 
 def scales(refb):
@@ -100,14 +205,15 @@ def assert_matches(eng, refb, rtol, cases, fields=None):
     sc = scales(refb)
     con_e, con_r = eng["contact"], refb["contact"]
 
-    def close(name, a, b, scale):
+    def close(name, a, b, scale, periodic=False):
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
         scale = np.asarray(scale, dtype=float)
         while scale.ndim < b.ndim:
             scale = scale[..., None]
         both_nan = np.isnan(a) & np.isnan(b)
-        err = np.where(both_nan, 0.0, np.abs(a - b))
+        diff = (a - b + 180.0) % 360.0 - 180.0 if periodic else a - b
+        err = np.where(both_nan, 0.0, np.abs(diff))
         bad = ~(err <= rtol * scale)
         if np.any(bad):
             idx = np.argwhere(bad)[0]
@@ -115,11 +221,8 @@ def assert_matches(eng, refb, rtol, cases, fields=None):
                 f"{name}: {int(bad.sum())} entries differ beyond rtol={rtol} of scale; first at {tuple(idx)}: "
                 f"engine {a[tuple(idx)]!r} vs reference {b[tuple(idx)]!r} (scale {np.broadcast_to(scale, b.shape)[tuple(idx)]!r})")
 
-    def angle(name, a, b):
-        a = np.asarray(a, dtype=float)
-        b = np.asarray(b, dtype=float)
-        d = (a - b + 180.0) % 360.0 - 180.0
-        close(name, np.where(np.isnan(a), np.nan, d), np.where(np.isnan(b), np.nan, 0.0), 360.0 * np.ones(b.shape))
+    def angle(name, a, b):  # degrees, compared modulo 360, relative to a full turn
+        close(name, a, b, 360.0 * np.ones(np.shape(b)), periodic=True)
 
     def want(name):
         return fields is None or name in fields
@@ -160,15 +263,14 @@ def assert_matches(eng, refb, rtol, cases, fields=None):
 
 
 def _status_code(text):
-    from ks_jax import types as t
-
+    """The reference's status words -> the engine's status code (``ks_jax.types``)."""
     table = {
-        "ok": t.OK, "separating": t.SEPARATING, "invalid: nonfinite": t.INVALID_NONFINITE,
-        "invalid: mass 1": t.INVALID_MASS_1, "invalid: mass 2": t.INVALID_MASS_2,
-        "invalid: inertia 1": t.INVALID_INERTIA_1, "invalid: inertia 2": t.INVALID_INERTIA_2,
-        "invalid: box 1": t.INVALID_BOX_1, "invalid: box 2": t.INVALID_BOX_2,
-        "invalid: restitution": t.INVALID_RESTITUTION, "invalid: friction": t.INVALID_FRICTION,
-        "invalid: normal": t.INVALID_NORMAL,
+        "ok": kt.OK, "separating": kt.SEPARATING, "invalid: nonfinite": kt.INVALID_NONFINITE,
+        "invalid: mass 1": kt.INVALID_MASS_1, "invalid: mass 2": kt.INVALID_MASS_2,
+        "invalid: inertia 1": kt.INVALID_INERTIA_1, "invalid: inertia 2": kt.INVALID_INERTIA_2,
+        "invalid: box 1": kt.INVALID_BOX_1, "invalid: box 2": kt.INVALID_BOX_2,
+        "invalid: restitution": kt.INVALID_RESTITUTION, "invalid: friction": kt.INVALID_FRICTION,
+        "invalid: normal": kt.INVALID_NORMAL,
     }
     return table[str(text)]
 
@@ -178,8 +280,10 @@ def kit():
     """Helpers shared by the test files (see the module functions of the same names)."""
     return types.SimpleNamespace(
         inputs=inputs, solve=solve, reference_batch=reference_batch, engine_dict=engine_dict,
-        assert_matches=assert_matches, status_code=_status_code, exchange=EXCHANGE, batch=BATCH,
-        raw_exchange=_exchange,
+        assert_matches=assert_matches, status_code=_status_code, exchange=EXCHANGE,
+        batch_exchange=batch_exchange, value_and_grad=value_and_grad, output_vector=output_vector,
+        outputs=OUTPUTS, output_slices=OUTPUT_SLICES, n_outputs=N_OUTPUTS, traces=TRACES,
+        jitted={"single": EXCHANGE, "batch": BATCH_JIT, "grad": GRAD_JIT},
     )
 
 

@@ -87,6 +87,14 @@ def wrap_degrees(rad):
     return 0.0 if d >= 360.0 else d
 
 
+def direction_degrees(y, x):
+    """atan2(y, x) in degrees in [0, 360); 0 for the zero vector (J = 0 at a separating contact:
+    the direction is undefined and reported as 0)."""
+    if x == 0 and y == 0:
+        return 0.0
+    return wrap_degrees(math.atan2(y, x))
+
+
 def box_bounds(veh):
     lo = np.array([veh["cg_to_front"] - veh["length"], -0.5 * veh["width"], -veh["cg_height"]])
     hi = np.array([veh["cg_to_front"], 0.5 * veh["width"], veh["height"] - veh["cg_height"]])
@@ -230,12 +238,12 @@ def solve(case):
         v_after = np.asarray(veh["velocity"]) + dv
         w_after = np.asarray(veh["angular_velocity"]) + dw
         f_body = rot.T @ force
-        pdof = wrap_degrees(math.atan2(f_body[1], -f_body[0]))
+        pdof = direction_degrees(f_body[1], -f_body[0])
         hour = round(pdof / 30.0) % 12
         after.append(dict(
             delta_v=dv, delta_v_magnitude=np.linalg.norm(j) / m, delta_v_body=rot.T @ dv, delta_yaw_rate=dw[2],
             velocity_after=v_after, speed_after=np.linalg.norm(v_after),
-            course_after=wrap_degrees(math.atan2(v_after[1], v_after[0])),
+            course_after=direction_degrees(v_after[1], v_after[0]),
             angular_velocity_after=w_after, yaw_rate_after=w_after[2],
             pdof=pdof, pdof_clock=12.0 if hour == 0 else float(hour),
             crush=crush(veh, p, into),
@@ -262,7 +270,7 @@ def solve(case):
     con = dict(
         point=p, normal=n, time=0.0, impulse=j, impulse_magnitude=j_abs, impulse_normal=j_n,
         impulse_tangential=float(np.linalg.norm(j - j_n * n)),
-        impulse_azimuth=wrap_degrees(math.atan2(j[1], j[0])),
+        impulse_azimuth=direction_degrees(j[1], j[0]),
         impulse_elevation=math.degrees(math.asin(j[2] / j_abs)) if j_abs > 0 else 0.0,
         sliding=bool(sliding), closing_velocity=u, separation_velocity=u_after, energy_loss=energy,
         status=status,
@@ -284,7 +292,8 @@ def brach_planar(case):
     Brach's model: impulse ratio P_t = mu P_n and restitution on the normal contact velocity
     u_n' = -e u_n, so P_n = -(1 + e) u_n / (C + mu B). The critical ratio mu_0 is the one that
     also ends the tangential contact velocity (u_t' = 0); the contact slides when |mu| < |mu_0|,
-    and then mu takes the sign of mu_0.
+    and then mu takes the sign of mu_0. The model presumes a compressive normal impulse
+    (P_n0 > 0, returned as ``pn0``); the KS model's N_c <= 0 branch lies outside it.
 
     Returns dict(impulse (3,), sliding, mu0, velocity_after [2], yaw_rate_after [2], energy_loss).
     """
@@ -346,7 +355,7 @@ def brach_planar(case):
         yaw_rate.append(wz1)
         ke0 += 0.5 * m * (vx * vx + vy * vy) + 0.5 * izz * wz * wz
         ke1 += 0.5 * m * (vx1 * vx1 + vy1 * vy1) + 0.5 * izz * wz1 * wz1
-    return dict(impulse=np.array([jx, jy, 0.0]), sliding=sliding, mu0=mu0, velocity_after=vel,
+    return dict(impulse=np.array([jx, jy, 0.0]), sliding=sliding, mu0=mu0, pn0=pn0, velocity_after=vel,
                 yaw_rate_after=yaw_rate, energy_loss=ke0 - ke1, kinetic_energy=ke0)
 
 

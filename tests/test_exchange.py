@@ -22,7 +22,7 @@ RTOL_INVARIANT = 1e-11  # conservation laws and kinematic identities, relative t
 RTOL_SYMMETRY = 1e-10  # swap symmetry
 RTOL_BRACH = 1e-9  # KS in the plane vs Brach's planar formulas
 RTOL_ROWS = 1e-12  # a batch row vs the same case solved alone
-RTOL_FLOAT32 = 2e-4  # float32 vs float64, relative to each field's natural scale (measured worst ~3e-5)
+RTOL_FLOAT32 = 5e-5  # float32 vs float64, relative to each field's natural scale (measured worst 4.7e-6)
 
 
 @pytest.fixture(scope="module")
@@ -65,15 +65,15 @@ def test_separating_contacts(kit):
         c = ref.random_case(rng, approaching=False)
         s = ref.stick_split(c)
         n, u = s["n"], s["u"]
-        # make u_n = +something, and exactly 0 for the last rows
-        target = 0.0 if k >= 9 else rng.uniform(0.1, 5.0)
-        c["vehicles"][1]["velocity"] = c["vehicles"][1]["velocity"] + (n @ u - target) * n
+        c["vehicles"][1]["velocity"] = c["vehicles"][1]["velocity"] + (n @ u - rng.uniform(0.1, 5.0)) * n
         cases.append(c)
-    cases[-1]["contact"]["normal"] = np.array([1.0, 0.0, 0.0])  # exact u_n = 0 on an axis
-    v2 = cases[-1]["vehicles"][1]
-    u = ref.stick_split(cases[-1])["u"]
-    v2["velocity"] = v2["velocity"] + np.array([u[0], 0.0, 0.0])
-    assert ref.stick_split(cases[-1])["u"][0] == 0.0
+    # u_n = 0 exactly: no rotation, n = +x and a relative velocity along +y only
+    last = cases[-1]
+    last["contact"]["normal"] = np.array([1.0, 0.0, 0.0])
+    for v in last["vehicles"]:
+        v["angular_velocity"] = np.zeros(3)
+    last["vehicles"][1]["velocity"] = last["vehicles"][0]["velocity"] + np.array([0.0, 3.0, 0.0])
+    assert ref.stick_split(last)["u"][0] == 0.0
     eng = kit.solve(cases)
     refb = kit.reference_batch(cases)
     np.testing.assert_array_equal(eng["contact"]["status"], t.SEPARATING)
@@ -160,7 +160,8 @@ def test_stick_and_slide_identities(random_results):
     assert n_stick >= 30 and n_slide >= 30
 
 
-def test_sliding_impulse_scales_with_one_plus_eps(kit, random_cases):
+def test_impulse_scales_with_one_plus_eps(kit, random_cases):
+    """J = (1 + eps) J_c(s*): the restitution scales the whole vector, sticking or sliding."""
     base = [c for c in random_cases["full"][:60]]
     cases = []
     for c in base:
@@ -178,8 +179,8 @@ def test_swap_symmetry(kit, random_results):
     for cases, eng, _ in random_results.values():
         swapped = kit.solve([ref.swap(c) for c in cases])
         jscale = np.linalg.norm(eng["contact"]["impulse"], axis=-1, keepdims=True)
-        np.testing.assert_array_less(
-            np.abs(swapped["contact"]["impulse"] + eng["contact"]["impulse"]), RTOL_SYMMETRY * jscale + 1e-300)
+        err = np.abs(swapped["contact"]["impulse"] + eng["contact"]["impulse"])
+        assert np.all(err <= RTOL_SYMMETRY * jscale), (err / jscale).max()
         np.testing.assert_array_equal(swapped["contact"]["sliding"], eng["contact"]["sliding"])
         np.testing.assert_allclose(swapped["contact"]["energy_loss"], eng["contact"]["energy_loss"],
                                    rtol=RTOL_SYMMETRY, atol=RTOL_SYMMETRY * np.abs(eng["contact"]["energy_loss"]).max())
@@ -192,16 +193,20 @@ def test_swap_symmetry(kit, random_results):
 
 # --------------------------------------------------------------------------- Brach
 def test_planar_sliding_is_brach(kit):
+    """Where Brach's model applies (compressive normal impulse: N_c > 0 and P_n0 > 0). In the
+    KS branch N_c <= 0 MODEL.md puts the friction impulse along T_c, while Brach's sign rule
+    (mu takes the sign of P_t0 / P_n0) would put it against T_c: those cases are skipped."""
     rng = np.random.default_rng(5)
     cases = [ref.planar_case(rng, restitution=float(e)) for e in np.r_[np.zeros(40), rng.uniform(0, 1, 80)]]
     eng = kit.solve(cases)
     brach = [ref.brach_planar(c) for c in cases]
     compared = 0
     for b, (c, br) in enumerate(zip(cases, brach)):
-        if c["contact"]["restitution"] == 0.0:
+        compressive = ref.stick_split(c)["n_c"] > 0 and br["pn0"] > 0
+        if c["contact"]["restitution"] == 0.0 and compressive:
             # with eps = 0 Brach's critical ratio is the KS ratio T_c / N_c: same sliding criterion
             assert bool(eng["contact"]["sliding"][b]) == br["sliding"], b
-        if not (eng["contact"]["sliding"][b] and br["sliding"]):
+        if not (eng["contact"]["sliding"][b] and br["sliding"] and compressive):
             continue
         compared += 1
         jscale = np.linalg.norm(br["impulse"])
@@ -232,7 +237,7 @@ def _inline_case(m1, m2, speed1, speed2, x1, x2, point_x, dims1, dims2, eps=0.1,
     return veh[0], s1, veh[1], s2, contact
 
 
-def test_seed_000_saturn_pontiac(kit):
+def test_seed_000_saturn_pontiac():
     m1 = 3183.475 * U.LBF / U.G0
     m2 = 3496.531 * U.LBF / U.G0
     args = _inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71), (16.53, 7.283, 6.05))
@@ -255,10 +260,11 @@ def test_seed_000_saturn_pontiac(kit):
     np.testing.assert_allclose(np.asarray(a.delta_v_body), np.asarray(a.delta_v), atol=1e-12)  # yaw 0
 
 
-def test_seed_001_lucid_kia(kit):
+def test_seed_001_lucid_kia():
     m1 = 155.75 * U.SLUG
     m2 = 100.38 * U.SLUG
-    args = _inline_case(m1, m2, 5.0, 20.0, 0.0, -16.0, -8.3, (16.3, 8.1, 6.4), (16.0, 7.6, 6.1))
+    # MODEL.md section 6's case file: Lucid at x = 0, Kia at x = -20 ft, P at (-5 ft, 0, CG height)
+    args = _inline_case(m1, m2, 5.0, 20.0, 0.0, -20.0, -5.0, (16.3, 8.1, 6.4), (16.0, 7.6, 6.1))
     r = ks_jax.exchange(*args)
     con, (a, b) = r.contact, r.vehicles
     assert int(con.status) == t.OK
@@ -271,6 +277,10 @@ def test_seed_001_lucid_kia(kit):
     assert float(con.energy_loss) / U.FT_LBF == pytest.approx(14624.38, rel=1e-3)
     assert float(con.energy_loss) == pytest.approx(19828, rel=1e-3)
     np.testing.assert_allclose(np.asarray(con.impulse)[1:], 0.0, atol=1e-9)
+    # P lies 3.2 ft inside the Lucid's rear and outside the Kia's box: Burg gives the Lucid all the energy
+    assert float(a.crush) / U.FT == pytest.approx(16.3 - 8.1 - 5.0, abs=1e-9) and float(b.crush) == 0.0
+    assert float(a.ees) == pytest.approx(math.sqrt(2 * float(con.energy_loss) / m1), rel=1e-12)
+    assert float(b.ees) == 0.0
 
 
 # --------------------------------------------------------------------------- bad rows
@@ -339,9 +349,15 @@ def test_bad_rows_in_a_batch(kit, random_cases, kind):
             assert np.all(np.isnan(xb)), name
             if name != "ees":
                 assert np.all(np.isfinite(x[~bad])), name
-    # good rows: the same as solving them alone, and as the reference
-    for b in np.flatnonzero(~bad):
-        single = kit.solve(cases[b])
+    # good rows: the same as solving them alone (the jitted single solve, compiled for principal
+    # moments; for tensors, a batch of the good rows only), and as the reference
+    good_rows = np.flatnonzero(~bad)
+    if kind == "principal":
+        alone = [kit.solve(cases[b]) for b in good_rows]
+    else:
+        together = kit.solve([cases[b] for b in good_rows])
+        alone = [jax.tree_util.tree_map(lambda x, i=i: x[i], together) for i in range(len(good_rows))]
+    for b, single in zip(good_rows, alone):
         for part_b, part_s in zip((eng["contact"], *eng["vehicles"]), (single["contact"], *single["vehicles"])):
             for name in part_s:
                 np.testing.assert_allclose(np.asarray(part_b[name][b], dtype=float),
@@ -357,24 +373,18 @@ def test_bad_rows_in_a_batch(kit, random_cases, kind):
 
 def test_bad_rows_do_not_poison_gradients(kit, random_cases):
     rng = np.random.default_rng(17)
-    cases, codes = _bad_rows(random_cases["full"][1], rng)
-    args = kit.inputs(cases)
-
-    def loss(args):
-        r = jax.vmap(lambda *a: ks_jax.exchange(*a))(*args)
-        ok = r.contact.status == t.OK
-        j = jnp.where(ok[:, None], r.contact.impulse, 0.0)
-        e = jnp.where(ok, r.contact.energy_loss, 0.0)
-        return jnp.sum(j[:, 0] + 2.0 * j[:, 1] - j[:, 2]) + 1e-3 * jnp.sum(e)
-
-    grads = jax.jit(jax.grad(loss))(args)
+    cases, codes = _bad_rows(random_cases["principal"][1], rng)
+    weights = rng.normal(size=(len(cases), kit.n_outputs))
+    weights[:, kit.output_slices["ees_1"]] = weights[:, kit.output_slices["ees_2"]] = 0.0
+    values, grads = kit.value_and_grad(kit.inputs(cases), weights, 0.0)
     bad = codes >= 10
+    assert np.all(np.isnan(values[bad])) and np.all(np.isfinite(values[~bad]))
     for g in jax.tree_util.tree_leaves(grads):
         g = np.asarray(g)
         assert np.all(np.isfinite(g))
         assert np.all(g[bad] == 0.0)
     # and the good rows really have a gradient
-    assert np.any(np.asarray(grads[1].velocity)[~bad] != 0.0)
+    assert np.all(np.abs(np.asarray(grads[1].velocity)[~bad & (codes == t.OK)]).sum(-1) > 0)
 
 
 # --------------------------------------------------------------------------- float32
@@ -392,28 +402,38 @@ def _float32_worst(kit, cases, eng32, refb):
     return hi
 
 
+def _case_dict(args):
+    """Input pytrees (one case) -> a reference case dict, inertia as a (3, 3) tensor."""
+    v1, s1, v2, s2, c = jax.tree_util.tree_map(np.asarray, args)
+    vehs = []
+    for v, st in ((v1, s1), (v2, s2)):
+        d = {k: getattr(v, k) for k in ref.VEHICLE_INPUTS}
+        d.update({k: getattr(st, k) for k in ref.STATE_INPUTS})
+        d["inertia"] = np.diag(d["inertia"]) if d["inertia"].ndim == 1 else d["inertia"]
+        vehs.append(d)
+    return {"vehicles": vehs, "contact": {k: getattr(c, k) for k in ref.CONTACT_INPUTS}}
+
+
 def test_float32_agrees_with_float64(kit, random_cases):
     m1 = 3183.475 * U.LBF / U.G0
     m2 = 3496.531 * U.LBF / U.G0
-    seed64 = _inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71), (16.53, 7.283, 6.05))
-    cases = random_cases["principal"][:25] + random_cases["full"][:25]
+    seed = _case_dict(_inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71),
+                                   (16.53, 7.283, 6.05)))
+    # one inertia shape for the batch (one float32 compilation): principal moments as diagonal tensors
+    cases = copy.deepcopy(random_cases["principal"][:25]) + random_cases["full"][:25] + [seed]
+    for c in cases[:25]:
+        for v in c["vehicles"]:
+            v["inertia"] = np.diag(v["inertia"])
     refb = kit.reference_batch(cases)
     with jax.enable_x64(False):
-        seed32 = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x), dtype=jnp.float32), seed64)
-        r32 = ks_jax.exchange(*seed32)
-        assert r32.contact.impulse.dtype == jnp.float32
-        eng_p = kit.engine_dict(kit.batch(*kit.inputs(cases[:25], np.float32), 0.0))
-        eng_f = kit.engine_dict(kit.batch(*kit.inputs(cases[25:], np.float32), 0.0))
-        assert eng_p["contact"]["impulse"].dtype == np.float32
-    eng32 = jax.tree_util.tree_map(lambda a, b: np.concatenate([a, b]), eng_p, eng_f)
+        eng32 = kit.engine_dict(kit.batch_exchange(kit.inputs(cases, np.float32)))
+    assert eng32["contact"]["impulse"].dtype == np.float32
     kit.assert_matches(eng32, refb, RTOL_FLOAT32, cases)
     worst = _float32_worst(kit, cases, eng32, refb)
-    print(f"\nfloat32 worst relative error over 50 random cases: {worst:.3g}")
-    r64 = ks_jax.exchange(*seed64)
-    for name in ("impulse_magnitude", "energy_loss"):
-        a, b = float(getattr(r32.contact, name)), float(getattr(r64.contact, name))
-        assert abs(a - b) <= RTOL_FLOAT32 * abs(b), name
-    for i in range(2):
-        for name in ("delta_v_magnitude", "crush", "ees"):
-            a, b = float(getattr(r32.vehicles[i], name)), float(getattr(r64.vehicles[i], name))
-            assert abs(a - b) <= RTOL_FLOAT32 * abs(b), (i, name, a, b)
+    print(f"\nfloat32 worst relative error over 50 random cases and seed 000: {worst:.3g}")
+    # the seed chapter's figures survive float32
+    con, (a, b) = eng32["contact"], eng32["vehicles"]
+    assert float(con["impulse_magnitude"][-1]) == pytest.approx(5946.847, rel=RTOL_FLOAT32)
+    assert float(con["energy_loss"][-1]) == pytest.approx(19141.047, rel=RTOL_FLOAT32)
+    assert float(a["crush"][-1]) / U.FT == pytest.approx(1.396, rel=RTOL_FLOAT32)
+    assert float(b["ees"][-1]) / U.MPH == pytest.approx(2.213, rel=1e-3)

@@ -1,0 +1,179 @@
+"""JAX transformations and scene symmetries: jit(exchange) == exchange, vmap(exchange) ==
+stacked single solves, no recompilation for new values, and results that rotate and translate
+with the scene (MODEL.md section 3, cross-checks; section 8)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import ks_jax
+import reference as ref
+
+RTOL_JIT = 1e-13  # jit vs eager, vmap vs single: the same arithmetic, fused differently
+RTOL_COVARIANCE = 1e-10  # rotated / translated scene vs the original, relative to each field's scale
+ANGLE_FIELDS = ("impulse_azimuth", "impulse_elevation", "course_after", "pdof")
+
+
+def _as_np(tree):
+    return jax.tree_util.tree_map(lambda x: np.asarray(x, dtype=float) if np.asarray(x).dtype != bool
+                                  else np.asarray(x), tree)
+
+
+def assert_trees_close(a, b, rtol, what=""):
+    """Leaf by leaf, relative to the largest magnitude of that leaf (over all rows of a batch);
+    NaN == NaN; booleans and codes exactly; angles (degrees) modulo 360, relative to a turn."""
+    leaves_a, _ = jax.tree_util.tree_flatten_with_path(_as_np(a))
+    leaves_b = jax.tree_util.tree_leaves(_as_np(b))
+    assert len(leaves_a) == len(leaves_b)
+    for (path, x), y in zip(leaves_a, leaves_b):
+        name = jax.tree_util.keystr(path)
+        assert x.shape == y.shape, name
+        if x.dtype == bool or np.issubdtype(x.dtype, np.integer):
+            np.testing.assert_array_equal(x, y, err_msg=f"{what}{name}")
+            continue
+        d = x - y
+        if any(f in name for f in ANGLE_FIELDS):
+            d = (d + 180.0) % 360.0 - 180.0
+            scale = 360.0
+        else:
+            scale = np.nanmax(np.abs(y)) if np.any(np.isfinite(y)) else 1.0
+        same_nan = np.isnan(x) == np.isnan(y)
+        assert np.all(same_nan), f"{what}{name}: NaN pattern differs"
+        err = np.nanmax(np.abs(d)) if np.any(np.isfinite(d)) else 0.0
+        assert err <= rtol * max(scale, 1e-300), f"{what}{name}: {err} > {rtol} * {scale}"
+
+
+# --------------------------------------------------------------------------- jit, vmap, retracing
+@pytest.fixture(scope="module")
+def few_cases(random_cases):
+    return random_cases["principal"][:4] + random_cases["principal"][40:44]
+
+
+def test_jit_equals_eager(kit, few_cases):
+    for c in few_cases[:3]:
+        args = kit.inputs(c)
+        eager = ks_jax.exchange(*args)
+        jitted = kit.exchange(*args)
+        assert_trees_close(jitted, eager, RTOL_JIT, "jit vs eager: ")
+
+
+def test_eager_smooth_equals_jit_vmap_row(kit, random_cases):
+    """The static Python-float smoothing (eager) equals the traced one (jitted batch)."""
+    c = random_cases["principal"][7]
+    eager = ks_jax.exchange(*kit.inputs(c), smoothing=0.05)
+    row = jax.tree_util.tree_map(lambda x: x[0], kit.batch_exchange(kit.inputs([c]), 0.05))
+    assert_trees_close(row, eager, RTOL_JIT, "eager vs jit(vmap): ")
+
+
+def test_vmap_equals_stacked_single_calls(kit, random_cases):
+    cases = random_cases["principal"][:20]
+    singles = [kit.exchange(*kit.inputs(c)) for c in cases]
+    stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
+    batched = kit.batch_exchange(kit.inputs(cases), 0.0)
+    assert_trees_close(batched, stacked, RTOL_JIT, "vmap vs stacked singles: ")
+    # the plain jax.vmap of the public function, too (no padding, no traced smoothing)
+    plain = jax.vmap(ks_jax.exchange)(*kit.inputs(cases[:5]))
+    assert_trees_close(plain, jax.tree_util.tree_map(lambda x: x[:5], stacked), RTOL_JIT, "jax.vmap: ")
+
+
+def test_no_recompilation_for_new_values(kit, few_cases):
+    kit.exchange(*kit.inputs(few_cases[0]))  # compiled (at most once) here or earlier
+    kit.batch_exchange(kit.inputs(few_cases[:2]), 0.0)
+    single, batch = kit.traces["single"], kit.traces["batch"]
+    single_cache = kit.jitted["single"]._cache_size()
+    batch_cache = kit.jitted["batch"]._cache_size()
+    for c in few_cases[1:]:
+        kit.exchange(*kit.inputs(c))
+    for tau in (0.0, 0.02, 0.3):  # a new smoothing value is a new value, not a new program
+        kit.batch_exchange(kit.inputs(few_cases[2:]), tau)
+    assert kit.traces["single"] == single and kit.traces["batch"] == batch
+    assert kit.jitted["single"]._cache_size() == single_cache
+    assert kit.jitted["batch"]._cache_size() == batch_cache
+    assert single >= 1 and batch >= 1  # the counters do count
+
+
+# --------------------------------------------------------------------------- scene symmetries
+def _expected(base, q, shift, alpha_deg=None):
+    """The base results as the transformed scene should give them: vectors rotated by q, the
+    point also shifted; scalars and body-frame quantities unchanged; global azimuths + alpha
+    (rotations about z only, else those are dropped)."""
+    con = dict(base["contact"])
+    for f in ("normal", "impulse", "closing_velocity", "separation_velocity"):
+        con[f] = con[f] @ q.T
+    con["point"] = con["point"] @ q.T + shift
+    vehs = []
+    for v in base["vehicles"]:
+        v = dict(v)
+        for f in ("delta_v", "velocity_after", "angular_velocity_after"):
+            v[f] = v[f] @ q.T
+        vehs.append(v)
+    if alpha_deg is None:
+        for f in ("impulse_azimuth", "impulse_elevation"):
+            con.pop(f)
+        for v in vehs:
+            for f in ("course_after", "delta_yaw_rate", "yaw_rate_after"):
+                v.pop(f)
+    else:
+        con["impulse_azimuth"] = (con["impulse_azimuth"] + alpha_deg) % 360.0
+        for v in vehs:
+            v["course_after"] = (v["course_after"] + alpha_deg) % 360.0
+    return {"contact": con, "vehicles": vehs}
+
+
+def _compare(got, want, rtol):
+    for part_g, part_w, label in ((got["contact"], want["contact"], "contact"),
+                                  (got["vehicles"][0], want["vehicles"][0], "vehicles[0]"),
+                                  (got["vehicles"][1], want["vehicles"][1], "vehicles[1]")):
+        assert_trees_close({k: part_g[k] for k in part_w}, part_w, rtol, f"{label}.")
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_rotation_about_z_and_translation(kit, random_cases, kind):
+    rng = np.random.default_rng(21)
+    cases = random_cases[kind]
+    alpha = rng.uniform(-math.pi, math.pi)
+    q = ref.rot_z(alpha)
+    shift = rng.normal(0, 50, size=3)
+    base = kit.solve(cases)
+    moved = kit.solve([ref.transform(c, q, shift) for c in cases])
+    for c in cases[:5]:  # about z, the orientation change is yaw + alpha alone
+        m = ref.transform(c, q, shift)
+        for a, b in zip(c["vehicles"], m["vehicles"]):
+            dyaw = (b["yaw"] - a["yaw"] - alpha + math.pi) % (2 * math.pi) - math.pi
+            assert abs(dyaw) < 1e-12 and b["pitch"] == pytest.approx(a["pitch"], abs=1e-12)
+            assert b["roll"] == pytest.approx(a["roll"], abs=1e-12)
+    _compare(moved, _expected(base, q, shift, math.degrees(alpha)), RTOL_COVARIANCE)
+    # translation alone changes nothing but the point
+    shifted = kit.solve([ref.transform(c, None, shift) for c in cases])
+    _compare(shifted, _expected(base, np.eye(3), shift, 0.0), RTOL_COVARIANCE)
+
+
+def _random_rotation(rng):
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q @ np.diag(np.sign(np.diag(r)))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_general_rotation_is_covariant(kit, random_cases, kind):
+    """A general 3D rotation of the whole scene (orientations become Q R, re-expressed as yaw,
+    pitch, roll): impulse, delta-V, velocities and angular velocities rotate; energy, |J|, the
+    normal/tangential split, body-frame delta-V, PDOF, crush and EES do not change."""
+    rng = np.random.default_rng(22)
+    cases = random_cases[kind]
+    q = _random_rotation(rng)
+    shift = rng.normal(0, 10, size=3)
+    moved_cases = [ref.transform(c, q, shift) for c in cases]
+    for c, m in zip(cases[:5], moved_cases[:5]):  # the re-expressed orientation is Q R
+        for a, b in zip(c["vehicles"], m["vehicles"]):
+            np.testing.assert_allclose(ref.rotation(b["yaw"], b["pitch"], b["roll"]),
+                                       q @ ref.rotation(a["yaw"], a["pitch"], a["roll"]), atol=1e-14)
+    base = kit.solve(cases)
+    moved = kit.solve(moved_cases)
+    _compare(moved, _expected(base, q, shift), RTOL_COVARIANCE)
