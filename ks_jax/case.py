@@ -439,8 +439,10 @@ def _input_leaf(path):
 
 
 def input_kind(path) -> str:
-    """The unit kind of an input path (see ``units.SI_UNITS``)."""
-    return INPUT_KINDS[parse_path(path)[2]]
+    """The unit kind of an input path (see ``units.SI_UNITS``); PathError for an unknown path."""
+    group, vi, name, idx = parse_path(path)
+    _input_leaf(path)
+    return INPUT_KINDS[name]
 
 
 def get_input(inputs: CaseInputs, path: str):

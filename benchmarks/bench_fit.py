@@ -1,0 +1,173 @@
+"""Benchmark: many reconstructions at once (fit.reconstruct_batch), and the solver comparison.
+
+    python benchmarks/bench_fit.py                     # 1000 cases x 8 starts, Levenberg-Marquardt
+    python benchmarks/bench_fit.py --compare --n 200   # lm vs optax L-BFGS vs optax Adam
+    python benchmarks/bench_fit.py --append            # also append the figures to benchmarks/RESULTS_fit.md
+
+Cases: random oblique side impacts that slide at the centroid (vehicle 2's front into vehicle
+1's right side, 60-120 deg apart, friction 0.1-0.35, restitution 0.05-0.3, initial yaw rates
+up to 10 deg/s). Six unknowns: both speeds, restitution, friction, centroid x and y. Ten
+evidence, perturbed by their sigmas: delta_v_body[0..1] of both vehicles (0.2 m/s), yaw rates
+after (0.02 rad/s), speeds after (0.2 m/s), crush of both (0.03 m). Truth from the engine
+(smoothing 1e-3, the fit's).
+
+Figures: time of the second call (after compile) and of the first (with compile); "global":
+the fit's chi^2 is no worse than the truth's (the multi-start found the global basin);
+"2-sigma coverage": the share of unknowns within 2 Laplace standard errors of the truth
+(95.4% if the standard errors are right and the global minimum was found); "all within 2 sigma":
+cases with all six within (about 0.954^6 = 75% if calibrated, higher where errors correlate);
+"converged": the solver's convergence test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import fit  # noqa: E402
+from ks_jax.case import case_from_dict, get_input, get_output  # noqa: E402
+from fit.solvers import SOLVERS  # noqa: E402
+from ks_jax.solve import solve  # noqa: E402
+
+UNKNOWNS = ["vehicles[0].speed", "vehicles[1].speed", "contact.restitution", "contact.friction",
+            "contact.point[0]", "contact.point[1]"]
+EVIDENCE = [("vehicles[0].delta_v_body[0]", 0.2), ("vehicles[0].delta_v_body[1]", 0.2),
+            ("vehicles[1].delta_v_body[0]", 0.2), ("vehicles[1].delta_v_body[1]", 0.2),
+            ("vehicles[0].yaw_rate_after", 0.02), ("vehicles[1].yaw_rate_after", 0.02),
+            ("vehicles[0].speed_after", 0.2), ("vehicles[1].speed_after", 0.2),
+            ("vehicles[0].crush", 0.03), ("vehicles[1].crush", 0.03)]
+SMOOTHING = 1e-3
+
+
+def oblique_case(rng) -> dict:
+    """One random oblique side impact (SI; angles in degrees, rates in deg/s)."""
+    L1, L2 = rng.uniform(4.4, 5.0, 2)
+    m1, m2 = rng.uniform(1200, 2200, 2)
+    yaw2 = rng.uniform(60, 120)
+    x_front = rng.uniform(-1.0, 1.2)
+    cf2 = 0.5 * L2
+    y_front = -0.9 + 0.35  # vehicle 2's front face 0.35 m into vehicle 1's right side
+    c2 = [x_front - cf2 * math.cos(math.radians(yaw2)), y_front - cf2 * math.sin(math.radians(yaw2))]
+    return {"name": "oblique", "vehicles": [
+        {"mass": m1, "inertia": [500, 2200, 1.6 * m1], "length": L1, "width": 1.85, "height": 1.45,
+         "cg_to_front": 0.45 * L1, "cg_height": 0.55, "position": [0, 0], "yaw": 0,
+         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)},
+        {"mass": m2, "inertia": [500, 2200, 1.6 * m2], "length": L2, "width": 1.8, "height": 1.5,
+         "cg_to_front": cf2, "cg_height": 0.55, "position": c2, "yaw": yaw2,
+         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)}],
+        "contact": {"point": [x_front + rng.uniform(-0.3, 0.3), -0.65, 0.55], "normal": 90 + rng.uniform(-15, 15),
+                    "restitution": rng.uniform(0.05, 0.3), "friction": rng.uniform(0.1, 0.35)}}
+
+
+def sliding_cases(n: int, seed: int):
+    """n cases that slide with a margin (still sliding at 1.5 x the friction) and have crush on
+    both vehicles; returns (cases, truths (n, 6), evidence lists, unknown lists, chi2 at truth)."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    while len(cases) < n:
+        batch = [oblique_case(rng) for _ in range(2 * (n - len(cases)) + 8)]
+        harder = [dict(d, contact=dict(d["contact"], friction=1.5 * d["contact"]["friction"])) for d in batch]
+        sols = solve([case_from_dict(d) for d in batch + harder], smoothing=SMOOTHING)
+        k = len(batch)
+        for d, s, h in zip(batch, sols[:k], sols[k:]):
+            r = s.result
+            if (s.status == "ok" and bool(r.contact.sliding) and bool(h.result.contact.sliding)
+                    and float(r.vehicles[0].crush) > 0.05 and float(r.vehicles[1].crush) > 0.05):
+                cases.append((case_from_dict(d), r))
+    cases = cases[:n]
+    truths, evidence, unknowns, chi2_truth = [], [], [], []
+    for case, result in cases:
+        truth = [float(get_input(case.inputs, p)) for p in UNKNOWNS]
+        noise = rng.standard_normal(len(EVIDENCE))
+        evidence.append([fit.Evidence(p, float(get_output(result, p)) + s * e, s)
+                         for (p, s), e in zip(EVIDENCE, noise)])
+        chi2_truth.append(float(noise @ noise))
+        px, py = truth[4] + rng.uniform(-0.5, 0.5), truth[5] + rng.uniform(-0.3, 0.3)  # the crush survey's guess
+        unknowns.append([fit.Unknown(UNKNOWNS[0], 0.0, 40.0), fit.Unknown(UNKNOWNS[1], 0.0, 40.0),
+                         fit.Unknown(UNKNOWNS[2], 0.0, 0.6), fit.Unknown(UNKNOWNS[3], 0.0, 1.0),
+                         fit.Unknown(UNKNOWNS[4], px - 1.5, px + 1.5), fit.Unknown(UNKNOWNS[5], py - 1.0, py + 1.0)])
+        truths.append(truth)
+    return [c for c, _ in cases], np.array(truths), evidence, unknowns, np.array(chi2_truth)
+
+
+def score(results, truths, chi2_truth):
+    est = np.array([[r.estimate[p] for p in UNKNOWNS] for r in results])
+    std = np.array([[r.std[p] for p in UNKNOWNS] for r in results])
+    chi2 = np.array([r.chi2 for r in results])
+    within = np.abs(est - truths) <= 2 * std
+    return {"global": float(np.mean(chi2 <= chi2_truth + 1e-6)), "coverage": float(np.mean(within)),
+            "all2": float(np.mean(np.all(within, 1))), "converged": float(np.mean([r.converged for r in results])),
+            "iterations": float(np.median([r.iterations for r in results]))}
+
+
+def run(solver, n, starts, seed):
+    cases, truths, evidence, unknowns, chi2_truth = sliding_cases(n, seed)
+    t0 = time.perf_counter()
+    fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed, solver=solver, smoothing=SMOOTHING)
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    results = fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed + 1, solver=solver,
+                                    smoothing=SMOOTHING)
+    second = time.perf_counter() - t0
+    return first, second, score(results, truths, chi2_truth)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=1000, help="reconstructions (default 1000)")
+    ap.add_argument("--starts", type=int, default=8, help="starts per reconstruction (default 8)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--solver", default="lm", choices=sorted(SOLVERS))
+    ap.add_argument("--compare", action="store_true", help="run lm, lbfgs and adam")
+    ap.add_argument("--append", action="store_true", help="append the figures to benchmarks/RESULTS_fit.md")
+    args = ap.parse_args(argv)
+    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {jax.devices()[0].device_kind}"
+    cpu = ""
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    command = "python " + " ".join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])
+    date = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    print(f"machine: {cpu or machine} ({os.cpu_count()} cores, jax {jax.__version__}, {jax.default_backend()}, "
+          "float64)")
+    print(f"command: {command}\ndate: {date}")
+    rows = []
+    for solver in (["lm", "lbfgs", "adam"] if args.compare else [args.solver]):
+        first, second, s = run(solver, args.n, args.starts, args.seed)
+        row = (f"| {solver} | {args.n} x {args.starts} | {second:.2f} s | {first:.2f} s | {100 * s['global']:.1f}% | "
+               f"{100 * s['coverage']:.1f}% | {100 * s['all2']:.1f}% | {100 * s['converged']:.1f}% | "
+               f"{s['iterations']:.0f} |")
+        rows.append(row)
+        print(row, flush=True)
+    header = ("| solver | fits x starts | time after compile | first call (with compile) | global | "
+              "2-sigma coverage | all within 2 sigma | converged | median iterations |\n"
+              "|---|---|---|---|---|---|---|---|---|")
+    print(header)
+    print("\n".join(rows))
+    if args.append:
+        path = Path(__file__).with_name("RESULTS_fit.md")
+        new = not path.exists()
+        with path.open("a") as f:
+            if new:
+                f.write("# fit benchmarks (benchmarks/bench_fit.py)\n\nColumns are explained in the script's "
+                        "docstring. Appended by `--append`; figures as run.\n")
+            f.write(f"\n## {date}: {cpu or machine}, {os.cpu_count()} cores, jax {jax.__version__}, "
+                    f"{jax.default_backend()}, float64\n\n`{command}`\n\n{header}\n" + "\n".join(rows) + "\n")
+        print(f"appended to {path}")
+
+
+if __name__ == "__main__":
+    main()

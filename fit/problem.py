@@ -1,0 +1,375 @@
+"""Unknowns, evidence and the weighted residual vector (MODEL.md section 6).
+
+An ``Unknown`` is one scalar input path with bounds (SI), an optional start and an optional
+Gaussian prior. An ``Evidence`` is one scalar output path of MODEL.md section 4 (or a
+pre-impact input such as ``vehicles[1].speed``) with a measured value and a sigma, in the
+units the results use: SI, degrees for ``pdof``, ``impulse_azimuth``, ``impulse_elevation``
+and ``course_after``; radians for angle *inputs* used as evidence (``vehicles[0].yaw``).
+
+Everything here is checked at the edge: a bad path, unit, bound or sigma raises
+``ks_jax.case.CaseError`` naming it. ``Problem`` is the static (hashable) part that the jitted
+solver is specialised on; ``residuals`` is the pure, unbatched residual function
+
+    r = [ (wrap(pred_k - value_k)) / sigma_k  for each evidence k ]
+        ++ [ (x_j - prior_mean_j) / prior_sigma_j  for each unknown j (0 without a prior) ]
+
+so that the fit minimises 0.5 |r|^2 (weighted least squares with Gaussian priors). Angles are
+compared on the circle: the difference is wrapped to [-180, 180) degrees ([-pi, pi) rad).
+
+Bounds are enforced by smooth transforms of an unconstrained z (``to_x``):
+both bounds: x = lo + (hi - lo) sigmoid(z); only a lower bound: x = lo + softplus(z);
+only an upper bound: x = hi - softplus(-z); none: x = z.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ks_jax import units as U
+from ks_jax.case import (
+    Case,
+    CaseError,
+    PathError,
+    check_output_path,
+    get_input,
+    get_output,
+    input_kind,
+    output_kind,
+    parse_output_value,
+    parse_path,
+    set_input,
+)
+from ks_jax.solve import solve_inputs
+
+# outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
+NOT_FITTABLE = {"sliding": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
+# outputs reported in degrees that are angles on the circle
+CIRCULAR_DEGREES = {"pdof", "impulse_azimuth", "course_after"}
+# inputs that are angles on the circle (radians inside)
+CIRCULAR_INPUTS = {"yaw", "course", "roll", "normal"}
+# physical limits of inputs, checked against the bounds of an unknown: field -> (lo, hi, strict lo)
+INPUT_LIMITS = {
+    "restitution": (-1.0, 1.0, False), "friction": (0.0, math.inf, False),
+    "penetration_time": (0.0, math.inf, False), "speed": (0.0, math.inf, False),
+    "mass": (0.0, math.inf, True), "inertia": (0.0, math.inf, True), "length": (0.0, math.inf, True),
+    "width": (0.0, math.inf, True), "height": (0.0, math.inf, True),
+}
+
+
+@dataclass(frozen=True)
+class Unknown:
+    """An input to fit. ``path``: an input path ("vehicles[1].speed", "contact.point[0]");
+    ``lower``/``upper``: bounds in SI (rad for angles; +-inf for none); ``start``: optional SI
+    start of the first multi-start; ``prior``: optional (mean, sigma) in SI, a Gaussian prior."""
+
+    path: str
+    lower: float = -math.inf
+    upper: float = math.inf
+    start: float | None = None
+    prior: tuple | None = None
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """A measured result. ``path``: an output path of MODEL.md section 4 with a component index
+    for vectors ("vehicles[0].delta_v_body[0]") or a pre-impact input ("vehicles[0].speed");
+    ``value`` and ``sigma`` in the result's units (SI; degrees for pdof, impulse_azimuth,
+    impulse_elevation, course_after; rad for angle inputs)."""
+
+    path: str
+    value: float
+    sigma: float
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The static part of a fit (hashable; the jitted solver is specialised on it).
+
+    unknowns: input paths; ties: (unknown index, extra input path set to the same value)
+    (a fitted yaw also moves the course when the case gives no course); evidence: tuples
+    (path, is_output, period) with period 360 (degrees), 2 pi (rad) or 0 (not an angle)."""
+
+    unknowns: tuple
+    ties: tuple
+    evidence: tuple
+    auto_point: bool = False
+    auto_normal: bool = False
+
+    @property
+    def n(self) -> int:
+        return len(self.unknowns)
+
+    @property
+    def m(self) -> int:
+        return len(self.evidence)
+
+
+# ---------------------------------------------------------------------------------------
+# reading unknowns and evidence (units at the edge)
+
+
+def _num(value, kind, where, case_name):
+    try:
+        x = U.parse_quantity(value, kind)
+    except U.UnitError as err:
+        raise CaseError(f"case '{case_name}': {where} = {value!r}: {err}") from None
+    except KeyError:
+        raise CaseError(f"case '{case_name}': {where}: no unit kind '{kind}'") from None
+    if math.isnan(x):
+        raise CaseError(f"case '{case_name}': {where} = {value!r}: must be a number")
+    return x
+
+
+def _field(path):
+    return parse_path(path)[2]
+
+
+def check_unknown(case: Case, u: Unknown) -> Unknown:
+    """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError)."""
+    name = case.name
+    try:
+        get_input(case.inputs, u.path)
+    except PathError as err:
+        raise CaseError(f"case '{name}': unknowns: {err}") from None
+    field = _field(u.path)
+    if field == "point" and case.auto_point or field == "normal" and case.auto_normal:
+        raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
+                        f"give contact.{field} in the case to fit it")
+    lo, hi = float(u.lower), float(u.upper)
+    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
+        raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{lo}, {hi}] (SI): the lower bound must be "
+                        "below the upper bound")
+    if field in INPUT_LIMITS:
+        plo, phi, strict = INPUT_LIMITS[field]
+        if lo < plo or (strict and lo <= plo) or hi > phi:
+            rule = f"{'>' if strict else '>='} {plo}" + (f" and <= {phi}" if math.isfinite(phi) else "")
+            raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{lo:.6g}, {hi:.6g}] (SI): "
+                            f"{field} must be {rule}, so must its bounds")
+    if field == "speed" and not math.isfinite(lo):
+        raise CaseError(f"case '{name}': unknowns: {u.path}: a speed needs a lower bound >= 0")
+    if u.start is not None and not lo <= u.start <= hi:
+        raise CaseError(f"case '{name}': unknowns: {u.path}: start {u.start:.6g} (SI) is outside the bounds "
+                        f"[{lo:.6g}, {hi:.6g}]")
+    if u.prior is not None:
+        mean, sigma = u.prior
+        if not (math.isfinite(mean) and math.isfinite(sigma) and sigma > 0):
+            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {mean}, sigma {sigma}): "
+                            "needs a finite mean and a positive sigma")
+    return Unknown(u.path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
+                   None if u.prior is None else (float(u.prior[0]), float(u.prior[1])))
+
+
+def evidence_kind(case: Case, path: str):
+    """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
+    that can be fitted."""
+    try:
+        group, vi, field, idx = check_output_path(path)
+    except PathError as out_err:
+        try:
+            get_input(case.inputs, path)
+        except PathError:
+            raise CaseError(f"case '{case.name}': evidence: {out_err}") from None
+        field = _field(path)
+        return False, (2 * math.pi if field in CIRCULAR_INPUTS else 0.0)
+    if field in NOT_FITTABLE:
+        raise CaseError(f"case '{case.name}': evidence: {path}: {field} is {NOT_FITTABLE[field]} and cannot be "
+                        "fitted (it has no gradient)")
+    return True, (360.0 if field in CIRCULAR_DEGREES else 0.0)
+
+
+def check_evidence(case: Case, e: Evidence) -> Evidence:
+    evidence_kind(case, e.path)  # raises on a bad path
+    if not math.isfinite(e.value):
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {e.value} must be finite")
+    if not (math.isfinite(e.sigma) and e.sigma > 0):
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {e.sigma}: must be positive "
+                        "(an exact measurement is an input, not evidence)")
+    return Evidence(e.path.replace(" ", ""), float(e.value), float(e.sigma))
+
+
+def _evidence_value(case, path, value, where):
+    try:
+        check_output_path(path)
+    except PathError:
+        return _num(value, input_kind(path), where, case.name)
+    return parse_output_value(value, path, case.name, where)
+
+
+def parse_unknowns(case: Case, spec) -> list[Unknown]:
+    """Unknowns from the file format of MODEL.md section 6: a map path -> {"bounds": [lo, hi],
+    "start": x, "prior": {"mean": x, "sigma": s}} (quantities as numbers or unit strings; bare
+    numbers are SI except angles in degrees and rates in deg/s). ``Unknown`` objects pass as
+    they are (SI). A list of paths or of ``Unknown`` is accepted too."""
+    if spec is None:
+        raise CaseError(f"case '{case.name}': unknowns: missing (name at least one input to fit)")
+    if isinstance(spec, (list, tuple)):
+        items = [(u.path, u) if isinstance(u, Unknown) else (u, {}) for u in spec]
+    elif isinstance(spec, dict):
+        items = list(spec.items())
+    else:
+        raise CaseError(f"case '{case.name}': unknowns: must be a map from input paths to bounds, got {spec!r}")
+    if not items:
+        raise CaseError(f"case '{case.name}': unknowns: empty (name at least one input to fit)")
+    out = []
+    for path, d in items:
+        if isinstance(d, Unknown):
+            out.append(check_unknown(case, d))
+            continue
+        try:
+            get_input(case.inputs, path)  # names a scalar input? (before asking its kind)
+            kind = input_kind(path)
+        except PathError as err:
+            raise CaseError(f"case '{case.name}': unknowns: {err}") from None
+        if d is None:
+            d = {}
+        if not isinstance(d, dict):
+            raise CaseError(f"case '{case.name}': unknowns: {path} = {d!r}: must be a map with 'bounds' "
+                            "(and optional 'start', 'prior')")
+        extra = set(d) - {"bounds", "start", "prior"}
+        if extra:
+            raise CaseError(f"case '{case.name}': unknowns: {path}.{sorted(extra)[0]}: unknown field "
+                            "(known: bounds, start, prior)")
+        lo, hi = -math.inf, math.inf
+        if "bounds" in d:
+            b = d["bounds"]
+            if not isinstance(b, (list, tuple)) or len(b) != 2:
+                raise CaseError(f"case '{case.name}': unknowns: {path}.bounds = {b!r}: must be [lower, upper]")
+            lo = -math.inf if b[0] is None else _num(b[0], kind, f"unknowns: {path}.bounds[0]", case.name)
+            hi = math.inf if b[1] is None else _num(b[1], kind, f"unknowns: {path}.bounds[1]", case.name)
+        start = None if d.get("start") is None else _num(d["start"], kind, f"unknowns: {path}.start", case.name)
+        prior = None
+        if d.get("prior") is not None:
+            p = d["prior"]
+            if isinstance(p, dict) and set(p) == {"mean", "sigma"}:
+                pm, ps = p["mean"], p["sigma"]
+            elif isinstance(p, (list, tuple)) and len(p) == 2:
+                pm, ps = p
+            else:
+                raise CaseError(f"case '{case.name}': unknowns: {path}.prior = {p!r}: must be "
+                                "{\"mean\": x, \"sigma\": s}")
+            prior = (_num(pm, kind, f"unknowns: {path}.prior.mean", case.name),
+                     _num(ps, kind, f"unknowns: {path}.prior.sigma", case.name))
+        out.append(check_unknown(case, Unknown(path, lo, hi, start, prior)))
+    paths = [u.path for u in out]
+    for p in paths:
+        if paths.count(p) > 1:
+            raise CaseError(f"case '{case.name}': unknowns: {p} is named twice")
+    return out
+
+
+def parse_evidence(case: Case, spec) -> list[Evidence]:
+    """Evidence from the file format: a list of {"quantity": path, "value": q, "sigma": q}
+    (unit strings parsed with the path's kind); ``Evidence`` objects pass as they are."""
+    if spec is None:
+        raise CaseError(f"case '{case.name}': evidence: missing (give at least one measured result)")
+    if not isinstance(spec, (list, tuple)) or not spec:
+        raise CaseError(f"case '{case.name}': evidence: must be a non-empty list of "
+                        "{\"quantity\", \"value\", \"sigma\"}")
+    out = []
+    for k, e in enumerate(spec):
+        if isinstance(e, Evidence):
+            out.append(check_evidence(case, e))
+            continue
+        if not isinstance(e, dict):
+            raise CaseError(f"case '{case.name}': evidence[{k}] = {e!r}: must be "
+                            "{\"quantity\", \"value\", \"sigma\"}")
+        extra = set(e) - {"quantity", "path", "value", "sigma", "note", "source"}
+        if extra:
+            raise CaseError(f"case '{case.name}': evidence[{k}].{sorted(extra)[0]}: unknown field "
+                            "(known: quantity, value, sigma, note, source)")
+        path = e.get("quantity", e.get("path"))
+        if path is None or "value" not in e or "sigma" not in e:
+            raise CaseError(f"case '{case.name}': evidence[{k}]: needs quantity, value and sigma")
+        evidence_kind(case, path)  # a clear error for a bad path first
+        value = _evidence_value(case, path, e["value"], f"evidence: {path}.value")
+        sigma = _evidence_value(case, path, e["sigma"], f"evidence: {path}.sigma")
+        out.append(check_evidence(case, Evidence(path, value, sigma)))
+    return out
+
+
+def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) -> Problem:
+    if not case.valid:
+        raise CaseError(case.error)
+    ties = []
+    for i, u in enumerate(unknowns):
+        group, vi, field, _ = parse_path(u.path)
+        if group == "vehicles" and field == "yaw":
+            raw = case.raw.get("vehicles", [{}, {}])[vi] if isinstance(case.raw, dict) else {}
+            if "course" not in raw and "velocity" not in raw and not any(x.path == f"vehicles[{vi}].course"
+                                                                         for x in unknowns):
+                ties.append((i, f"vehicles[{vi}].course"))
+    ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
+    return Problem(tuple(u.path for u in unknowns), tuple(ties), ev, bool(case.auto_point), bool(case.auto_normal))
+
+
+# ---------------------------------------------------------------------------------------
+# transforms and residuals (pure, unbatched)
+
+
+def to_x(z, lo, hi):
+    """Unconstrained z (n,) -> x (n,) within [lo, hi] (smooth, see the module docstring)."""
+    lo_f, hi_f = jnp.isfinite(lo), jnp.isfinite(hi)
+    lo0, hi0 = jnp.where(lo_f, lo, 0.0), jnp.where(hi_f, hi, 0.0)
+    # the sigmoid from whichever bound is nearer, so that x - lo or hi - x (and dx/dz) keep
+    # their relative precision as z saturates (1 - sigmoid(z) would cancel to 0)
+    w = hi0 - lo0
+    both = jnp.where(z < 0, lo0 + w * jax.nn.sigmoid(z), hi0 - w * jax.nn.sigmoid(-z))
+    lower = lo0 + jax.nn.softplus(z)
+    upper = hi0 - jax.nn.softplus(-z)
+    return jnp.where(lo_f & hi_f, both, jnp.where(lo_f, lower, jnp.where(hi_f, upper, z)))
+
+
+def to_z(x, lo, hi):
+    """Inverse of ``to_x`` (NumPy, float64); x is clipped a hair inside finite bounds."""
+    x, lo, hi = (np.asarray(a, dtype=np.float64) for a in (x, lo, hi))
+    lo_f, hi_f = np.isfinite(lo), np.isfinite(hi)
+    w = np.where(lo_f & hi_f, hi - lo, 1.0)
+    with np.errstate(all="ignore"):
+        f = np.clip((x - np.where(lo_f, lo, 0)) / w, 1e-9, 1 - 1e-9)
+        both = np.log(f) - np.log1p(-f)
+        dl = np.maximum(x - np.where(lo_f, lo, 0), 1e-9)
+        lower = np.where(dl > 30, dl, np.log(np.expm1(np.minimum(dl, 30))))
+        du = np.maximum(np.where(hi_f, hi, 0) - x, 1e-9)
+        upper = -np.where(du > 30, du, np.log(np.expm1(np.minimum(du, 30))))
+    return np.where(lo_f & hi_f, both, np.where(lo_f, lower, np.where(hi_f, upper, x)))
+
+
+def apply_unknowns(problem: Problem, inputs, x):
+    for path, xi in zip(problem.unknowns, x):
+        inputs = set_input(inputs, path, xi)
+    for i, path in problem.ties:
+        inputs = set_input(inputs, path, x[i])
+    return inputs
+
+
+def predict(problem: Problem, inputs, x, smoothing):
+    """(predicted evidence (m,), status ()) for unknowns x (n,), SI / the result's units."""
+    inputs = apply_unknowns(problem, inputs, x)
+    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing)
+    preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
+    dtype = jnp.result_type(x)
+    return jnp.stack([jnp.asarray(p, dtype) for p in preds]), res.contact.status
+
+
+def wrap(d, period):
+    """Angle differences to [-period/2, period/2) (period 0: unchanged)."""
+    if period == 0:
+        return d
+    return jnp.mod(d + 0.5 * period, period) - 0.5 * period
+
+
+def residuals(problem: Problem, x, inputs, values, sigmas, prior_mean, prior_weight, smoothing):
+    """Whitened residuals (m + n,): evidence in sigmas, then priors (0 where none)."""
+    pred, _ = predict(problem, inputs, x, smoothing)
+    d = jnp.stack([wrap(pred[k] - values[k], period) for k, (_, _, period) in enumerate(problem.evidence)])
+    return jnp.concatenate([d / sigmas, (x - prior_mean) * prior_weight])
+
+
+def output_units(path: str, is_output: bool) -> str:
+    """The unit kind of an evidence path ("degrees" for outputs reported in degrees)."""
+    return output_kind(path) if is_output else input_kind(path)

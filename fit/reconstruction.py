@@ -1,0 +1,407 @@
+"""``reconstruct`` and ``reconstruct_batch``: multi-start weighted least squares, one jitted call.
+
+All starts of all cases go through one compiled, doubly vmapped solver (cases x starts); the
+best start of each case is kept, and the Jacobian of the whitened residuals with respect to the
+physical unknowns is evaluated there (in the same call) for the Laplace covariance
+(``fit.uncertainty``). Monte Carlo refits perturbed evidence the same way, one vmapped batch
+(in chunks, when a progress bar is wanted).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ks_jax.case import Case, CaseError, as_arrays
+from ks_jax.types import status_text
+
+from .problem import (
+    Problem,
+    make_problem,
+    output_units,
+    parse_evidence,
+    parse_unknowns,
+    predict,
+    to_x,
+    to_z,
+    wrap,
+)
+from .solvers import SOLVERS
+from .uncertainty import analyse, default_rtol
+
+PERCENTILES = (5, 50, 95)
+
+
+Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
+
+
+@partial(jax.jit, static_argnames=("problem", "solver", "max_iter"))
+def _fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
+              z0, smoothing):
+    """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
+    lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
+    x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
+    with respect to the physical x, residuals (m + n,), predicted (m,), status."""
+
+    def fun(z, d):
+        x = to_x(z, d["lo"], d["hi"])
+        pred, status = predict(problem, d["inputs"], x, smoothing)
+        dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
+        r = jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]])
+        return r, (pred, status)
+
+    data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
+            "pw": prior_weight}
+    z_min = jnp.where(jnp.isfinite(lo), -Z_LIMIT, -jnp.inf)
+    z_max = jnp.where(jnp.isfinite(hi), Z_LIMIT, jnp.inf)
+    sol = SOLVERS[solver](fun, z0, data, max_iter, z_min, z_max)
+    x = to_x(sol.z, lo, hi)
+    # dr/dx = dr/dz / (dx/dz): the transforms are elementwise; dx/dz >= ~4e-18 thanks to Z_LIMIT
+    dxdz = jax.jvp(lambda z: to_x(z, lo, hi), (sol.z,), (jnp.ones_like(sol.z),))[1]
+    jac = jnp.where(dxdz[:, None, :] > 0, sol.jacobian / jnp.where(dxdz > 0, dxdz, 1.0)[:, None, :], 0.0)
+    pred, status = sol.aux
+    return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged, "iterations": sol.iterations,
+            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status}
+
+
+def _best(cost, converged):
+    """Index of the best start: the lowest cost, preferring a converged start whose cost ties it."""
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    lowest = cost.min()
+    tie = cost <= lowest + 1e-9 * max(abs(lowest), 1.0) + 1e-12
+    pick = tie & converged
+    return int(np.flatnonzero(pick)[np.argmin(cost[pick])]) if pick.any() else int(np.argmin(cost))
+
+
+@dataclass
+class FitResult:
+    """One reconstruction (MODEL.md section 6). Values are SI (rad for angles, rad/s for rates);
+    evidence-side values (``fitted``) are in the result's units (degrees for pdof, ...).
+
+    estimate, std: path -> value (std inf = not determined by the evidence); correlation:
+    path -> path -> value (nan where undefined); fitted: evidence -> fitted value; residuals:
+    evidence -> (fitted - measured) / sigma (angles wrapped); converged: the best start passed
+    the solver's convergence test; unidentified: statements of what the evidence does not
+    determine; at_bound: unknowns pinned at a bound; monte_carlo: None or
+    {"samples", "converged_fraction", "percentiles": {"5": {path: value}, ...}}.
+    """
+
+    case_name: str
+    unknowns: list
+    evidence: list
+    estimate: dict
+    std: dict
+    correlation: dict
+    fitted: dict
+    residuals: dict
+    converged: bool
+    unidentified: list
+    at_bound: list
+    cost: float
+    status: str
+    starts: int
+    starts_converged: int
+    starts_at_best: int
+    iterations: int
+    singular_values: list
+    covariance: np.ndarray = field(repr=False)
+    evidence_kinds: list = field(default_factory=list, repr=False)
+    monte_carlo: dict | None = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def chi2(self) -> float:
+        """Sum of squared whitened residuals (evidence and priors) at the estimate."""
+        return 2.0 * self.cost
+
+    def to_dict(self) -> dict:
+        """JSON-ready (MODEL.md section 6): SI values, inf/nan -> null."""
+
+        def num(v):
+            v = float(v)
+            return v if math.isfinite(v) else None
+
+        out = {
+            "name": self.case_name,
+            "estimate": {k: num(v) for k, v in self.estimate.items()},
+            "std": {k: num(v) for k, v in self.std.items()},
+            "correlation": {k: {k2: num(v2) for k2, v2 in row.items()} for k, row in self.correlation.items()},
+            "residuals": {k: num(v) for k, v in self.residuals.items()},
+            "fitted": {k: num(v) for k, v in self.fitted.items()},
+            "converged": bool(self.converged),
+            "unidentified": list(self.unidentified),
+            "at_bound": list(self.at_bound),
+            "chi2": num(self.chi2),
+            "status": self.status,
+            "starts": {"total": self.starts, "converged": self.starts_converged, "at_best": self.starts_at_best},
+            "notes": list(self.notes),
+        }
+        if self.monte_carlo is not None:
+            mc = self.monte_carlo
+            out["monte_carlo"] = {
+                "samples": mc["samples"],
+                "converged_fraction": mc["converged_fraction"],
+                "percentiles": {p: {k: num(v) for k, v in row.items()} for p, row in mc["percentiles"].items()},
+            }
+        return out
+
+
+def _keys(evidence):
+    """Unique keys for evidence (a path named twice gets ' (2)')."""
+    keys, seen = [], {}
+    for e in evidence:
+        seen[e.path] = seen.get(e.path, 0) + 1
+        keys.append(e.path if seen[e.path] == 1 else f"{e.path} ({seen[e.path]})")
+    return keys
+
+
+def _starts(unknowns, inputs_value, n_starts: int, rng) -> np.ndarray:
+    """(S, n) starts in x (SI): the first at each unknown's start (else the middle of its
+    bounds, else the case value), the others a Latin hypercube within the bounds (2% margins),
+    or normal draws around the first start where a bound is missing."""
+    n = len(unknowns)
+    x0 = np.empty((n_starts, n))
+    k = n_starts - 1
+    for j, u in enumerate(unknowns):
+        lo, hi = u.lower, u.upper
+        base = inputs_value[j]
+        if math.isfinite(lo) and math.isfinite(hi):
+            first = 0.5 * (lo + hi) if u.start is None else u.start
+            strata = (rng.permutation(k) + rng.random(k)) / max(k, 1)  # Latin hypercube in [0, 1)
+            draws = lo + (hi - lo) * (0.02 + 0.96 * strata)
+        else:
+            first = u.start if u.start is not None else (u.prior[0] if u.prior else base)
+            if math.isfinite(lo):
+                first = max(first, lo + 1e-3)
+            if math.isfinite(hi):
+                first = min(first, hi - 1e-3)
+            s = u.prior[1] if u.prior else max(abs(first), 1.0)
+            draws = first + s * rng.standard_normal(k)
+            if math.isfinite(lo):
+                draws = lo + np.abs(draws - lo)
+            if math.isfinite(hi):
+                draws = hi - np.abs(hi - draws)
+        x0[0, j] = first
+        x0[1:, j] = draws
+    return x0
+
+
+def _prepare(case: Case, unknowns, evidence):
+    if not isinstance(case, Case):
+        raise TypeError(f"reconstruct needs a ks_jax Case, got {type(case).__name__}")
+    if not case.valid:
+        raise CaseError(case.error)
+    if unknowns is None:
+        unknowns = case.raw.get("unknowns")
+    if evidence is None:
+        evidence = case.raw.get("evidence")
+    unknowns = parse_unknowns(case, unknowns)
+    evidence = parse_evidence(case, evidence)
+    problem = make_problem(case, unknowns, evidence)
+    return unknowns, evidence, problem
+
+
+def _arrays(case, unknowns, evidence, dtype):
+    from ks_jax.case import get_input
+
+    n = len(unknowns)
+    lo = np.array([u.lower for u in unknowns])
+    hi = np.array([u.upper for u in unknowns])
+    pm = np.array([u.prior[0] if u.prior else 0.0 for u in unknowns])
+    pw = np.array([1.0 / u.prior[1] if u.prior else 0.0 for u in unknowns])
+    values = np.array([e.value for e in evidence])
+    sigmas = np.array([e.sigma for e in evidence])
+    current = np.array([float(get_input(case.inputs, u.path)) for u in unknowns]) if n else np.zeros(0)
+    return {"inputs": case.inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": pm, "pw": pw,
+            "current": current}
+
+
+def _stack(trees):
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
+
+
+def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts):
+    """Fit B cases x S starts in one call. inputs: stacked CaseInputs [B]; values, sigmas (B, m);
+    lo, hi, pm, pw (B, n); z0 (B, S, n). Returns NumPy arrays shaped (B, S, ...)."""
+    rep = lambda a: np.repeat(np.asarray(a, np.float64), starts, axis=0)  # noqa: E731
+    arr = lambda a: jnp.asarray(rep(a), dtype)  # noqa: E731
+    rows_inputs = jax.tree_util.tree_map(arr, inputs)
+    B = np.asarray(values).shape[0]
+    out = _fit_rows(problem, solver, max_iter, rows_inputs, arr(values), arr(sigmas), arr(lo), arr(hi), arr(pm),
+                    arr(pw), jnp.asarray(np.asarray(z0).reshape(B * starts, -1), dtype), jnp.asarray(smoothing, dtype))
+    return {k: np.asarray(v).reshape(B, starts, *np.shape(v)[1:]) for k, v in out.items()}
+
+
+def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
+    paths = [u.path for u in unknowns]
+    m = len(evidence)
+    info = analyse(unknowns, row["x"], row["jacobian"], m, arrays["pw"], rtol)
+    keys = _keys(evidence)
+    cost_starts = row["cost_starts"]
+    best_cost = float(row["cost"])
+    at_best = int(np.sum(np.isfinite(cost_starts) & (cost_starts <= best_cost + 1e-6 * max(best_cost, 1.0) + 1e-9)))
+    notes = []
+    res = row["residuals"][:m]
+    worst = [(k, r) for k, r in zip(keys, res) if abs(r) > 3]
+    if worst:
+        notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{k} ({r:+.1f} sigma)" for k, r in worst)
+                     + ": the evidence disagrees with itself or with the fixed inputs")
+    status = status_text(row["status"])
+    if status != "ok":
+        notes.append(f"the exchange at the estimate has status '{status}'")
+    corr = {p: {q: float(info["corr"][i, j]) for j, q in enumerate(paths)} for i, p in enumerate(paths)}
+    return FitResult(
+        case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
+        estimate={p: float(v) for p, v in zip(paths, row["x"])},
+        std={p: float(v) for p, v in zip(paths, info["std"])},
+        correlation=corr,
+        fitted={k: float(v) for k, v in zip(keys, row["predicted"])},
+        residuals={k: float(v) for k, v in zip(keys, res)},
+        converged=bool(row["converged"]),
+        unidentified=info["statements"], at_bound=info["at_bound"],
+        cost=best_cost, status=status, starts=len(cost_starts),
+        starts_converged=int(np.sum(row["converged_starts"])), starts_at_best=at_best,
+        iterations=int(row["iterations"]),
+        singular_values=[float(s) for s in info["singular"]], covariance=info["cov"], notes=notes,
+        evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
+    )
+
+
+def _progress(total, desc):
+    try:
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=desc, file=sys.stderr, unit="fit")
+    except ImportError:  # pragma: no cover - tqdm is an extra
+
+        class Lines:
+            def __init__(self):
+                self.n = 0
+
+            def update(self, k):
+                self.n += k
+                print(f"{desc}: {self.n}/{total}", file=sys.stderr)
+
+            def close(self):
+                pass
+
+        return Lines()
+
+
+def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
+                smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
+                progress: bool = False, chunk: int = 250, dtype=None) -> FitResult:
+    """Fit unknown inputs of ``case`` to ``evidence`` (MODEL.md section 6).
+
+    case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
+    "start", "prior"} as in case files (unit strings, bare numbers SI except angles in degrees),
+    or a list of ``Unknown`` (SI); default: the case file's ``unknowns``. evidence: a list of
+    {"quantity", "value", "sigma"} as in case files or of ``Evidence`` (result units); default:
+    the case file's ``evidence``. starts: multi-start count (the first at the given starts or
+    the middle of the bounds, the rest uniform within the bounds, seeded by ``seed``).
+    monte_carlo: number of refits with the evidence perturbed by its sigmas (0: none); their
+    5/50/95 percentiles go to ``result.monte_carlo``. smoothing: the engine's smooth friction
+    cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
+    "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
+    in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
+    ``chunk`` samples). Raises CaseError for a bad path, unit, bound or sigma.
+    """
+    return reconstruct_batch([case], None if unknowns is None else [unknowns],
+                             None if evidence is None else [evidence], starts=starts, seed=seed,
+                             monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
+                             rtol=rtol, progress=progress, chunk=chunk, dtype=dtype)[0]
+
+
+def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
+                      smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
+                      rtol: float | None = None, progress: bool = False, chunk: int = 250,
+                      dtype=None) -> list[FitResult]:
+    """Many reconstructions in one compiled, vmapped call (cases x starts).
+
+    cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
+    the same length as ``cases``), or None to read each case file's own. All cases must name
+    the same unknown paths and the same evidence paths, in the same order (bounds, priors,
+    values and sigmas may differ). Other arguments as ``reconstruct``.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
+    if not 0.0 <= smoothing < 1.0:
+        raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
+    if starts < 1:
+        raise ValueError(f"starts = {starts}: need at least one start")
+    cases = list(cases)
+    if not cases:
+        return []
+    dtype = dtype or jnp.result_type(float)
+    rtol = default_rtol(dtype) if rtol is None else rtol
+    max_iter = max_iter or {"lm": 50, "lbfgs": 200, "adam": 2000}[solver]
+    specs_u = [None] * len(cases) if unknowns is None else list(unknowns)
+    specs_e = [None] * len(cases) if evidence is None else list(evidence)
+    if len(specs_u) != len(cases) or len(specs_e) != len(cases):
+        raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
+    prepared = [_prepare(c, u, e) for c, u, e in zip(cases, specs_u, specs_e)]
+    problem = prepared[0][2]
+    for c, (_, _, p) in zip(cases, prepared):
+        if p != problem:
+            raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
+                            f"in every case (differs from case '{cases[0].name}')")
+    arrays = [_arrays(c, u, e, dtype) for c, (u, e, _) in zip(cases, prepared)]
+    rng = np.random.default_rng(seed)
+    x0 = np.stack([_starts(u, a["current"], starts, rng) for (u, _, _), a in zip(prepared, arrays)])
+    z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
+    stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
+    inputs = _stack([a["inputs"] for a in arrays])
+    out = _run(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
+               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts)
+    results = []
+    for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
+        best = _best(out["cost"][i], out["converged"][i])
+        row = {k: v[i, best] for k, v in out.items()}
+        row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i])
+        r = _result(case, u, e, problem, row, a, rtol)
+        if monte_carlo:
+            r.monte_carlo = _monte_carlo(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
+                                         smoothing, dtype, progress, chunk)
+        results.append(r)
+    return results
+
+
+def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
+                 chunk):
+    """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2); the first
+    start of each refit is the estimate, the others are drawn as for the fit."""
+    n_mc = int(samples)
+    noise = rng.standard_normal((n_mc, len(a["values"])))
+    values = a["values"] + a["sigmas"] * noise
+    x0 = np.stack([_starts(unknowns, a["current"], starts, rng) for _ in range(n_mc)])
+    z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
+    z0[:, 0] = z_best
+    size = min(chunk, n_mc) if progress else n_mc
+    bar = _progress(n_mc, "monte carlo") if progress else None
+    inputs = _stack([a["inputs"]] * size)
+    const = {k: np.repeat(a[k][None], size, 0) for k in ("sigmas", "lo", "hi", "pm", "pw")}
+    xs, conv = [], []
+    for s in range(0, n_mc, size):
+        k = min(size, n_mc - s)
+        pad = lambda x: np.concatenate([x, np.repeat(x[-1:], size - k, 0)]) if k < size else x  # noqa: E731
+        out = _run(problem, solver, max_iter, inputs, pad(values[s:s + k]), const["sigmas"], const["lo"],
+                   const["hi"], const["pm"], const["pw"], pad(z0[s:s + k]), smoothing, dtype, starts)
+        best = [_best(out["cost"][i], out["converged"][i]) for i in range(k)]
+        xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
+        conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))
+        if bar is not None:
+            bar.update(k)
+    if bar is not None:
+        bar.close()
+    xs = np.concatenate(xs)
+    conv = np.concatenate(conv)
+    paths = [u.path for u in unknowns]
+    use = xs[conv] if conv.any() else xs
+    pct = {str(p): {path: float(v) for path, v in zip(paths, np.percentile(use, p, axis=0))} for p in PERCENTILES}
+    return {"samples": n_mc, "converged_fraction": float(conv.mean()), "percentiles": pct, "x": xs, "converged": conv}

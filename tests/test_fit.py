@@ -1,0 +1,268 @@
+"""Reconstruction (fit/, MODEL.md section 6): truth -> evidence -> fit -> truth, honest uncertainty.
+
+Tolerances: RECOVER (relative, noise-free evidence: the fit must return the truth to solver
+precision); LAPLACE_FD (standard errors against finite-difference Laplace estimates: central
+differences of the residuals, step 1e-5 of each unknown's range; and second differences of the
+cost, step 1e-3, where the truncation error is larger).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # no-op when tests/conftest.py has done it
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import fit  # noqa: E402
+from fit.problem import to_x, to_z, wrap  # noqa: E402
+from ks_jax import units as U  # noqa: E402
+from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input  # noqa: E402
+from ks_jax.solve import solve  # noqa: E402
+
+CASES = Path(__file__).resolve().parents[1] / "ks_jax" / "cases"
+SEED = CASES / "seed_001_lucid_kia.toml"
+FIT_SEED = CASES / "fit_seed_001.json"
+RECOVER = 1e-5
+LAPLACE_FD = 1e-5
+LAPLACE_FD_HESSIAN = 1e-3
+
+UNKNOWNS = ["vehicles[0].speed", "vehicles[1].speed", "contact.restitution", "contact.friction",
+            "contact.point[0]", "contact.point[1]"]
+EVIDENCE = [("vehicles[0].delta_v_body[0]", 0.2), ("vehicles[0].delta_v_body[1]", 0.2),
+            ("vehicles[1].delta_v_body[0]", 0.2), ("vehicles[1].delta_v_body[1]", 0.2),
+            ("vehicles[0].yaw_rate_after", 0.02), ("vehicles[1].yaw_rate_after", 0.02),
+            ("vehicles[0].speed_after", 0.2), ("vehicles[1].speed_after", 0.2),
+            ("vehicles[0].crush", 0.03), ("vehicles[1].crush", 0.03)]
+
+
+def _oblique(rng):
+    """A random oblique side impact (vehicle 2's front into vehicle 1's right side), SI."""
+    L1, L2 = rng.uniform(4.4, 5.0, 2)
+    m1, m2 = rng.uniform(1200, 2200, 2)
+    yaw2 = rng.uniform(60, 120)
+    x_front = rng.uniform(-1.0, 1.2)
+    cf2 = 0.5 * L2
+    c2 = [x_front - cf2 * math.cos(math.radians(yaw2)), -0.55 - cf2 * math.sin(math.radians(yaw2))]
+    return {"name": "oblique", "vehicles": [
+        {"mass": m1, "inertia": [500, 2200, 1.6 * m1], "length": L1, "width": 1.85, "height": 1.45,
+         "cg_to_front": 0.45 * L1, "cg_height": 0.55, "position": [0, 0], "yaw": 0,
+         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)},
+        {"mass": m2, "inertia": [500, 2200, 1.6 * m2], "length": L2, "width": 1.8, "height": 1.5,
+         "cg_to_front": cf2, "cg_height": 0.55, "position": c2, "yaw": yaw2,
+         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)}],
+        "contact": {"point": [x_front + rng.uniform(-0.3, 0.3), -0.65, 0.55], "normal": 90 + rng.uniform(-15, 15),
+                    "restitution": rng.uniform(0.05, 0.3), "friction": rng.uniform(0.1, 0.35)}}
+
+
+@pytest.fixture(scope="module")
+def oblique():
+    """Four sliding oblique cases, noise-free evidence from the engine, fitted in one batch."""
+    rng = np.random.default_rng(7)
+    cases, truths, evidence, unknowns = [], [], [], []
+    while len(cases) < 4:
+        d = _oblique(rng)
+        case = case_from_dict(d)
+        sol = solve(case, smoothing=1e-3)
+        harder = solve(case_from_dict(dict(d, contact=dict(d["contact"], friction=1.5 * d["contact"]["friction"]))))
+        r = sol.result
+        if not (sol.status == "ok" and bool(r.contact.sliding) and bool(harder.result.contact.sliding)
+                and float(r.vehicles[0].crush) > 0.05 and float(r.vehicles[1].crush) > 0.05):
+            continue
+        truth = np.array([float(get_input(case.inputs, p)) for p in UNKNOWNS])
+        px, py = truth[4] + rng.uniform(-0.5, 0.5), truth[5] + rng.uniform(-0.3, 0.3)
+        unknowns.append([fit.Unknown(UNKNOWNS[0], 0.0, 40.0), fit.Unknown(UNKNOWNS[1], 0.0, 40.0),
+                         fit.Unknown(UNKNOWNS[2], 0.0, 0.6), fit.Unknown(UNKNOWNS[3], 0.0, 1.0),
+                         fit.Unknown(UNKNOWNS[4], px - 1.5, px + 1.5), fit.Unknown(UNKNOWNS[5], py - 1.0, py + 1.0)])
+        evidence.append([fit.Evidence(p, float(get_output(r, p)), s) for p, s in EVIDENCE])
+        cases.append(case)
+        truths.append(truth)
+    results = fit.reconstruct_batch(cases, unknowns, evidence, starts=16, seed=1)
+    return cases, np.array(truths), unknowns, evidence, results
+
+
+def test_recovers_six_unknowns_of_sliding_oblique_cases(oblique):
+    cases, truths, unknowns, evidence, results = oblique
+    for truth, r in zip(truths, results):
+        est = np.array([r.estimate[p] for p in UNKNOWNS])
+        np.testing.assert_allclose(est, truth, rtol=RECOVER, atol=1e-6)
+        assert r.converged and r.unidentified == [] and r.at_bound == []
+        assert r.chi2 < 1e-10
+        assert all(abs(v) < 1e-4 for v in r.residuals.values())
+        std = np.array([r.std[p] for p in UNKNOWNS])
+        assert np.all(np.isfinite(std)) and np.all(std > 0)
+        d = r.to_dict()
+        json.dumps(d)
+        assert set(d) >= {"estimate", "std", "correlation", "residuals", "converged", "unidentified"}
+
+
+def _fd_residuals(case, us, ev):
+    """The whitened residuals at many points of the physical unknowns, from ``ks_jax.solve``
+    (forward only, one batch) and NumPy: an independent path to the same numbers."""
+
+    def f(xs):
+        cases = []
+        for x in xs:
+            inputs = case.inputs
+            for u, xi in zip(us, x):
+                inputs = set_input(inputs, u.path, xi)
+            cases.append(dataclasses.replace(case, inputs=jax.tree_util.tree_map(np.asarray, inputs)))
+        sols = solve(cases, smoothing=1e-3)
+        return np.array([[(float(get_output(s.result, e.path)) - e.value) / e.sigma for e in ev] for s in sols])
+
+    return f
+
+
+def test_standard_errors_match_finite_difference_laplace(oblique):
+    cases, truths, unknowns, evidence, results = oblique
+    case, us, ev, r = cases[0], unknowns[0], evidence[0], results[0]
+    x = np.array([r.estimate[p] for p in UNKNOWNS])
+    n = len(x)
+    scale = np.array([u.upper - u.lower for u in us])
+    h = 1e-5 * scale  # central differences of the residual vector -> Gauss-Newton covariance
+    hh = 1e-3 * scale  # second differences of the cost 0.5 |r|^2 (zero residual: Hessian = J^T J)
+    pts = [x + np.diag(h)[i] for i in range(n)] + [x - np.diag(h)[i] for i in range(n)]
+    for i in range(n):
+        for j in range(n):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                p = x.copy()
+                p[i] += si * hh[i]
+                p[j] += sj * hh[j]
+                pts.append(p)
+    rr = _fd_residuals(case, us, ev)(np.array(pts))
+    J = ((rr[:n] - rr[n:2 * n]) / (2 * h[:, None])).T
+    cov = np.linalg.inv(J.T @ J)
+    std_fd = np.sqrt(np.diag(cov))
+    std = np.array([r.std[p] for p in UNKNOWNS])
+    np.testing.assert_allclose(std, std_fd, rtol=LAPLACE_FD)
+    corr_fd = cov / np.outer(std_fd, std_fd)
+    corr = np.array([[r.correlation[p][q] for q in UNKNOWNS] for p in UNKNOWNS])
+    np.testing.assert_allclose(corr, corr_fd, atol=10 * LAPLACE_FD)
+    cost = 0.5 * np.sum(rr[2 * n:] ** 2, 1).reshape(n, n, 4)
+    H = (cost[..., 0] - cost[..., 1] - cost[..., 2] + cost[..., 3]) / (4 * np.outer(hh, hh))
+    np.testing.assert_allclose(std, np.sqrt(np.diag(np.linalg.inv(H))), rtol=LAPLACE_FD_HESSIAN)
+
+
+def test_bounds_are_respected(oblique):
+    cases, truths, unknowns, evidence, results = oblique
+    for us, r in zip(unknowns, results):
+        for u in us:
+            assert u.lower <= r.estimate[u.path] <= u.upper
+
+
+def test_seed_001_recovers_the_kias_speed():
+    r = fit.reconstruct(load_case(FIT_SEED))
+    kia = r.estimate["vehicles[1].speed"] / U.MPH
+    assert kia == pytest.approx(20.0, abs=0.05)  # the chapter: 20 mph
+    assert 0.2 < r.std["vehicles[1].speed"] / U.MPH < 1.0  # 0.3 mph sigmas on both delta-Vs
+    assert r.converged and r.unidentified == []
+    # bounds below the truth: the estimate stops at the bound, and says so
+    r = fit.reconstruct(load_case(FIT_SEED), {"vehicles[1].speed": {"bounds": ["0 mph", "15 mph"]}})
+    assert r.estimate["vehicles[1].speed"] <= 15 * U.MPH
+    assert any("vehicles[1].speed" in s and "upper bound" in s for s in r.at_bound)
+    assert any("not reproduced" in s for s in r.notes)
+
+
+def test_seed_001_monte_carlo_agrees_with_laplace():
+    r = fit.reconstruct(load_case(FIT_SEED), monte_carlo=64, seed=3)
+    mc = r.monte_carlo
+    p5, p50, p95 = (mc["percentiles"][q]["vehicles[1].speed"] for q in ("5", "50", "95"))
+    assert p5 < p50 < p95
+    assert p50 / U.MPH == pytest.approx(20.0, abs=0.3)
+    assert (p95 - p5) / (2 * 1.645) == pytest.approx(r.std["vehicles[1].speed"], rel=0.35)
+    assert mc["converged_fraction"] > 0.9
+    assert "monte_carlo" in r.to_dict()
+
+
+SEED_EVIDENCE = [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6.47 mph", "sigma": "0.3 mph"},
+                 {"quantity": "vehicles[1].delta_v_magnitude", "value": "10.03 mph", "sigma": "0.3 mph"}]
+
+
+def test_seed_001_restitution_and_speed_are_not_both_determined():
+    case = load_case(SEED)
+    r = fit.reconstruct(case, {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]},
+                               "contact.restitution": {"bounds": [0, 0.5]}}, SEED_EVIDENCE)
+    assert len(r.unidentified) == 1
+    words = r.unidentified[0]
+    assert "vehicles[1].speed" in words and "contact.restitution" in words and "not determined" in words
+    assert "lowering" in words  # faster closing needs less restitution for the same delta-V
+    for p in ("vehicles[1].speed", "contact.restitution"):
+        assert math.isinf(r.std[p])  # never a confident number
+        assert r.to_dict()["std"][p] is None
+    # whatever pair it picked, it reproduces the delta-Vs: the closing speed x (1 + eps) is fixed
+    closing = r.estimate["vehicles[1].speed"] - 5 * U.MPH
+    assert closing * (1 + r.estimate["contact.restitution"]) == pytest.approx(15 * U.MPH * 1.1, rel=2e-3)
+
+
+def test_seed_001_both_speeds_move_together():
+    case = load_case(SEED)
+    unknowns = {"vehicles[0].speed": {"bounds": ["0 mph", "40 mph"]},
+                "vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]}}
+    r = fit.reconstruct(case, unknowns, SEED_EVIDENCE)
+    assert len(r.unidentified) == 1
+    words = r.unidentified[0]
+    assert "raising vehicles[0].speed by 1 mph while raising vehicles[1].speed by 1 mph" in words
+    assert all(math.isinf(r.std[p]) for p in unknowns)
+    # a prior on the lead car's speed (an EDR: 5 +/- 0.5 mph) fixes the pair, and the words say so
+    unknowns["vehicles[0].speed"]["prior"] = {"mean": "5 mph", "sigma": "0.5 mph"}
+    r = fit.reconstruct(case, unknowns, SEED_EVIDENCE)
+    assert len(r.unidentified) == 1 and "Only the prior on vehicles[0].speed fixes this" in r.unidentified[0]
+    assert r.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.1)
+    assert r.std["vehicles[1].speed"] > r.std["vehicles[0].speed"] > 0.4 * U.MPH
+    assert r.correlation["vehicles[0].speed"]["vehicles[1].speed"] > 0.5
+
+
+@pytest.mark.parametrize("unknowns, evidence, words", [
+    ({"vehicles[1].sped": {"bounds": [0, 30]}}, SEED_EVIDENCE, "vehicles[1].sped"),
+    ({"vehicles[2].speed": {"bounds": [0, 30]}}, SEED_EVIDENCE, "vehicles[2].speed"),
+    ({"contact.point": {"bounds": [0, 1]}}, SEED_EVIDENCE, "contact.point"),
+    ({"contact.restitution": {"bounds": [0, 2]}}, SEED_EVIDENCE, "restitution must be"),
+    ({"vehicles[1].speed": {"bounds": ["0 mph", "60 kg"]}}, SEED_EVIDENCE, "vehicles[1].speed.bounds[1]"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].delta_v_bdy[0]", "value": 1, "sigma": 1}], "vehicles[0].delta_v_bdy[0]"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].delta_v", "value": 1, "sigma": 1}], "vehicles[0].delta_v"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "contact.sliding", "value": 1, "sigma": 1}], "contact.sliding"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "contact.energy_loss", "value": "1 kJ", "sigma": 0}], "sigma"),
+])
+def test_bad_unknowns_and_evidence_are_refused(unknowns, evidence, words):
+    with pytest.raises(CaseError, match=words.replace("[", r"\[").replace("]", r"\]").replace(".", r"\.")):
+        fit.reconstruct(load_case(SEED), unknowns, evidence)
+
+
+def test_transforms_and_angle_wrap():
+    lo = jnp.array([0.0, -1.0, -jnp.inf, -jnp.inf])
+    hi = jnp.array([10.0, jnp.inf, 2.0, jnp.inf])
+    x = np.array([9.999, 3.0, -5.0, 7.0])
+    np.testing.assert_allclose(to_x(jnp.asarray(to_z(x, lo, hi)), lo, hi), x, rtol=1e-12)
+    assert float(to_x(jnp.array([40.0]), jnp.array([0.0]), jnp.array([1.0]))[0]) <= 1.0
+    assert float(wrap(jnp.asarray(359.0 - 1.0), 360.0)) == pytest.approx(-2.0)
+    assert float(wrap(jnp.asarray(1.0 - 359.0), 360.0)) == pytest.approx(2.0)
+
+
+def test_cli_fit_json_and_text(capsys, tmp_path):
+    from ks_jax.cli import main
+
+    assert main(["fit", str(FIT_SEED), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.05)
+    assert d["converged"] is True and d["unidentified"] == []
+    assert set(d["residuals"]) == {"vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude"}
+    assert main(["fit", str(FIT_SEED)]) == 0
+    text = capsys.readouterr().out
+    assert "mph" in text and "Converged: yes" in text
+    bad = json.loads(FIT_SEED.read_text())
+    bad["evidence"][0]["quantity"] = "vehicles[0].delta_v_magnitud"
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(bad))
+    assert main(["fit", str(path)]) == 2
+    assert "vehicles[0].delta_v_magnitud" in capsys.readouterr().err
