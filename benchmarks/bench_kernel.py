@@ -1,0 +1,264 @@
+"""Benchmark of the batched KS kernel, side by side with its baselines. Not a test.
+
+    .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--quick]
+
+Prints the machine, the command and the date, then (median of --repeats runs each):
+- the kernel's rate (exchanges/s, all section-4 results, float64 and float32): the per-row
+  status in one jitted call, ``exchange_with_status`` in a second (what ``ks_jax.sweep`` does),
+  and, for comparison, the single call ``jit(vmap(exchange))``;
+- a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
+- the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
+  kernel's inputs and outputs together (one read and one write of each, as the kernel does);
+- the ratios kernel/NumPy and kernel/streaming; gradient / forward of a batched loss
+  (sum of both delta-V magnitudes); the first-call (compile) time;
+- a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
+- the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
+  (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
+The layout is batch-last (every leaf (..., N)): each component of a vector is one contiguous
+array, which is what XLA's elementwise loops want.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime
+import importlib.util
+import io
+import os
+import platform
+import statistics
+import sys
+import time
+import types
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy_ks  # noqa: E402
+
+import ks_jax  # noqa: E402
+from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
+from ks_jax.exchange import exchange, exchange_with_status, input_status  # noqa: E402
+from ks_jax.sweep import sweep  # noqa: E402
+
+CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
+
+
+def cpu_model():
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def timed(fn, repeats):
+    """(median seconds, first-call seconds) of fn() (which blocks until done)."""
+    t = time.perf_counter()
+    fn()
+    first = time.perf_counter() - t
+    runs = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        runs.append(time.perf_counter() - t)
+    return statistics.median(runs), first
+
+
+def random_batch(n, seed=0):
+    """Rows around the seed case: speeds, angles, contact point, inertias, eps and mu varied;
+    batch-first NumPy dicts (for numpy_ks) and batch-last kernel pytrees."""
+    rng = np.random.default_rng(seed)
+    v1, s1, v2, s2, c = (jax.tree_util.tree_map(np.asarray, t) for t in to_pytrees(as_arrays(ks_jax.load_case(CASE).inputs)))
+
+    def rows(x, rel=0.1):
+        x = np.asarray(x, dtype=np.float64)
+        return x[None] * (1 + rel * rng.standard_normal((n,) + x.shape))
+
+    def veh(v):
+        I = np.diag(np.diag(v.inertia))[None] * np.abs(1 + 0.2 * rng.standard_normal((n, 3, 3)))
+        off = 0.03 * rng.standard_normal((n, 3)) * np.diag(v.inertia).min()
+        for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
+            I[:, i, j] = I[:, j, i] = off[:, k]
+        return {"mass": rows(v.mass), "inertia": I, "length": rows(v.length, 0.02), "width": rows(v.width, 0.02),
+                "height": rows(v.height, 0.02), "cg_to_front": rows(v.cg_to_front, 0.02),
+                "cg_height": rows(v.cg_height, 0.02)}
+
+    def st(s):
+        yaw = s.yaw + 0.3 * rng.standard_normal(n)
+        speed = np.linalg.norm(s.velocity) * (1 + 0.3 * rng.standard_normal(n))
+        vel = np.stack([speed * np.cos(yaw), speed * np.sin(yaw), np.zeros(n)], -1)
+        w = np.stack([np.zeros(n), np.zeros(n), 0.3 * rng.standard_normal(n)], -1)
+        return {"position": rows(s.position, 0.02), "velocity": vel, "yaw": yaw, "pitch": 0.01 * rng.standard_normal(n),
+                "roll": 0.01 * rng.standard_normal(n), "angular_velocity": w}
+
+    az = 0.2 * rng.standard_normal(n)
+    cn = {"point": rows(c.point, 0.05), "normal": np.stack([np.cos(az), np.sin(az), np.zeros(n)], -1),
+          "restitution": rng.uniform(0, 0.5, n), "friction": rng.uniform(0.1, 1.0, n), "penetration_time": np.zeros(n)}
+    nps = (veh(v1), st(s1), veh(v2), st(s2), cn)
+    kinds = (ks_jax.Vehicle, ks_jax.State, ks_jax.Vehicle, ks_jax.State, ks_jax.Contact)
+    last = tuple(k(**{f: jnp.asarray(np.moveaxis(d[f], 0, -1)) for f in k._fields}) for k, d in zip(kinds, nps))
+    return nps, last
+
+
+def kernel_two_calls(smoothing=0.0):
+    status = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
+    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], smoothing, a[5]), in_axes=-1, out_axes=-1))
+    return lambda args: body(*args, status(*args))
+
+
+def kernel_one_call():
+    f = jax.jit(jax.vmap(exchange, in_axes=-1, out_axes=-1))
+    return lambda args: f(*args)
+
+
+def nbytes(tree):
+    return sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(tree))
+
+
+def pycrash_rate(repeats):
+    """Seconds per call of pycrash.impc.impc_calcs, or a reason why not."""
+    extra = os.environ.get("PYCRASH_PATH")
+    if extra:
+        sys.path.insert(0, extra)
+    spec = importlib.util.find_spec("pycrash")
+    if spec is None:
+        return None, ("pycrash not available: not importable (pip install --target DIR pycrash, "
+                      "then PYCRASH_PATH=DIR)")
+    path = Path(spec.submodule_search_locations[0]) / "impc.py"
+    try:  # load impc.py alone: the package __init__ pulls plotting/dash dependencies
+        mspec = importlib.util.spec_from_file_location("pycrash_impc", path)
+        mod = importlib.util.module_from_spec(mspec)
+        mspec.loader.exec_module(mod)
+    except Exception as err:  # noqa: BLE001
+        return None, f"pycrash not available: {path} does not load ({err})"
+    veh = lambda **kw: types.SimpleNamespace(**kw)  # noqa: E731
+    v1 = veh(head_angle=0.0, pimpact_x=-7.0, pimpact_y=0.0, vx_initial=7.33, vy_initial=0.0, omega_z=0.0,
+             weight=3183.475, izz=1770.0)
+    v2 = veh(head_angle=0.0, pimpact_x=7.0, pimpact_y=0.0, vx_initial=30.8, vy_initial=0.0, omega_z=0.0,
+             weight=3496.531, izz=1990.0)
+    sim = {"cor": 0.1, "cof": 0.5, "impact_norm_deg": 0.0}
+    n = 2000
+    sink = io.StringIO()
+    runs = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        with contextlib.redirect_stdout(sink):  # it prints several lines per call
+            for _ in range(n):
+                mod.impc_calcs(v1, v2, 7.0, 0.0, sim)
+        runs.append((time.perf_counter() - t) / n)
+        sink.seek(0)
+        sink.truncate()
+    return statistics.median(runs), "pycrash.impc.impc_calcs (planar, scalar Python, prints redirected)"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rows", type=int, default=1 << 20)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--grid", type=int, default=1000, help="sweep grid side (default 1000: 10^6 points)")
+    args = ap.parse_args()
+    n, reps = args.rows, args.repeats
+
+    print("ks-jax kernel benchmark")
+    print(f"  date     {datetime.datetime.now().astimezone().isoformat(timespec='seconds')}")
+    print(f"  command  {' '.join([Path(sys.executable).name, *sys.argv])}")
+    print(f"  machine  {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}")
+    print(f"  jax      {jax.__version__}, backend {jax.default_backend()}, devices {jax.devices()}")
+    print(f"  numpy    {np.__version__}")
+    print(f"  rows     {n} per batch, median of {reps} runs\n")
+
+    nps, last = random_batch(n)
+    two = kernel_two_calls()
+    one = kernel_one_call()
+
+    # --- kernel float64 / float32
+    res = {}
+    t64, first64 = timed(lambda: jax.block_until_ready(two(last)), reps)
+    out = two(last)
+    io_bytes = nbytes(last) + nbytes(out)
+    last32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), last)
+    t32, first32 = timed(lambda: jax.block_until_ready(two(last32)), reps)
+    t1, first1 = timed(lambda: jax.block_until_ready(one(last)), max(1, reps // 2))
+    res["kernel64"], res["kernel32"], res["kernel1"] = n / t64, n / t32, n / t1
+    statuses = np.bincount(np.asarray(out.contact.status).ravel())
+
+    # --- NumPy, same equations (and a check that it agrees)
+    tnp, _ = timed(lambda: numpy_ks.exchange(*nps), max(1, reps // 2))
+    res["numpy"] = n / tnp
+    ref_c, ref_v = numpy_ks.exchange(*jax.tree_util.tree_map(lambda x: x[:4096], nps))
+    diff = max(
+        np.nanmax(np.abs(np.asarray(out.contact.impulse_magnitude[:4096]) - ref_c["impulse_magnitude"])
+                  / np.abs(ref_c["impulse_magnitude"])),
+        np.nanmax(np.abs(np.asarray(out.vehicles[1].delta_v_magnitude[:4096]) - ref_v[1]["delta_v_magnitude"])
+                  / np.abs(ref_v[1]["delta_v_magnitude"])),
+    )
+
+    # --- streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
+    flat = [x.astype(jnp.float64) for x in jax.tree_util.tree_leaves((last, out))]
+    copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
+    tstream, _ = timed(lambda: jax.block_until_ready(copy(flat)), reps)
+    stream_bytes = sum(x.size * 8 for x in flat)
+    res["stream"] = n / tstream
+
+    # --- gradient / forward of a batched loss
+    floats = (last[0], last[1], last[2], last[3], last[4])
+    status_fn = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
+    st = status_fn(*last)
+
+    def loss(args, status):
+        r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1)(*args, status)
+        dv = r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
+        return jnp.sum(jnp.where(r.contact.status == 0, dv, 0.0))
+
+    fwd = jax.jit(loss)
+    grad = jax.jit(jax.value_and_grad(loss))
+    tf, _ = timed(lambda: jax.block_until_ready(fwd(floats, st)), reps)
+    tg, firstg = timed(lambda: jax.block_until_ready(grad(floats, st)), reps)
+    g = grad(floats, st)[1]
+    gfinite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
+
+    # --- sweep of a million-point grid
+    case = ks_jax.load_case(CASE)
+    over = {"vehicles[1].speed": np.linspace(2, 30, args.grid), "contact.friction": np.linspace(0, 1, args.grid)}
+    tsw_first = time.perf_counter()
+    sweep(case, over, progress=False)
+    tsw_first = time.perf_counter() - tsw_first
+    r = sweep(case, over, progress=False)
+    tsw = r.seconds
+
+    pc, pc_note = pycrash_rate(3)
+
+    w = 44
+    print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
+    print(f"{'kernel float64 (status + exchange_with_status)':{w}} {res['kernel64']:14.4g}")
+    print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {res['kernel32'] / res['kernel64']:8.2f}  (f32/f64)")
+    print(f"{'single jit(vmap(exchange)), float64':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  (/kernel)")
+    print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
+          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e})")
+    print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {res['kernel64'] / res['stream']:8.2f}  "
+          f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
+          f" {2 * stream_bytes / tstream / 1e9:.2f})")
+    print(f"{'gradient/forward, sum of delta-V':{w}} {n / tg:14.4g}  {tg / tf:8.2f}  (grad finite: {gfinite})")
+    print(f"first call (compile + run) kernel float64: {first64:.2f} s (steady run {t64:.3f} s); float32: {first32:.2f} s; "
+          f"single jit: {first1:.2f} s; value_and_grad: {firstg:.2f} s")
+    print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
+          f"({r.points / tsw:.3g} points/s; first call incl. compile {tsw_first:.2f} s)")
+    if pc is None:
+        print(pc_note)
+    else:
+        print(f"pycrash impc_calcs: {pc * 1e6:.1f} us per call ({1 / pc:.3g} exchanges/s; kernel is "
+              f"{res['kernel64'] * pc:.0f}x) -- {pc_note}")
+    print(f"statuses in the random batch: {dict((int(k), int(v)) for k, v in enumerate(statuses) if v)}")
+
+
+if __name__ == "__main__":
+    main()

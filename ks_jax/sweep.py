@@ -1,0 +1,495 @@
+"""Sweeps at scale: one case, many values of some inputs (a grid or samples), chosen results.
+
+``sweep(case, over={path: values}, outputs=[path, ...], mode="grid"|"zip")`` solves the case
+at every point and returns a ``SweepResult`` (a mapping output path -> NumPy array shaped like
+the grid, with ``"status"`` always included).
+
+How it scales
+-------------
+- Nothing of size "number of points" is built on the device. The points are taken in chunks of
+  ``chunk_size`` consecutive flat indices; inside one jitted call per chunk each row's inputs
+  are made from its index (grid: the index is unravelled into one position per axis; zip: the
+  index picks the k-th sample of every path) and only the requested outputs leave the device.
+- The host keeps one array per requested output (plus ``status`` as int8), so memory is
+  ``points x (sum of output itemsizes + 1)`` bytes: 10^8 points x one float32 output is about
+  0.5 GB; x k float64 outputs 8e8 k bytes. For more, pass ``on_chunk`` (a callback that gets
+  every chunk's outputs: reduce or stream them to disk) with ``keep=False``: memory then stays
+  at a few chunks whatever the number of points. ``output_dtype=np.float32`` halves the
+  stored results (the computation stays in the case's float type).
+- Invalid rows (e.g. a restitution above 1) get their status code (``ks_jax.status_text``)
+  and NaN results; the other rows are solved as usual.
+- The status of each row is computed in its own jitted call and handed to the kernel
+  (``exchange_with_status``): on CPU, XLA's loop fusion would otherwise re-evaluate the
+  ~100 input checks in every loop that reads an input or writes a result.
+
+Devices
+-------
+Every chunk is split over ``devices`` (default ``jax.devices()``): a 1-D ``jax.sharding.Mesh``
+named ``"batch"``, the chunk's row axis sharded over it with ``NamedSharding`` (the chunk is
+padded to a multiple of the device count; padded rows are dropped). The same code runs on one
+CPU, on ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` host devices, or on GPUs.
+
+Several hosts (``jax.distributed``)
+-----------------------------------
+Two ways, see docs/sweeps.md:
+1. Independent slices (simplest, no communication): every process calls
+   ``jax.distributed.initialize()`` (or nothing at all) and
+   ``sweep(..., index_range=(lo, hi), devices=jax.local_devices())`` with its own slice of the
+   flat index range ``[0, result.points)``, e.g. ``lo, hi = np.array_split(range(n), P)[i]``
+   bounds for process ``i = jax.process_index()`` of ``P = jax.process_count()``; each writes
+   its file, or they are gathered afterwards.
+2. One global mesh: after ``jax.distributed.initialize()``, ``jax.devices()`` lists the devices
+   of all processes and ``sweep(..., devices=jax.devices())`` shards every chunk over all of
+   them; every process runs the same call, and each gets (and keeps) the whole result, which
+   JAX gathers across hosts.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, set_input
+from .case import to_pytrees
+from .types import STATUS_TEXT, status_text
+
+DEFAULT_OUTPUTS = (
+    "contact.impulse_magnitude",
+    "contact.energy_loss",
+    "contact.sliding",
+    "vehicles[0].delta_v_magnitude",
+    "vehicles[1].delta_v_magnitude",
+    "vehicles[0].pdof",
+    "vehicles[1].pdof",
+    "vehicles[0].speed_after",
+    "vehicles[1].speed_after",
+)
+DEFAULT_CHUNK = 1 << 16  # rows per device and chunk
+PROGRESS_MIN_POINTS = 1 << 20
+
+
+@dataclass
+class SweepResult(Mapping):
+    """Results of a sweep: a mapping output path -> array (grid shape, or (n,) for zip and
+    index ranges), ``"status"`` (int8 codes, ``ks_jax.status_text``) always among them.
+
+    axes: path -> the values (SI) swept along each grid axis (zip: the samples).
+    shape: the result shape. mode: "grid" or "zip". points: number of points solved.
+    status_counts: status text -> number of points. seconds: wall time of the sweep.
+    index_range: the flat indices solved (all of them unless ``index_range`` was given).
+    """
+
+    outputs: dict
+    axes: dict
+    shape: tuple
+    mode: str
+    points: int
+    status_counts: dict
+    seconds: float
+    index_range: tuple = (0, 0)
+    output_paths: tuple = field(default=())
+
+    def __getitem__(self, key):
+        return self.outputs[key]
+
+    def __iter__(self):
+        return iter(self.outputs)
+
+    def __len__(self):
+        return len(self.outputs)
+
+    def inputs(self):
+        """path -> the input value (SI) at every point, flat (in the order of the outputs)."""
+        lo, hi = self.index_range
+        idx = np.arange(lo, hi)
+        if self.mode == "zip":
+            return {p: np.asarray(v)[idx] for p, v in self.axes.items()}
+        sizes = tuple(len(v) for v in self.axes.values())
+        pos = np.unravel_index(idx, sizes)
+        return {p: np.asarray(v)[k] for (p, v), k in zip(self.axes.items(), pos)}
+
+    def table(self):
+        """Flat columns (one row per point): the inputs, the outputs, status code and text."""
+        cols = dict(self.inputs())
+        for p in self.output_paths:
+            cols[p] = np.ravel(self.outputs[p])
+        cols["status"] = np.ravel(self.outputs["status"]).astype(np.int32)
+        return cols
+
+    def summary(self) -> str:
+        counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
+        rate = self.points / self.seconds if self.seconds > 0 else float("inf")
+        return (f"{self.points} points ({self.mode}, shape {self.shape}) in {self.seconds:.3g} s "
+                f"({rate:.3g} points/s); status: {counts}")
+
+
+# ---------------------------------------------------------------------------------------
+# the jitted chunk
+
+
+def _row_inputs(base, paths, values):
+    inputs = base
+    for p, v in zip(paths, values):
+        inputs = set_input(inputs, p, v)
+    return inputs
+
+
+def _chunk_values(start, axes, mode, sizes, n_rows, total):
+    """The swept values of rows start .. start + n_rows (clamped to the last point)."""
+    idx = start + jnp.arange(n_rows, dtype=start.dtype)
+    idx = jnp.minimum(idx, total - 1)
+    if mode == "zip":
+        return [a[idx] for a in axes]
+    out = []
+    rest = idx
+    for k in range(len(sizes) - 1, -1, -1):  # row-major: the last axis varies fastest
+        out.append(axes[k][rest % sizes[k]])
+        rest = rest // sizes[k]
+    return out[::-1]
+
+
+@lru_cache(maxsize=32)
+def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
+    """(status_fn, solve_fn): jitted, sharded over ``devices`` along the row axis."""
+    from .exchange import exchange_with_status, input_status
+    from .solve import solve_inputs
+
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    split = auto_point or auto_normal  # automatic contact: the geometry computes its own status
+
+    def values(start, axes, total):
+        vals = _chunk_values(start, axes, mode, sizes, n_rows, total)
+        return [jax.lax.with_sharding_constraint(v, rows) for v in vals]
+
+    def status_fn(start, axes, total, base):
+        vals = values(start, axes, total)
+        if split:
+            return jnp.zeros(n_rows, jnp.int32)
+        return jax.vmap(lambda *v: input_status(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
+
+    def solve_fn(start, axes, total, base, status):
+        vals = values(start, axes, total)
+
+        def one(st, *v):
+            inputs = _row_inputs(base, paths, v)
+            if split:
+                res = solve_inputs(inputs, auto_point, auto_normal, smoothing)
+            else:
+                res = exchange_with_status(*to_pytrees(inputs), smoothing, st)
+            out = {}
+            for p in outputs:
+                x = get_output(res, p)
+                out[p] = x if x.dtype == jnp.bool_ else x.astype(out_dtype)
+            out["status"] = res.contact.status.astype(jnp.int8)
+            return out
+
+        return jax.vmap(one)(status, *vals)
+
+    status_jit = jax.jit(status_fn, in_shardings=(replicated, replicated, replicated, replicated),
+                         out_shardings=rows)
+    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, replicated, replicated, replicated, rows),
+                        out_shardings=rows)
+    return status_jit, solve_jit
+
+
+# ---------------------------------------------------------------------------------------
+# progress
+
+
+class _Progress:
+    def __init__(self, total, enabled):
+        self.total, self.enabled, self.done = total, enabled, 0
+        self.bar = None
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+        if enabled:
+            try:
+                from tqdm.auto import tqdm
+
+                self.bar = tqdm(total=total, unit="pt", unit_scale=True, desc="ks-jax sweep", file=sys.stderr)
+            except ImportError:
+                self.bar = None
+
+    def update(self, n):
+        self.done += n
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(n)
+            return
+        now = time.perf_counter()
+        if now - self.last > 1.0 or self.done >= self.total:
+            self.last = now
+            rate = self.done / max(now - self.t0, 1e-9)
+            print(f"\rks-jax sweep: {self.done}/{self.total} points ({100 * self.done / self.total:.0f}%, "
+                  f"{rate:.3g}/s)", end="" if self.done < self.total else "\n", file=sys.stderr, flush=True)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+# ---------------------------------------------------------------------------------------
+# the sweep
+
+
+def _check_values(path, values):
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.ndim != 1 or arr.size == 0:
+        raise CaseError(f"sweep over '{path}': give a non-empty 1-D list of values (SI), got shape {arr.shape}")
+    return arr
+
+
+def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0, progress=None, devices=None,
+          output_dtype=None, on_chunk=None, keep=True, index_range=None) -> SweepResult:
+    """Solve ``case`` at every point of a grid or a list of samples of some of its inputs.
+
+    case: a ``Case`` (``ks_jax.load_case``). over: {input path: values}, values SI (m, kg, s,
+    rad, rad/s), e.g. {"vehicles[1].speed": np.linspace(5, 30, 51), "contact.restitution": [0, .1]}.
+    Any input path of ``ks_jax.case`` (``vehicles[i].mass``, ``.inertia[k]``, ``.position[k]``,
+    ``.yaw``, ``.speed``, ``.course``, ``.yaw_rate``, ``contact.point[k]``, ``contact.normal``
+    (azimuth), ``contact.restitution``, ``contact.friction``, ...).
+    outputs: output paths of MODEL.md section 4 (components by index, e.g.
+    ``vehicles[0].delta_v[0]``); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
+    mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
+    "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
+    chunk_size: rows per device and chunk (default 65536). smoothing: tau of the smooth cone.
+    progress: None (a bar for >= 2^20 points), True or False; tqdm if installed, else a line on
+    stderr. devices: the devices to shard every chunk over (default ``jax.devices()``).
+    output_dtype: dtype of the stored float results (default: the compute dtype).
+    on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
+    NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
+    only status counts are kept; use with ``on_chunk`` for reductions of any size).
+    index_range: (lo, hi) solve only these flat indices (row-major over the grid), e.g. one
+    process's share of a multi-host sweep; the result is then flat, shape (hi - lo,).
+    """
+    if not isinstance(case, Case):
+        raise CaseError(f"sweep needs a Case (ks_jax.load_case), got {type(case).__name__}")
+    if not case.valid:
+        raise CaseError(case.error)
+    if mode not in ("grid", "zip"):
+        raise CaseError(f"sweep mode = {mode!r}: mode must be 'grid' or 'zip'")
+    if not isinstance(over, Mapping) or not over:
+        raise CaseError("sweep needs at least one input path to vary: over={path: values}")
+    paths = tuple(over)
+    for p in paths:
+        _input_leaf(p)  # raises PathError (a CaseError) naming the path
+    axes = {p: _check_values(p, over[p]) for p in paths}
+    outputs = tuple(DEFAULT_OUTPUTS if outputs is None else outputs)
+    for p in outputs:
+        if p != "status":
+            check_output_path(p)
+    outputs = tuple(dict.fromkeys(p for p in outputs if p != "status"))
+    if not 0.0 <= float(smoothing) < 1.0:
+        raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    sizes = tuple(len(a) for a in axes.values())
+    if mode == "zip":
+        if len(set(sizes)) != 1:
+            raise CaseError("sweep mode 'zip' needs the same number of values for every path, got "
+                            + ", ".join(f"{p}: {n}" for p, n in zip(paths, sizes)))
+        shape = (sizes[0],)
+    else:
+        shape = sizes
+    total = math.prod(shape)
+    lo, hi = (0, total) if index_range is None else (int(index_range[0]), int(index_range[1]))
+    if not 0 <= lo <= hi <= total:
+        raise CaseError(f"index_range = {index_range}: must satisfy 0 <= lo <= hi <= {total}")
+    n_points = hi - lo
+
+    devices = tuple(jax.devices() if devices is None else devices)
+    per_device = int(chunk_size or DEFAULT_CHUNK)
+    if per_device <= 0:
+        raise CaseError(f"chunk_size = {chunk_size}: must be positive")
+    n_rows = per_device * len(devices)
+    n_rows = min(n_rows, -(-max(n_points, 1) // len(devices)) * len(devices))  # small sweeps: one short chunk
+
+    base = as_arrays(case.inputs)
+    dtype = jnp.result_type(float)
+    out_dtype = np.dtype(output_dtype or dtype)
+    status_jit, solve_jit = _compiled(paths, outputs, mode, sizes, n_rows, case.auto_point, case.auto_normal,
+                                      float(smoothing), out_dtype, devices)
+    index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
+    if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
+        raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
+    dev_axes = tuple(jnp.asarray(a, dtype=dtype) for a in axes.values())
+    total_arr = jnp.asarray(total, dtype=index_dtype)
+
+    store = {}
+    if keep:
+        for p in outputs:
+            store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else out_dtype)
+        store["status"] = np.empty(n_points, dtype=np.int8)
+    counts = np.zeros(256, dtype=np.int64)
+
+    show = (n_points >= PROGRESS_MIN_POINTS) if progress is None else bool(progress)
+    bar = _Progress(n_points, show)
+    t0 = time.perf_counter()
+
+    def launch(start):
+        s = jnp.asarray(start, dtype=index_dtype)
+        status = status_jit(s, dev_axes, total_arr, base)
+        return start, solve_jit(s, dev_axes, total_arr, base, status)
+
+    def collect(item):
+        start, out = item
+        n = min(n_rows, hi - start)
+        chunk = {k: np.asarray(v)[:n] for k, v in out.items()}
+        counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
+        a, b = start - lo, start - lo + n
+        if keep:
+            for k, v in chunk.items():
+                store[k][a:b] = v
+        if on_chunk is not None:
+            on_chunk(start, start + n, chunk)
+        bar.update(n)
+
+    try:
+        pending = None
+        for start in range(lo, hi, n_rows):
+            item = launch(start)  # dispatched asynchronously: overlaps the previous transfer
+            if pending is not None:
+                collect(pending)
+            pending = item
+        if pending is not None:
+            collect(pending)
+    finally:
+        bar.close()
+    seconds = time.perf_counter() - t0
+
+    result_shape = shape if (index_range is None) else (n_points,)
+    if keep:
+        store = {k: v.reshape(result_shape) for k, v in store.items()}
+    status_counts = {STATUS_TEXT.get(c, status_text(c)): int(counts[c]) for c in np.flatnonzero(counts)}
+    return SweepResult(store, axes, result_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs)
+
+
+# ---------------------------------------------------------------------------------------
+# command line: ks-jax sweep FILE --over PATH=START:STOP:N ... --out results.csv|.npz|.parquet
+
+
+def add_arguments(parser):
+    parser.add_argument("file", help="a case file (JSON or TOML) holding one case")
+    parser.add_argument("--over", action="append", required=True, metavar="PATH=START:STOP:N",
+                        help="an input path and its values: START:STOP:N (N evenly spaced values) or "
+                             "V1,V2,... ; bare numbers are SI except angles (deg) and rates (deg/s); "
+                             "unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
+    parser.add_argument("--output", action="append", metavar="PATH",
+                        help="an output path of MODEL.md section 4 (repeat; default: the main results)")
+    parser.add_argument("--mode", choices=("grid", "zip"), default="grid",
+                        help="grid: cartesian product (default); zip: the k-th values of every path together")
+    parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
+    parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
+    parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 65536)")
+    parser.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1)")
+    parser.add_argument("--float32", action="store_true", help="store the results as float32")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def parse_over(text):
+    """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values)."""
+    from .units import UnitError, parse_quantity
+
+    if "=" not in text:
+        raise CaseError(f"--over {text!r}: expected PATH=START:STOP:N or PATH=V1,V2,...")
+    path, spec = (s.strip() for s in text.split("=", 1))
+    _input_leaf(path)
+    kind = input_kind(path)
+
+    def q(v):
+        try:
+            return parse_quantity(v.strip(), kind)
+        except UnitError as err:
+            raise CaseError(f"--over {path}: {v.strip()!r}: {err}") from None
+
+    parts = spec.split(":")
+    if len(parts) == 3:
+        try:
+            n = int(parts[2])
+        except ValueError:
+            raise CaseError(f"--over {path}: N = {parts[2]!r} must be a whole number") from None
+        if n < 1:
+            raise CaseError(f"--over {path}: N = {n} must be at least 1")
+        return path, np.linspace(q(parts[0]), q(parts[1]), n)
+    if len(parts) == 1:
+        return path, np.array([q(v) for v in spec.split(",") if v.strip()])
+    raise CaseError(f"--over {path}={spec}: expected START:STOP:N or V1,V2,...")
+
+
+def write_results(result: SweepResult, out):
+    """Write a sweep to .csv (one row per point), .npz (arrays) or .parquet (pyarrow)."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix == ".npz":
+        arrays = {p: np.asarray(v) for p, v in result.outputs.items()}
+        arrays.update({f"axis:{p}": v for p, v in result.axes.items()})
+        codes = np.array(sorted(STATUS_TEXT))
+        arrays["status_codes"] = codes
+        arrays["status_texts"] = np.array([STATUS_TEXT[c] for c in codes])
+        np.savez(out, **arrays)
+        return
+    cols = result.table()
+    if suffix == ".csv":
+        import csv
+
+        names = list(cols) + ["status_text"]
+        n = len(cols["status"])
+        with out.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(names)
+            block = 100_000
+            for a in range(0, n, block):
+                b = min(n, a + block)
+                data = [cols[k][a:b].tolist() for k in cols]
+                text = [STATUS_TEXT.get(c, status_text(c)) for c in data[-1]]
+                w.writerows(zip(*data, text))
+        return
+    if suffix == ".parquet":
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise CaseError("parquet output needs pyarrow: pip install 'ks-jax[parquet]' (or write .csv / .npz)") from None
+        cols["status_text"] = np.array([STATUS_TEXT.get(c, status_text(c)) for c in cols["status"]])
+        pq.write_table(pa.table(cols), out)
+        return
+    raise CaseError(f"--out {out}: unknown file type '{out.suffix}' (use .csv, .npz or .parquet)")
+
+
+def run(args) -> int:
+    from .case import load_cases
+
+    cases = load_cases(args.file)
+    if args.case is None:
+        if len(cases) != 1:
+            raise CaseError(f"{args.file} holds {len(cases)} cases: choose one with --case K (0-based)")
+        case = cases[0]
+    else:
+        if not 0 <= args.case < len(cases):
+            raise CaseError(f"--case {args.case}: {args.file} holds {len(cases)} cases (0..{len(cases) - 1})")
+        case = cases[args.case]
+    if not case.valid:
+        raise CaseError(case.error)
+    over = dict(parse_over(t) for t in args.over)
+    suffix = Path(args.out).suffix.lower()
+    if suffix not in (".csv", ".npz", ".parquet"):
+        raise CaseError(f"--out {args.out}: unknown file type '{suffix}' (use .csv, .npz or .parquet)")
+    result = sweep(case, over, outputs=args.output, mode=args.mode, chunk_size=args.chunk_size,
+                   smoothing=args.smoothing, progress=False if args.no_progress else None,
+                   output_dtype=np.float32 if args.float32 else None)
+    t = time.perf_counter()
+    write_results(result, args.out)
+    print(f"ks-jax sweep: {case.name}")
+    print(f"  {result.summary()}")
+    print(f"  written to {args.out} in {time.perf_counter() - t:.3g} s")
+    return 0

@@ -1,0 +1,208 @@
+"""ks_jax.sweep: values equal single solves, shapes, chunking, zip, sharding, bad rows, CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+jax.config.update("jax_enable_x64", True)  # also set by conftest; kept so the module runs alone
+
+import ks_jax  # noqa: E402
+from ks_jax.case import CaseError, as_arrays, get_output, set_input  # noqa: E402
+from ks_jax.cli import main  # noqa: E402
+from ks_jax.sweep import DEFAULT_OUTPUTS, parse_over, sweep  # noqa: E402
+
+CASES = Path(ks_jax.__file__).parent / "cases"
+SEED0 = CASES / "seed_000_saturn_pontiac.json"
+SEED1 = CASES / "seed_001_lucid_kia.toml"
+RTOL = 1e-12  # sweep vs single solve: the same kernel, batched; only rounding may differ
+
+OUTPUTS = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", "vehicles[0].delta_v[0]",
+           "vehicles[1].pdof", "vehicles[0].speed_after", "contact.impulse[1]"]
+
+
+@pytest.fixture(scope="module")
+def case():
+    return ks_jax.load_case(SEED0)
+
+
+def single(case, point, path):
+    inputs = case.inputs
+    for p, v in point.items():
+        inputs = set_input(inputs, p, v)
+    res = ks_jax.solve_inputs(as_arrays(inputs), case.auto_point, case.auto_normal)
+    return np.asarray(get_output(res, path)), int(res.contact.status)
+
+
+def assert_matches(result, case, points):
+    """points: list of (result index, {path: value})."""
+    for index, point in points:
+        for path in result.output_paths:
+            want, status = single(case, point, path)
+            got = result[path][index]
+            assert result["status"][index] == status
+            if status != 0 and path != "contact.sliding":
+                assert np.isnan(got), (path, index)
+            else:
+                np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-9, err_msg=f"{path} at {point}")
+
+
+def test_grid_values_and_shape(case):
+    speeds = np.linspace(3.0, 15.0, 5)
+    yaws = np.radians([0.0, 10.0, 25.0])
+    mus = np.array([0.0, 0.3, 0.9, 2.0])
+    over = {"vehicles[1].speed": speeds, "vehicles[1].yaw": yaws, "contact.friction": mus}
+    r = sweep(case, over, outputs=OUTPUTS, chunk_size=7)  # 60 points: chunks of 7 do not divide it
+    assert r.shape == (5, 3, 4) and r.points == 60
+    for p in OUTPUTS + ["status"]:
+        assert r[p].shape == (5, 3, 4), p
+    assert r["contact.sliding"].dtype == bool and r["status"].dtype == np.int8
+    pts = [((i, j, k), {"vehicles[1].speed": speeds[i], "vehicles[1].yaw": yaws[j], "contact.friction": mus[k]})
+           for i, j, k in [(0, 0, 0), (4, 2, 3), (2, 1, 1), (3, 0, 2), (1, 2, 0)]]
+    assert_matches(r, case, pts)
+    assert sum(r.status_counts.values()) == 60
+
+
+def test_chunk_boundaries_do_not_change_results(case):
+    over = {"vehicles[1].speed": np.linspace(2, 20, 13), "contact.restitution": np.linspace(0, 1, 7)}
+    whole = sweep(case, over, outputs=OUTPUTS, chunk_size=1000)
+    for chunk in (5, 13):
+        part = sweep(case, over, outputs=OUTPUTS, chunk_size=chunk)
+        for p in OUTPUTS + ["status"]:
+            np.testing.assert_array_equal(part[p], whole[p], err_msg=f"{p}, chunk {chunk}")
+
+
+def test_default_outputs_and_status(case):
+    r = sweep(case, {"contact.restitution": [0.0, 0.1]})
+    assert set(r) == set(DEFAULT_OUTPUTS) | {"status"}
+    np.testing.assert_allclose(r["contact.impulse_magnitude"][1], 5946.847, rtol=2e-4)  # the seed chapter
+
+
+def test_zip_mode_monte_carlo(case):
+    rng = np.random.default_rng(3)
+    n = 37
+    over = {"vehicles[1].speed": rng.uniform(5, 15, n), "contact.restitution": rng.uniform(0, 0.3, n),
+            "contact.point[1]": rng.uniform(-0.5, 0.5, n), "vehicles[0].inertia[2]": rng.uniform(1500, 3000, n)}
+    r = sweep(case, over, outputs=OUTPUTS, mode="zip", chunk_size=8)
+    assert r.shape == (n,)
+    assert_matches(r, case, [(k, {p: v[k] for p, v in over.items()}) for k in (0, 7, 8, 20, 36)])
+    with pytest.raises(CaseError, match="same number of values"):
+        sweep(case, {"vehicles[1].speed": [1.0, 2.0], "contact.friction": [0.1]}, mode="zip")
+
+
+def test_bad_rows_get_their_status_others_match(case):
+    eps = np.linspace(0.0, 1.5, 7)  # 1.25 and 1.5 break the rule eps <= 1
+    r = sweep(case, {"contact.restitution": eps}, outputs=OUTPUTS)
+    bad = eps > 1
+    assert np.all(r["status"][bad] == ks_jax.types.INVALID_RESTITUTION)
+    assert np.all(r["status"][~bad] == 0)
+    assert np.all(np.isnan(r["contact.impulse_magnitude"][bad]))
+    assert not r["contact.sliding"][bad].any()
+    assert r.status_counts["invalid: contact.restitution must be in [-1, 1]"] == bad.sum()
+    assert_matches(r, case, [(k, {"contact.restitution": eps[k]}) for k in range(len(eps))])
+
+
+def test_index_range_and_reducing_callback(case):
+    over = {"vehicles[1].speed": np.linspace(2, 20, 9), "contact.friction": np.linspace(0, 1, 6)}
+    whole = sweep(case, over, outputs=["contact.energy_loss"])
+    part = sweep(case, over, outputs=["contact.energy_loss"], index_range=(10, 33), chunk_size=4)
+    np.testing.assert_array_equal(part["contact.energy_loss"], whole["contact.energy_loss"].ravel()[10:33])
+    seen = []
+    total = [0.0]
+
+    def on_chunk(lo, hi, chunk):
+        seen.append((lo, hi))
+        total[0] += float(np.sum(chunk["contact.energy_loss"]))
+
+    r = sweep(case, over, outputs=["contact.energy_loss"], chunk_size=5, on_chunk=on_chunk, keep=False)
+    assert len(r) == 0 and r.points == 54
+    assert seen[0] == (0, 5) and seen[-1][1] == 54
+    np.testing.assert_allclose(total[0], whole["contact.energy_loss"].sum(), rtol=1e-12)
+
+
+def test_bad_paths_and_arguments(case):
+    with pytest.raises(CaseError, match="'sped' is not a vehicle input"):
+        sweep(case, {"vehicles[1].sped": [1.0]})
+    with pytest.raises(CaseError, match="not a contact result"):
+        sweep(case, {"vehicles[1].speed": [1.0]}, outputs=["contact.impulse_size"])
+    with pytest.raises(CaseError, match="is a vector"):
+        sweep(case, {"vehicles[1].speed": [1.0]}, outputs=["contact.impulse"])
+    with pytest.raises(CaseError, match="mode"):
+        sweep(case, {"vehicles[1].speed": [1.0]}, mode="random")
+    with pytest.raises(CaseError, match="non-empty"):
+        sweep(case, {"vehicles[1].speed": []})
+
+
+def test_parse_over_units():
+    path, v = parse_over("vehicles[1].speed=10mph:60mph:51")
+    assert path == "vehicles[1].speed" and len(v) == 51
+    np.testing.assert_allclose(v[[0, -1]], np.array([10, 60]) * ks_jax.units.MPH)
+    _, yaw = parse_over("vehicles[0].yaw=0:90:3")  # bare angles are degrees
+    np.testing.assert_allclose(yaw, np.radians([0, 45, 90]))
+    _, rate = parse_over("vehicles[0].yaw_rate=10,20")  # bare rates are deg/s
+    np.testing.assert_allclose(rate, np.radians([10, 20]))
+    with pytest.raises(CaseError, match="START:STOP:N"):
+        parse_over("vehicles[0].yaw")
+
+
+def test_cli_writes_csv_and_npz(tmp_path, capsys):
+    csv_path, npz_path = tmp_path / "r.csv", tmp_path / "r.npz"
+    args = [str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5", "--over", "contact.restitution=0:1.5:4",
+            "--output", "contact.impulse_magnitude", "--output", "vehicles[0].delta_v_magnitude"]
+    assert main(["sweep", *args, "--out", str(csv_path)]) == 0
+    out = capsys.readouterr().out
+    assert "20 points" in out and "ok: 15" in out and "invalid: contact.restitution" in out
+    lines = csv_path.read_text().splitlines()
+    assert lines[0].split(",") == ["vehicles[1].speed", "contact.restitution", "contact.impulse_magnitude",
+                                   "vehicles[0].delta_v_magnitude", "status", "status_text"]
+    assert len(lines) == 21
+    assert main(["sweep", *args, "--out", str(npz_path)]) == 0
+    data = np.load(npz_path)
+    assert data["contact.impulse_magnitude"].shape == (5, 4)
+    row = lines[1 + 4 * 2 + 1].split(",")  # speed index 2, restitution index 1
+    np.testing.assert_allclose(float(row[2]), data["contact.impulse_magnitude"][2, 1], rtol=1e-15)
+    np.testing.assert_allclose(data["axis:vehicles[1].speed"], np.linspace(10, 30, 5) * ks_jax.units.MPH)
+
+
+def test_cli_bad_path_is_a_clear_error(tmp_path, capsys):
+    code = main(["sweep", str(SEED1), "--over", "vehicles[1].sped=1:2:3", "--out", str(tmp_path / "x.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and "'sped' is not a vehicle input" in err and "Traceback" not in err
+    code = main(["sweep", str(SEED1), "--over", "vehicles[1].speed=1:2:3", "--out", str(tmp_path / "x.xlsx")])
+    assert code == 2 and "unknown file type" in capsys.readouterr().err
+
+
+SHARDED = r"""
+import json, sys, jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import ks_jax
+from ks_jax.sweep import sweep
+assert len(jax.devices()) == 2, jax.devices()
+case = ks_jax.load_case(sys.argv[1])
+over = {"vehicles[1].speed": np.linspace(2, 20, 11), "contact.restitution": np.linspace(0, 1.2, 7)}
+outs = ["contact.impulse_magnitude", "vehicles[0].delta_v[1]", "contact.sliding"]
+a = sweep(case, over, outputs=outs, chunk_size=3)                                  # 2 devices, 6 rows a chunk
+b = sweep(case, over, outputs=outs, chunk_size=1000, devices=jax.devices()[:1])   # one device
+print(json.dumps({k: [np.asarray(a[k]).tolist(), np.asarray(b[k]).tolist()] for k in outs + ["status"]}))
+"""
+
+
+def test_sharded_equals_unsharded(case):
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", SHARDED, str(SEED0)], capture_output=True, text=True, env=env,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = json.loads(proc.stdout.strip().splitlines()[-1])
+    here = sweep(case, {"vehicles[1].speed": np.linspace(2, 20, 11), "contact.restitution": np.linspace(0, 1.2, 7)},
+                 outputs=["contact.impulse_magnitude", "vehicles[0].delta_v[1]", "contact.sliding"])
+    for k, (sharded, single_device) in data.items():
+        sharded = np.array(sharded, dtype=float)
+        np.testing.assert_array_equal(sharded, np.array(single_device, dtype=float), err_msg=k)
+        np.testing.assert_allclose(sharded, np.asarray(here[k], dtype=float), rtol=1e-13, err_msg=k)
