@@ -43,3 +43,12 @@ __all__ = [
     "units",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name):
+    # submodules with optional dependencies (matplotlib) or heavier imports load on first use
+    if name in ("plot", "geometry"):
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'ks_jax' has no attribute {name!r}")

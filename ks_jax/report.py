@@ -51,6 +51,15 @@ def _row(label, si, us="", width=34):
     return f"  {label:<{width}}{si:<26}{us}"
 
 
+def _timing_rows(sol):
+    c = sol.result.contact
+    if not (sol.case.auto_point or sol.case.auto_normal):
+        return [_row("timing", "explicit contact: exchange at the case state")]
+    dt = float(sol.case.inputs.contact.penetration_time)
+    return [_row("first contact (timing)", f"{_fmt(c.time, 4)} s"),
+            _row("exchange (+ depth of penetration)", f"{_fmt(c.time + dt, 4)} s", f"(+{_fmt(dt, 4)} s)")]
+
+
 def text_report(sol, reference: bool = True) -> str:
     """The auto-ees panel of one solved case, SI beside US units."""
     lines = [f"Case: {sol.case.name}"]
@@ -63,7 +72,7 @@ def text_report(sol, reference: bool = True) -> str:
         "",
         "  contact",
         _row("status", sol.status),
-        _row("time of exchange", f"{_fmt(c.time)} s"),
+        *_timing_rows(sol),
         _row("impulse centroid (x, y, z)", " ".join(_fmt(p) for p in c.point) + " m",
              " ".join(_fmt(p / U.FT) for p in c.point) + " ft"),
         _row("normal (azimuth, pitch)", f"{_fmt(math.degrees(math.atan2(c.normal[1], c.normal[0])) % 360, 1)} deg, "
@@ -95,7 +104,9 @@ def text_report(sol, reference: bool = True) -> str:
             _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
-    if not (v1.crush + v2.crush > 0):
+    if sol.status == "no_contact":
+        lines.append("\n  note: the footprints never touch under free motion from the case state: no exchange.")
+    elif not (v1.crush + v2.crush > 0):
         lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
     elif not np.isfinite(v1.ees):
         lines.append("\n  note: EES is undefined: the energy loss is negative.")
