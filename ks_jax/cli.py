@@ -86,8 +86,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _compilation_cache():
+    """Keep compiled programs between runs (the first run of a command compiles for seconds;
+    later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it."""
+    import os
+    from pathlib import Path
+
+    where = os.environ.get("KS_JAX_CACHE", "")
+    if where.lower() in ("off", "0", "no"):
+        return
+    path = Path(where) if where else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ks-jax" / "jax"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
 def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
+    _compilation_cache()
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)

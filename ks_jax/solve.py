@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from functools import partial
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .case import Case, CaseInputs, as_arrays, to_pytrees
@@ -30,7 +29,7 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     return exchange(v1, s1, v2, s2, contact, smoothing)
 
 
-@partial(jax.jit, static_argnames=("auto_point", "auto_normal"))
+@partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))
 def _solve_batch(inputs, smoothing, auto_point, auto_normal):
     return jax.vmap(lambda x: solve_inputs(x, auto_point, auto_normal, smoothing))(inputs)
 
@@ -69,7 +68,7 @@ def solve(cases, smoothing: float = 0.0):
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
     for (auto_point, auto_normal), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
-        res = _solve_batch(as_arrays(stacked), jnp.asarray(smoothing), auto_point, auto_normal)
+        res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
         res = jax.tree_util.tree_map(np.asarray, res)
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)
