@@ -169,7 +169,12 @@ def top_view(solution, ax=None):
     sec.set_xlabel("x (ft)", fontsize=8)
     sec = ax.secondary_yaxis("right", functions=(lambda m: m / U.FT, lambda f: f * U.FT))
     sec.set_ylabel("y (ft)", fontsize=8)
-    ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=2, frameon=False)
+    # below the x label whatever the axes' height: a fixed offset in points, not in axes fractions
+    from matplotlib.transforms import offset_copy
+
+    below = offset_copy(ax.transAxes, fig=ax.figure, y=-34, units="points")
+    ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, 0.0), bbox_transform=below, ncol=2,
+              frameon=False)
     return ax
 
 
