@@ -4,7 +4,9 @@
 
 Prints the machine, the command and the date, then (median of --repeats runs each):
 - the kernel's rate (exchanges/s, all section-4 results, float64 and float32): the per-row
-  status in one jitted call, ``exchange_with_status`` in a second (what ``ks_jax.sweep`` does),
+  status and the sines/cosines of the angles in one jitted call (``exchange.prepare``),
+  ``exchange_with_status`` in a second
+  (what ``ks_jax.sweep`` does),
   and, for comparison, the single call ``jit(vmap(exchange))``;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
@@ -44,9 +46,10 @@ import numpy_ks  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.exchange import exchange, exchange_with_status, input_status  # noqa: E402
+from ks_jax.exchange import exchange, exchange_with_status, input_status, prepare  # noqa: E402
 from ks_jax.sweep import sweep  # noqa: E402
 
+CHUNK = 16384
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 
 
@@ -110,8 +113,15 @@ def random_batch(n, seed=0):
 
 
 def kernel_two_calls(smoothing=0.0):
+    prep = jax.jit(jax.vmap(prepare, in_axes=-1, out_axes=-1))
+    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], smoothing, *a[5:]), in_axes=-1, out_axes=-1))
+    return lambda args: body(*args, *prep(*args))
+
+
+def kernel_status_only():
+    """The previous library path: status alone in the first call, default compiler options."""
     status = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
-    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], smoothing, a[5]), in_axes=-1, out_axes=-1))
+    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1))
     return lambda args: body(*args, status(*args))
 
 
@@ -188,7 +198,14 @@ def main():
     last32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), last)
     t32, first32 = timed(lambda: jax.block_until_ready(two(last32)), reps)
     t1, first1 = timed(lambda: jax.block_until_ready(one(last)), max(1, reps // 2))
+    prev = kernel_status_only()
+    tp, _ = timed(lambda: jax.block_until_ready(prev(last)), max(1, reps // 2))
+    # the same two calls on chunks of CHUNK rows (inputs already in chunks, as ks_jax.sweep makes them
+    # inside its jitted call): the ~130 loops XLA makes then work on cache-resident arrays
+    chunks = [jax.tree_util.tree_map(lambda x: x[..., i:i + CHUNK], last) for i in range(0, n, CHUNK)]
+    tc, _ = timed(lambda: jax.block_until_ready([two(a) for a in chunks]), reps)
     res["kernel64"], res["kernel32"], res["kernel1"] = n / t64, n / t32, n / t1
+    res["prev"], res["chunk"] = n / tp, n / tc
     statuses = np.bincount(np.asarray(out.contact.status).ravel())
 
     # --- NumPy, same equations (and a check that it agrees)
@@ -214,7 +231,7 @@ def main():
     status_fn = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
     st = status_fn(*last)
 
-    def loss(args, status):
+    def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
         r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1)(*args, status)
         dv = r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
         return jnp.sum(jnp.where(r.contact.status == 0, dv, 0.0))
@@ -239,14 +256,17 @@ def main():
 
     w = 44
     print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
-    print(f"{'kernel float64 (status + exchange_with_status)':{w}} {res['kernel64']:14.4g}")
+    print(f"{'kernel float64 (prepare + exchange_with_status)':{w}} {res['kernel64']:14.4g}")
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {res['kernel32'] / res['kernel64']:8.2f}  (f32/f64)")
     print(f"{'single jit(vmap(exchange)), float64':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  (/kernel)")
+    print(f"{'previous: status-only first call, default':{w}} {res['prev']:14.4g}  {res['prev'] / res['kernel64']:8.2f}  (/kernel)")
+    print(f"{f'kernel float64, chunks of {CHUNK} rows':{w}} {res['chunk']:14.4g}  {res['chunk'] / res['kernel64']:8.2f}  (/kernel)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
-          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e})")
+          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e}; chunked/NumPy "
+          f"{res['chunk'] / res['numpy']:.2f})")
     print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {res['kernel64'] / res['stream']:8.2f}  "
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
-          f" {2 * stream_bytes / tstream / 1e9:.2f})")
+          f" {2 * stream_bytes / tstream / 1e9:.2f}; chunked/streaming {res['chunk'] / res['stream']:.2f})")
     print(f"{'gradient/forward, sum of delta-V':{w}} {n / tg:14.4g}  {tg / tf:8.2f}  (grad finite: {gfinite})")
     print(f"first call (compile + run) kernel float64: {first64:.2f} s (steady run {t64:.3f} s); float32: {first32:.2f} s; "
           f"single jit: {first1:.2f} s; value_and_grad: {firstg:.2f} s")

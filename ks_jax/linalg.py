@@ -49,11 +49,15 @@ def adjugate3(m):
     return jnp.stack([jnp.stack(row) for row in c])
 
 
-def rotation(yaw, pitch, roll):
-    """R = Rz(yaw) Ry(pitch) Rx(roll): body (ISO 8855) -> global."""
-    cz, sz = jnp.cos(yaw), jnp.sin(yaw)
-    cy, sy = jnp.cos(pitch), jnp.sin(pitch)
-    cx, sx = jnp.cos(roll), jnp.sin(roll)
+def trig(yaw, pitch, roll):
+    """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six transcendentals of
+    ``rotation``. A batched caller may compute them once in their own jitted call: XLA's CPU
+    loop fusion otherwise re-evaluates them (scalar libm calls) in every loop that reads R."""
+    return jnp.cos(yaw), jnp.sin(yaw), jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll)
+
+
+def rotation_from_trig(cz, sz, cy, sy, cx, sx):
+    """R from ``trig``'s six values."""
     return jnp.stack(
         [
             jnp.stack([cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx]),
@@ -61,6 +65,11 @@ def rotation(yaw, pitch, roll):
             jnp.stack([-sy, cy * sx, cy * cx]),
         ]
     )
+
+
+def rotation(yaw, pitch, roll):
+    """R = Rz(yaw) Ry(pitch) Rx(roll): body (ISO 8855) -> global."""
+    return rotation_from_trig(*trig(yaw, pitch, roll))
 
 
 def safe_norm(v):

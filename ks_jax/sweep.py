@@ -18,9 +18,10 @@ How it scales
   stored results (the computation stays in the case's float type).
 - Invalid rows (e.g. a restitution above 1) get their status code (``ks_jax.status_text``)
   and NaN results; the other rows are solved as usual.
-- The status of each row is computed in its own jitted call and handed to the kernel
-  (``exchange_with_status``): on CPU, XLA's loop fusion would otherwise re-evaluate the
-  ~100 input checks in every loop that reads an input or writes a result.
+- The status of each row and the sines/cosines of both vehicles' angles are computed in their
+  own jitted call (``exchange.prepare``) and handed to the kernel (``exchange_with_status``): on
+  CPU, XLA's loop fusion would otherwise re-evaluate the ~100 input checks, and the twelve
+  sines/cosines (scalar libm calls in float64), in every loop that reads them.
 
 Devices
 -------
@@ -160,7 +161,7 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 @lru_cache(maxsize=32)
 def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
     """(status_fn, solve_fn): jitted, sharded over ``devices`` along the row axis."""
-    from .exchange import exchange_with_status, input_status
+    from .exchange import exchange_with_status, prepare
     from .solve import solve_inputs
 
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
@@ -175,18 +176,19 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
     def status_fn(start, axes, total, base):
         vals = values(start, axes, total)
         if split:
-            return jnp.zeros(n_rows, jnp.int32)
-        return jax.vmap(lambda *v: input_status(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
+            return jnp.zeros(n_rows, jnp.int32), None
+        return jax.vmap(lambda *v: prepare(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
 
-    def solve_fn(start, axes, total, base, status):
+    def solve_fn(start, axes, total, base, prepared):
         vals = values(start, axes, total)
+        status, trig = prepared
 
-        def one(st, *v):
+        def one(st, tr, *v):
             inputs = _row_inputs(base, paths, v)
             if split:
                 res = solve_inputs(inputs, auto_point, auto_normal, smoothing)
             else:
-                res = exchange_with_status(*to_pytrees(inputs), smoothing, st)
+                res = exchange_with_status(*to_pytrees(inputs), smoothing, st, tr)
             out = {}
             for p in outputs:
                 x = get_output(res, p)
@@ -194,7 +196,7 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
             out["status"] = res.contact.status.astype(jnp.int8)
             return out
 
-        return jax.vmap(one)(status, *vals)
+        return jax.vmap(one, in_axes=(0, None if trig is None else 0) + (0,) * len(vals))(status, trig, *vals)
 
     status_jit = jax.jit(status_fn, in_shardings=(replicated, replicated, replicated, replicated),
                          out_shardings=rows)
