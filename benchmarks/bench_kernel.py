@@ -47,7 +47,7 @@ import numpy_ks  # noqa: E402
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
 from ks_jax.exchange import exchange, exchange_with_status, input_status, prepare  # noqa: E402
-from ks_jax.sweep import sweep  # noqa: E402
+from ks_jax.sweeps import sweep  # noqa: E402
 
 CHUNK = 16384
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"

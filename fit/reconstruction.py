@@ -89,7 +89,9 @@ class FitResult:
     evidence -> (fitted - measured) / sigma (angles wrapped); converged: the best start passed
     the solver's convergence test; unidentified: statements of what the evidence does not
     determine; at_bound: unknowns pinned at a bound; monte_carlo: None or
-    {"samples", "converged_fraction", "percentiles": {"5": {path: value}, ...}}.
+    {"samples", "converged_fraction", "percentiles": {"5": {path: value}, ...}, "x": (samples, n_unknowns)
+    array of every refit's estimate (SI, columns in the order of ``unknowns``), "converged": (samples,) bool};
+    ``to_dict()`` keeps the first three.
     """
 
     case_name: str

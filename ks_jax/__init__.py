@@ -1,13 +1,15 @@
 """ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
 
 See MODEL.md (the contract) for frames, equations and result names. Public surface:
-``Vehicle``, ``State``, ``Contact``, ``exchange``, ``load_case``, ``solve``, ``units``.
+``Vehicle``, ``State``, ``Contact``, ``exchange``, ``load_case``, ``solve``, ``sweep``, ``units``;
+``ks_jax.plot`` (matplotlib) loads on first use.
 """
 
 from . import units
 from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case, load_cases, set_input
 from .exchange import exchange
 from .solve import Solution, solve, solve_inputs
+from .sweeps import SweepResult, sweep
 from .types import (
     Contact,
     ContactResult,
@@ -31,6 +33,8 @@ __all__ = [
     "set_input",
     "solve",
     "solve_inputs",
+    "sweep",
+    "SweepResult",
     "Contact",
     "ContactResult",
     "ExchangeResult",

@@ -19,7 +19,7 @@ from .units import UnitError
 
 # subcommands that live in their own modules: name -> module with add_arguments(p) and run(args)
 EXTERNAL = {"fit": ("fit.cli", "reconstruct unknown inputs from evidence"),
-            "sweep": ("ks_jax.sweep", "solve a grid or samples of inputs")}
+            "sweep": ("ks_jax.sweeps", "solve a grid or samples of inputs")}
 
 DEMO_CASES = ("seed_000_saturn_pontiac.json", "seed_001_lucid_kia.toml")
 

@@ -34,11 +34,17 @@ def crush_depth(point, direction, position, rot, vehicle):
     return jnp.where(inside & jnp.isfinite(depth), depth, 0.0)
 
 
-def ees_pair(energy_loss, crush1, crush2, mass1, mass2):
+CRUSH_TOLERANCE = 1e-6  # relative to the sum of the two lengths: 10 um for two 5 m cars
+
+
+def ees_pair(energy_loss, crush1, crush2, mass1, mass2, length_sum=1.0):
     """Burg's EES (MODEL.md section 4): E_i = E C_i / (C_1 + C_2), EES_i = sqrt(2 E_i / m_i).
-    NaN (undefined) when C_1 + C_2 = 0 or the energy loss is negative."""
+
+    NaN (undefined) when C_1 + C_2 = 0 or the energy loss is negative. "= 0" means below
+    ``CRUSH_TOLERANCE * length_sum``: a centroid on a box face gives a crush of rounding size
+    (1e-16 m), which must not hand the whole energy to one vehicle."""
     total = crush1 + crush2
-    defined = (total > 0) & (energy_loss >= 0)
+    defined = (total > CRUSH_TOLERANCE * length_sum) & (energy_loss >= 0)
 
     def one(c, m):
         e_i = la.safe_div(energy_loss * c, total)
@@ -85,7 +91,8 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
         v2.velocity_after + la.cross(v2.angular_velocity_after, r2)
     )
     energy = -0.5 * la.dot(j, u + u_after)
-    ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass)
+    ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass,
+                          body1[0].length + body2[0].length)
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
     v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)
     jn = la.dot(n, j)

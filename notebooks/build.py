@@ -153,7 +153,7 @@ def sweeps():
 # Parameter sweeps
 
 A reconstruction rarely has one set of inputs: speeds, restitution, friction and the impulse centroid are known
-only within ranges. `ks_jax.sweep.sweep` solves one case at every point of a grid of some of its inputs in one
+only within ranges. `ks_jax.sweep` solves one case at every point of a grid of some of its inputs in one
 compiled, vectorised call and hands back only the results asked for. This notebook shows
 
 1. delta-V and deformation energy over the bullet vehicle's speed and the restitution (seed chapter 001,
@@ -177,7 +177,7 @@ from matplotlib.colors import ListedColormap
 import ks_jax
 from ks_jax import units as U
 from ks_jax.case import case_from_dict
-from ks_jax.sweep import sweep
+from ks_jax import sweep
 
 cases = resources.files("ks_jax.cases")
 lucid_case = ks_jax.load_case(cases / "seed_001_lucid_kia.toml")
@@ -565,7 +565,7 @@ First a picture: the SUV's speed against the restitution, coloured by the sedan'
 is every pair that reproduces the measured lateral delta-V.
 """),
         ("code", """
-from ks_jax.sweep import sweep
+from ks_jax import sweep
 
 speeds = np.linspace(20, 60, 81) * U.MPH
 eps = np.linspace(0, 0.5, 51)
@@ -641,7 +641,7 @@ import matplotlib.pyplot as plt
 import ks_jax
 from ks_jax import units as U
 from ks_jax.plot import top_view
-from ks_jax.sweep import sweep
+from ks_jax import sweep
 
 cases = resources.files("ks_jax.cases")
 tbone = ks_jax.load_case(cases / "auto_tbone.json")

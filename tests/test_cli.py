@@ -213,3 +213,17 @@ def test_paths_refuse_unknown_names():
         ks_jax.get_output(ks_jax.solve(case).result, "contact.impulse_size")
     new = ks_jax.set_input(case.inputs, "vehicles[1].yaw_rate", 0.5)
     assert float(ks_jax.get_input(new, "vehicles[1].angular_velocity[2]")) == 0.5
+
+
+def test_ees_undefined_when_crush_is_rounding_error():
+    # a centroid on a box face gives crush ~1e-16 m: Burg's split is undefined there, not 100 % / 0 %
+    import jax.numpy as jnp
+
+    from ks_jax.derived import ees_pair
+
+    e1, e2 = ees_pair(jnp.float64(2e4), jnp.float64(2.2e-16), jnp.float64(0.0), 1500.0, 1400.0, 9.0)
+    assert np.isnan(e1) and np.isnan(e2)
+    # a real crush splits the energy in proportion (MODEL.md section 4): E_i = E C_i / (C_1 + C_2)
+    e1, e2 = ees_pair(jnp.float64(2e4), jnp.float64(0.3), jnp.float64(0.1), 1500.0, 1400.0, 9.0)
+    assert float(e1) == pytest.approx(math.sqrt(2 * 2e4 * 0.75 / 1500.0), rel=1e-12)
+    assert float(e2) == pytest.approx(math.sqrt(2 * 2e4 * 0.25 / 1400.0), rel=1e-12)

@@ -17,7 +17,7 @@ jax.config.update("jax_enable_x64", True)  # also set by conftest; kept so the m
 import ks_jax  # noqa: E402
 from ks_jax.case import CaseError, as_arrays, get_output, set_input  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
-from ks_jax.sweep import DEFAULT_OUTPUTS, parse_over, sweep  # noqa: E402
+from ks_jax.sweeps import DEFAULT_OUTPUTS, parse_over, sweep  # noqa: E402
 
 CASES = Path(ks_jax.__file__).parent / "cases"
 SEED0 = CASES / "seed_000_saturn_pontiac.json"
@@ -183,7 +183,7 @@ SHARDED = r"""
 import json, sys, jax, numpy as np
 jax.config.update("jax_enable_x64", True)
 import ks_jax
-from ks_jax.sweep import sweep
+from ks_jax import sweep
 assert len(jax.devices()) == 2, jax.devices()
 case = ks_jax.load_case(sys.argv[1])
 over = {"vehicles[1].speed": np.linspace(2, 20, 11), "contact.restitution": np.linspace(0, 1.2, 7)}
