@@ -74,7 +74,7 @@ DEFAULT_OUTPUTS = (
     "vehicles[0].speed_after",
     "vehicles[1].speed_after",
 )
-DEFAULT_CHUNK = 1 << 16  # rows per device and chunk
+DEFAULT_CHUNK = 1 << 14  # rows per device and chunk: cache-resident (1.4-2x faster than 1 << 16 here)
 PROGRESS_MIN_POINTS = 1 << 20
 
 
@@ -266,7 +266,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     ``vehicles[0].delta_v[0]``); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
     mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
-    chunk_size: rows per device and chunk (default 65536). smoothing: tau of the smooth cone.
+    chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
     progress: None (a bar for >= 2^20 points), True or False; tqdm if installed, else a line on
     stderr. devices: the devices to shard every chunk over (default ``jax.devices()``).
     output_dtype: dtype of the stored float results (default: the compute dtype).
@@ -392,7 +392,7 @@ def add_arguments(parser):
                         help="grid: cartesian product (default); zip: the k-th values of every path together")
     parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
     parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
-    parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 65536)")
+    parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
     parser.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,52 @@
+"""Peak memory of a 10^8-point sweep (10000 x 10000 grid, one output). Not a test.
+
+    /usr/bin/time -v python benchmarks/bench_sweep_memory.py [--keep float32|none] [--n 10000]
+
+--keep float32: the output is stored as float32 (0.4 GB for 10^8 points) plus the int8 status;
+--keep none: nothing is stored; a per-chunk callback reduces the output (its maximum) as it goes.
+Prints the time and the peak resident memory (ru_maxrss) of the process.
+"""
+
+import argparse
+import datetime
+import resource
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+import ks_jax  # noqa: E402
+
+CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--keep", choices=["float32", "none"], default="float32")
+    ap.add_argument("--n", type=int, default=10000, help="grid side (points = n^2)")
+    args = ap.parse_args()
+    case = ks_jax.load_case(CASE)
+    over = {"vehicles[1].speed": np.linspace(5, 30, args.n), "contact.restitution": np.linspace(0, 0.5, args.n)}
+    out = "vehicles[0].delta_v_magnitude"
+    peak = {"max": -np.inf}
+
+    def reduce(lo, hi, chunk):
+        peak["max"] = max(peak["max"], float(np.nanmax(chunk[out])))
+
+    t = time.perf_counter()
+    if args.keep == "float32":
+        r = ks_jax.sweep(case, over=over, outputs=[out], output_dtype=np.float32, progress=False)
+        summary = f"max delta-V {np.nanmax(r[out]):.4f} m/s, status {r.status_counts}"
+    else:
+        r = ks_jax.sweep(case, over=over, outputs=[out], on_chunk=reduce, keep=False, progress=False)
+        summary = f"max delta-V {peak['max']:.4f} m/s, status {r.status_counts}"
+    dt = time.perf_counter() - t
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, jax {jax.__version__}, "
+          f"{args.n ** 2:.3g} points, keep={args.keep}: {dt:.1f} s (incl. compile), peak RSS {rss:.0f} MiB; {summary}")
+
+
+if __name__ == "__main__":
+    main()
