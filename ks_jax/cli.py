@@ -113,6 +113,11 @@ def main(argv=None) -> int:
     except (CaseError, UnitError, FileNotFoundError, IsADirectoryError) as err:
         print(f"ks-jax: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (ks-jax demo | head): not an error
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
