@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -181,13 +182,19 @@ def _inertia(value, path, case_name):
     return np.diag(moments)
 
 
+class CaseWarning(UserWarning):
+    """Something in a case file that is ignored (an unknown field); the case is still solved."""
+
+
 def _check_keys(d, allowed, path, case_name):
+    """A table must be a dict; an unknown field (a typo, or a key of another tool) is ignored with
+    a CaseWarning naming it, so that a misspelt optional field does not pass silently."""
     if not isinstance(d, dict):
         raise CaseError(f"{_where(case_name, path)}: must be a table/object, got {d!r}")
     for k in d:
         if k not in allowed:
-            raise CaseError(f"{_where(case_name, path + '.' + k if path else k)}: unknown field "
-                            f"(known: {', '.join(sorted(allowed - {'...'}))})")
+            warnings.warn(CaseWarning(f"{_where(case_name, path + '.' + k if path else k)}: unknown field, ignored "
+                                      f"(known: {', '.join(sorted(allowed - {'...'}))})"), stacklevel=2)
 
 
 def _require(d, key, path, case_name):

@@ -104,8 +104,29 @@ def _compilation_cache():
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 
+def _show_case_warnings():
+    import warnings
+
+    from .case import CaseWarning
+
+    if getattr(warnings.showwarning, "_ks_jax", False):
+        return
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CaseWarning):
+            print(f"ks-jax: warning: {message}", file=sys.stderr)
+        else:
+            default_show(message, category, filename, lineno, file, line)
+
+    default_show = warnings.showwarning
+    show._ks_jax = True
+    warnings.showwarning = show
+    warnings.simplefilter("always", CaseWarning)
+
+
 def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
+    _show_case_warnings()
     _compilation_cache()
     args = build_parser().parse_args(argv)
     try:

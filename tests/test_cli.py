@@ -151,7 +151,8 @@ BAD = {
     "one vehicle": (lambda d: d["vehicles"].pop(), r"exactly two vehicles"),
     "three vehicles": (lambda d: d["vehicles"].append(copy.deepcopy(d["vehicles"][0])), r"exactly two vehicles"),
     "zero normal": (lambda d: d["contact"].update(normal=[0, 0, 0]), r"contact\.normal.*non-zero"),
-    "unknown field": (lambda d: d["vehicles"][1].update(sped="30 mph"), r"vehicles\[1\]\.sped: unknown field"),
+    "misspelt required field": (lambda d: d["vehicles"][1].update(sped=d["vehicles"][1].pop("speed")),
+                                r"vehicles\[1\]\.speed: missing field"),
 }
 
 
@@ -167,7 +168,8 @@ def test_bad_input_is_refused_with_field_value_and_rule(label, tmp_path, capsys)
     path.write_text(json.dumps(d))
     code, out, errtext = run_cli(capsys, "solve", str(path), "--json")
     assert code == 2 and out == ""
-    assert errtext.startswith("ks-jax: error: case 'units check'") and "Traceback" not in errtext
+    # one error line (after any warning about an ignored field, which points at a typo), no traceback
+    assert errtext.splitlines()[-1].startswith("ks-jax: error: case 'units check'") and "Traceback" not in errtext
 
 
 def test_bad_case_in_a_batch_is_reported_and_the_others_solved(tmp_path, capsys):
@@ -227,3 +229,18 @@ def test_ees_undefined_when_crush_is_rounding_error():
     e1, e2 = ees_pair(jnp.float64(2e4), jnp.float64(0.3), jnp.float64(0.1), 1500.0, 1400.0, 9.0)
     assert float(e1) == pytest.approx(math.sqrt(2 * 2e4 * 0.75 / 1500.0), rel=1e-12)
     assert float(e2) == pytest.approx(math.sqrt(2 * 2e4 * 0.25 / 1400.0), rel=1e-12)
+
+
+def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
+    d = _bad(lambda d: d["vehicles"][1].update(year=2021))
+    with pytest.warns(ks_jax.case.CaseWarning, match=r"case 'units check': vehicles\[1\]\.year: unknown field"):
+        case = case_from_dict(d)
+    # the case is solved as without the field
+    a = ks_jax.solve(case).to_dict()
+    b = ks_jax.solve(case_from_dict(US_CASE)).to_dict()
+    assert a["contact"]["impulse"] == b["contact"]["impulse"]
+    path = tmp_path / "extra.json"
+    path.write_text(json.dumps(d))
+    code, out, err = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 0 and json.loads(out)["cases"][0]["contact"]["status"] == "ok"
+    assert "ks-jax: warning: case 'units check': vehicles[1].year: unknown field, ignored" in err
