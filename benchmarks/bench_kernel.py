@@ -3,11 +3,10 @@
     .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--quick]
 
 Prints the machine, the command and the date, then (median of --repeats runs each):
-- the kernel's rate (exchanges/s, all section-4 results, float64 and float32): the per-row
-  status and the sines/cosines of the angles in one jitted call (``exchange.prepare``),
-  ``exchange_with_status`` in a second
-  (what ``ks_jax.sweep`` does),
-  and, for comparison, the single call ``jit(vmap(exchange))``;
+- the kernel's rate (exchanges/s, all section-4 results, float64 and float32), as ``ks_jax.sweep``
+  computes it: three jitted calls, the per-row status and sines/cosines (``exchange.prepare``), the
+  impulse (``exchange.impulse_stage``), the results (``exchange.results_stage``); for comparison the
+  previous path (prepare, then ``exchange_with_status``) and the single call ``jit(vmap(exchange))``;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
   kernel's inputs and outputs together (one read and one write of each, as the kernel does);
@@ -46,7 +45,7 @@ import numpy_ks  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.exchange import exchange, exchange_with_status, input_status, prepare  # noqa: E402
+from ks_jax.exchange import exchange, exchange_with_status, impulse_stage, input_status, results_stage, prepare  # noqa: E402
 from ks_jax.sweeps import sweep  # noqa: E402
 
 CHUNK = 16384
@@ -112,17 +111,25 @@ def random_batch(n, seed=0):
     return nps, last
 
 
-def kernel_two_calls(smoothing=0.0):
+def kernel_staged(smoothing=0.0):
+    """What ks_jax.sweep does per chunk: three jitted calls, each result stored once per row:
+    prepare (status, sines/cosines), impulse_stage (J and what the results need), results_stage."""
     prep = jax.jit(jax.vmap(prepare, in_axes=-1, out_axes=-1))
-    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], smoothing, *a[5:]), in_axes=-1, out_axes=-1))
-    return lambda args: body(*args, *prep(*args))
+    imp = jax.jit(jax.vmap(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:]), in_axes=-1, out_axes=-1))
+    body = jax.jit(jax.vmap(lambda *a: results_stage(*a[:5], *a[5:]), in_axes=-1, out_axes=-1))
+
+    def run(args):
+        status, trig = prep(*args)
+        return body(*args, status, imp(*args, status, trig))
+
+    return run
 
 
 def kernel_status_only():
-    """The previous library path: status alone in the first call, default compiler options."""
-    status = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
-    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1))
-    return lambda args: body(*args, status(*args))
+    """The previous library path: prepare, then the whole exchange in one second call."""
+    prep = jax.jit(jax.vmap(prepare, in_axes=-1, out_axes=-1))
+    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, *a[5:]), in_axes=-1, out_axes=-1))
+    return lambda args: body(*args, *prep(*args))
 
 
 def kernel_one_call():
@@ -187,7 +194,7 @@ def main():
     print(f"  rows     {n} per batch, median of {reps} runs\n")
 
     nps, last = random_batch(n)
-    two = kernel_two_calls()
+    two = kernel_staged()
     one = kernel_one_call()
 
     # --- kernel float64 / float32
@@ -256,10 +263,10 @@ def main():
 
     w = 44
     print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
-    print(f"{'kernel float64 (prepare + exchange_with_status)':{w}} {res['kernel64']:14.4g}")
+    print(f"{'kernel float64 (prepare, impulse, results)':{w}} {res['kernel64']:14.4g}")
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {res['kernel32'] / res['kernel64']:8.2f}  (f32/f64)")
     print(f"{'single jit(vmap(exchange)), float64':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  (/kernel)")
-    print(f"{'previous: status-only first call, default':{w}} {res['prev']:14.4g}  {res['prev'] / res['kernel64']:8.2f}  (/kernel)")
+    print(f"{'previous: prepare + exchange_with_status':{w}} {res['prev']:14.4g}  {res['prev'] / res['kernel64']:8.2f}  (/kernel)")
     print(f"{f'kernel float64, chunks of {CHUNK} rows':{w}} {res['chunk']:14.4g}  {res['chunk'] / res['kernel64']:8.2f}  (/kernel)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
           f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e}; chunked/NumPy "

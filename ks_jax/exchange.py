@@ -24,6 +24,8 @@ C = ln 2 * s |dJ/ds| / |J| depends on mu and K (measured: below 1.2 for mu <= 1.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 
@@ -210,6 +212,34 @@ def exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing,
     """``exchange`` given ``input_status`` of the same inputs (() int32), computed elsewhere
     (a batched caller may compute the status in its own jitted call and store it once).
     ``trig``: the second result of ``prepare`` (optional; computed here if None)."""
+    impulse_ = impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status, trig)
+    return results_stage(vehicle1, state1, vehicle2, state2, contact, status, impulse_)
+
+
+class ImpulseStage(NamedTuple):
+    """What ``results_stage`` needs from ``impulse_stage``: J (3,) on vehicle 1, sliding,
+    approaching, n (3,), u (3,), I^-1 (3, 3) and R (3, 3) of both vehicles, r_i = P - x_i (3,)."""
+
+    j: jnp.ndarray
+    sliding: jnp.ndarray
+    approaching: jnp.ndarray
+    n: jnp.ndarray
+    u: jnp.ndarray
+    a1: jnp.ndarray
+    rot1: jnp.ndarray
+    a2: jnp.ndarray
+    rot2: jnp.ndarray
+    r1: jnp.ndarray
+    r2: jnp.ndarray
+
+
+def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status, trig=None) -> ImpulseStage:
+    """MODEL.md section 3, steps 1-6: the impulse and what the results are derived from.
+
+    ``exchange_with_status`` is ``results_stage(impulse_stage(...))``. A batched caller on CPU
+    may run the two stages as separate jitted calls: the ~60 numbers of ``ImpulseStage`` are then
+    stored once per row instead of being re-derived inside every loop XLA's fusion makes of the
+    ~40 results (half the time per row at cache-sized chunks; benchmarks/RESULTS.md)."""
     if isinstance(smoothing, (int, float)) and not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     ok = status == OK
@@ -227,11 +257,17 @@ def exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing,
     )
     K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
     j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
+    return ImpulseStage(j, sliding, approaching, n, u, a1, rot1, a2, rot2, r1, r2)
 
-    status = jnp.where(ok & ~approaching, jnp.int32(SEPARATING), status)
+
+def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
+    """MODEL.md section 4 from ``impulse_stage``'s output (same inputs and status)."""
+    ok = status == OK
+    vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
+    status = jnp.where(ok & ~stage.approaching, jnp.int32(SEPARATING), status)
     result = derived.results(
-        j, n, p, u, sliding, status,
-        (vehicle1, state1, rot1, a1, r1),
-        (vehicle2, state2, rot2, a2, r2),
+        stage.j, stage.n, contact.point, stage.u, stage.sliding, status,
+        (vehicle1, state1, stage.rot1, stage.a1, stage.r1),
+        (vehicle2, state2, stage.rot2, stage.a2, stage.r2),
     )
     return derived.mask_invalid(result, ok)

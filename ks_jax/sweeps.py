@@ -160,8 +160,14 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 @lru_cache(maxsize=32)
 def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
-    """(status_fn, solve_fn): jitted, sharded over ``devices`` along the row axis."""
-    from .exchange import exchange_with_status, prepare
+    """(status_fn, impulse_fn, solve_fn): jitted, sharded over ``devices`` along the row axis.
+
+    Three calls per chunk for an explicit contact: the status and angle sines/cosines
+    (``exchange.prepare``), the impulse (``exchange.impulse_stage``), then the results
+    (``exchange.results_stage``). Each call's outputs are stored once per row; in one program
+    XLA's CPU fusion would re-derive them inside every loop that reads them (2x slower here).
+    """
+    from .exchange import impulse_stage, prepare, results_stage
     from .solve import solve_inputs
 
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
@@ -179,16 +185,24 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
             return jnp.zeros(n_rows, jnp.int32), None
         return jax.vmap(lambda *v: prepare(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
 
-    def solve_fn(start, axes, total, base, prepared):
+    def impulse_fn(start, axes, total, base, prepared):
+        if split:
+            return None
         vals = values(start, axes, total)
         status, trig = prepared
+        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v)), smoothing, st, tr))(
+            status, trig, *vals)
 
-        def one(st, tr, *v):
+    def solve_fn(start, axes, total, base, prepared, stage):
+        vals = values(start, axes, total)
+        status, _ = prepared
+
+        def one(st, stg, *v):
             inputs = _row_inputs(base, paths, v)
             if split:
                 res = solve_inputs(inputs, auto_point, auto_normal, smoothing)
             else:
-                res = exchange_with_status(*to_pytrees(inputs), smoothing, st, tr)
+                res = results_stage(*to_pytrees(inputs), st, stg)
             out = {}
             for p in outputs:
                 x = get_output(res, p)
@@ -196,13 +210,15 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
             out["status"] = res.contact.status.astype(jnp.int8)
             return out
 
-        return jax.vmap(one, in_axes=(0, None if trig is None else 0) + (0,) * len(vals))(status, trig, *vals)
+        return jax.vmap(one, in_axes=(0, None if stage is None else 0) + (0,) * len(vals))(status, stage, *vals)
 
     status_jit = jax.jit(status_fn, in_shardings=(replicated, replicated, replicated, replicated),
                          out_shardings=rows)
-    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, replicated, replicated, replicated, rows),
+    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, replicated, replicated, replicated, rows),
+                          out_shardings=rows)
+    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, replicated, replicated, replicated, rows, rows),
                         out_shardings=rows)
-    return status_jit, solve_jit
+    return status_jit, impulse_jit, solve_jit
 
 
 # ---------------------------------------------------------------------------------------
@@ -319,7 +335,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     base = as_arrays(case.inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
-    status_jit, solve_jit = _compiled(paths, outputs, mode, sizes, n_rows, case.auto_point, case.auto_normal,
+    status_jit, impulse_jit, solve_jit = _compiled(paths, outputs, mode, sizes, n_rows, case.auto_point, case.auto_normal,
                                       float(smoothing), out_dtype, devices)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
@@ -341,7 +357,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     def launch(start):
         s = jnp.asarray(start, dtype=index_dtype)
         status = status_jit(s, dev_axes, total_arr, base)
-        return start, solve_jit(s, dev_axes, total_arr, base, status)
+        stage = impulse_jit(s, dev_axes, total_arr, base, status)
+        return start, solve_jit(s, dev_axes, total_arr, base, status, stage)
 
     def collect(item):
         start, out = item
