@@ -18,10 +18,12 @@ How it scales
   stored results (the computation stays in the case's float type).
 - Invalid rows (e.g. a restitution above 1) get their status code (``ks_jax.status_text``)
   and NaN results; the other rows are solved as usual.
-- The status of each row and the sines/cosines of both vehicles' angles are computed in their
-  own jitted call (``exchange.prepare``) and handed to the kernel (``exchange_with_status``): on
-  CPU, XLA's loop fusion would otherwise re-evaluate the ~100 input checks, and the twelve
-  sines/cosines (scalar libm calls in float64), in every loop that reads them.
+- An explicit-contact chunk is solved in three jitted calls whose outputs are stored once per
+  row: the status and the sines/cosines of both vehicles' angles (``exchange.prepare``), the
+  impulse and what the results derive from (``exchange.impulse_stage``), then the results
+  (``exchange.results_stage``). In one program XLA's CPU loop fusion re-evaluates shared values
+  (the ~100 input checks, the scalar float64 sines/cosines, the 3x3 algebra) in every loop that
+  reads them: the three calls take half the time per row (benchmarks/RESULTS.md).
 
 Devices
 -------
