@@ -52,12 +52,6 @@ from .types import (
 )
 
 
-def body_inertia(inertia):
-    """(3,) principal moments or a (3, 3) tensor -> (3, 3) body-frame tensor."""
-    inertia = jnp.asarray(inertia)
-    return jnp.diag(inertia) if inertia.ndim == 1 else inertia
-
-
 def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     """I^-1 in the global frame, R I_body^-1 R^T, and R. Closed form, no LAPACK.
     ``trig``: ``linalg.trig(yaw, pitch, roll)`` if the caller already has it."""
