@@ -12,7 +12,8 @@ from .types import ContactResult, ExchangeResult, VehicleResult
 def pdof_degrees(force_body):
     """SAE J224 principal direction of force: atan2(F_y, -F_x) mod 360, degrees clockwise from
     the front (0 = a frontal force, pointing rearward; 90 = right side; 180 = rear)."""
-    return la.degrees_0_360(la.safe_atan2(force_body[1], -force_body[0]))
+    fx, fy, _ = la.vec(force_body)
+    return la.degrees_0_360(la.safe_atan2(fy, -fx))
 
 
 def clock(pdof):
@@ -24,8 +25,8 @@ def clock(pdof):
 def crush_depth(point, direction, position, rot, vehicle):
     """Distance from ``point`` along ``direction`` (unit, global) until it leaves the
     vehicle's bounding box; 0 if the point is not inside the box (MODEL.md section 4)."""
-    p = la.matvec(rot.T, point - position)
-    d = la.matvec(rot.T, direction)
+    p = la.matvec(rot, point - position, transpose=True)
+    d = la.matvec(rot, direction, transpose=True)
     lo = jnp.stack([vehicle.cg_to_front - vehicle.length, -0.5 * vehicle.width, -vehicle.cg_height])
     hi = jnp.stack([vehicle.cg_to_front, 0.5 * vehicle.width, vehicle.height - vehicle.cg_height])
     inside = jnp.all((p >= lo) & (p <= hi))
@@ -62,14 +63,14 @@ def _vehicle(force, body, point, normal_into, j_mag):
     return VehicleResult(
         delta_v=dv,
         delta_v_magnitude=j_mag / vehicle.mass,
-        delta_v_body=la.matvec(rot.T, dv),
-        delta_yaw_rate=dw[2],
+        delta_v_body=la.matvec(rot, dv, transpose=True),
+        delta_yaw_rate=la.vec(dw)[2],
         velocity_after=v_after,
         speed_after=la.safe_norm(v_after),
-        course_after=la.degrees_0_360(la.safe_atan2(v_after[1], v_after[0])),
+        course_after=la.degrees_0_360(la.safe_atan2(*la.vec(v_after)[1::-1])),
         angular_velocity_after=w_after,
-        yaw_rate_after=w_after[2],
-        pdof=pdof_degrees(la.matvec(rot.T, force)),
+        yaw_rate_after=la.vec(w_after)[2],
+        pdof=pdof_degrees(la.matvec(rot, force, transpose=True)),
         pdof_clock=jnp.zeros(()),  # filled below, from pdof
         crush=crush_depth(point, normal_into, state.position, rot, vehicle),
         ees=jnp.zeros(()),  # filled below, needs both crushes
@@ -96,6 +97,7 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
     v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)
     jn = la.dot(n, j)
+    jx, jy, jz = la.vec(j)
     contact = ContactResult(
         point=p,
         normal=n,
@@ -104,8 +106,8 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
         impulse_magnitude=j_mag,
         impulse_normal=jn,
         impulse_tangential=la.safe_norm(j - jn * n),
-        impulse_azimuth=la.degrees_0_360(la.safe_atan2(j[1], j[0])),
-        impulse_elevation=jnp.degrees(la.safe_atan2(j[2], la.safe_norm(jnp.stack([j[0], j[1], 0.0 * j[2]])))),
+        impulse_azimuth=la.degrees_0_360(la.safe_atan2(jy, jx)),
+        impulse_elevation=jnp.degrees(la.safe_atan2(jz, la.safe_norm((jx, jy, 0.0 * jz)))),
         sliding=sliding,
         closing_velocity=u,
         separation_velocity=u_after,

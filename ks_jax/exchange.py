@@ -61,7 +61,7 @@ def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     else:
         inv_body = la.adjugate3(inertia) / la.det3(inertia)
     rot = la.rotation_from_trig(*(la.trig(yaw, pitch, roll) if trig is None else trig))
-    return la.matmul(la.matmul(rot, inv_body), rot.T), rot
+    return la.matmul(la.matmul(rot, inv_body), rot, transpose_b=True), rot
 
 
 def _inertia_ok(inertia):
@@ -161,11 +161,10 @@ def collision_matrix(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
     """K = (1/m1 + 1/m2) Id - [r1]x I1^-1 [r1]x - [r2]x I2^-1 [r2]x (MODEL.md section 3, step 2)."""
 
     def arm(r, a):
-        zero = jnp.zeros_like(r[0])
-        rx = jnp.stack(
-            [jnp.stack([zero, -r[2], r[1]]), jnp.stack([r[2], zero, -r[0]]), jnp.stack([-r[1], r[0], zero])]
-        )
-        return la.matmul(la.matmul(rx, a), rx.T)  # = -[r]x A [r]x
+        x, y, z = la.vec(r)
+        zero = jnp.zeros_like(x)
+        rx = ((zero, -z, y), (z, zero, -x), (-y, x, zero))
+        return la.matmul(la.matmul_c(rx, a), rx, transpose_b=True)  # = -[r]x A [r]x
 
     eye = jnp.eye(3, dtype=r1.dtype)
     return (1.0 / mass1 + 1.0 / mass2) * eye + arm(r1, inv_inertia1) + arm(r2, inv_inertia2)

@@ -3,68 +3,187 @@
 Written out component by component so that, batched under vmap, XLA fuses it into
 elementwise loops instead of calling a batched LAPACK routine per row. ``safe_*`` use the
 double-where pattern: the singular point is never passed to sqrt, division or arctan2.
+
+Components. Vectors and matrices are read with ``vec``/``mat`` (one ``unstack``), never as
+``v[i]``, and the functions here accept arrays or tuples of components (``*_c`` return
+components, the others arrays). Reverse mode is why: the cotangent of each ``v[i]`` is a ``pad``
+into a zero array, and the pads are then added up; batched, those pads and adds were most of
+the backward pass. The transpose of one ``unstack`` is one ``stack`` (benchmarks/RESULTS.md).
 """
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+from jax import lax
 
 
-def cross(a, b):
-    return jnp.stack(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]], -1
-    )
+def _unstack(x):
+    if hasattr(lax, "unstack"):
+        return tuple(lax.unstack(x))
+    return tuple(x[i] for i in range(x.shape[0]))  # older jax: indexing (same values)
+
+
+def vec(v):
+    """The three components of a 3-vector (a tuple is returned as is; an array is unstacked
+    once, whose transpose is one stack rather than a pad per component)."""
+    if isinstance(v, (tuple, list)):
+        return tuple(v)
+    return _unstack(jnp.asarray(v))
+
+
+def mat(m):
+    """The nine entries of a 3x3 matrix, as three rows of components (see ``vec``)."""
+    if isinstance(m, (tuple, list)):
+        return tuple(vec(row) for row in m)
+    return tuple(vec(row) for row in _unstack(jnp.asarray(m)))
+
+
+def array(v):
+    """A (3,) array from components."""
+    return jnp.stack(vec(v), -1)
+
+
+def from_rows(rows):
+    """A (3, 3) array from three rows of three components."""
+    return jnp.stack([jnp.stack(vec(row)) for row in rows])
+
+
+def add(a, b):
+    return tuple(x + y for x, y in zip(vec(a), vec(b)))
+
+
+def sub(a, b):
+    return tuple(x - y for x, y in zip(vec(a), vec(b)))
+
+
+def scale(s, a):
+    return tuple(s * x for x in vec(a))
+
+
+def scale_each(a, s):
+    """Componentwise product of two 3-vectors."""
+    return tuple(x * y for x, y in zip(vec(a), vec(s)))
+
+
+def neg(a):
+    return tuple(-x for x in vec(a))
+
+
+def transpose_c(m):
+    return tuple(zip(*mat(m)))
 
 
 def dot(a, b):
+    a, b = vec(a), vec(b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def matvec(m, v):
-    return jnp.stack([dot(m[i], v) for i in range(3)], -1)
+def cross_c(a, b):
+    a, b = vec(a), vec(b)
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def matmul(a, b):
-    bt = b.T
-    return jnp.stack([jnp.stack([dot(a[i], bt[j]) for j in range(3)]) for i in range(3)])
+def cross(a, b):
+    return array(cross_c(a, b))
+
+
+def matvec_c(m, v, transpose=False):
+    """m v, or m^T v with ``transpose``."""
+    rows = transpose_c(m) if transpose else mat(m)
+    v = vec(v)
+    return tuple(dot(row, v) for row in rows)
+
+
+def matvec(m, v, transpose=False):
+    return array(matvec_c(m, v, transpose))
+
+
+def matmul_c(a, b, transpose_b=False):
+    """a b, or a b^T with ``transpose_b``."""
+    cols = mat(b) if transpose_b else transpose_c(b)
+    return tuple(tuple(dot(row, col) for col in cols) for row in mat(a))
+
+
+def matmul(a, b, transpose_b=False):
+    return from_rows(matmul_c(a, b, transpose_b))
 
 
 def det3(m):
+    m = mat(m)
     return (
-        m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
-        - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-        + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     )
 
 
-def adjugate3(m):
+def adjugate_c(m):
     """Adjugate (transpose of the cofactor matrix): m @ adj(m) = det(m) Id."""
+    m = mat(m)
     c = [[None] * 3 for _ in range(3)]
     for i in range(3):
         for j in range(3):
             r = [k for k in range(3) if k != i]
             s = [k for k in range(3) if k != j]
-            minor = m[r[0], s[0]] * m[r[1], s[1]] - m[r[0], s[1]] * m[r[1], s[0]]
+            minor = m[r[0]][s[0]] * m[r[1]][s[1]] - m[r[0]][s[1]] * m[r[1]][s[0]]
             c[j][i] = minor if (i + j) % 2 == 0 else -minor
-    return jnp.stack([jnp.stack(row) for row in c])
+    return tuple(tuple(row) for row in c)
 
 
+def adjugate3(m):
+    return from_rows(adjugate_c(m))
+
+
+def materialize(*xs):
+    """``xs`` (arrays of one shape and float dtype) unchanged, computed in a loop of their own
+    and stored, batched under vmap on CPU.
+
+    XLA's CPU fusion copies an elementwise producer into every loop that reads it. For sin, cos
+    and atan2 (scalar libm calls, 15-25 ns each per row in float64) that means evaluating them
+    many times over, and a libm call inside a loop keeps the rest of that loop from being
+    vectorized. ``lax.optimization_barrier`` is dropped before fusion on CPU, and a max-reduce
+    over copies is rewritten into an elementwise op; a bitwise-or reduction of the bits with
+    zeros is kept as a reduction, which is not copied into its consumers. The values are exact
+    (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
+    own derivative). On a GPU it costs one small kernel."""
+    x = jnp.stack(xs)
+    bits = lax.bitcast_convert_type(x, jnp.int64 if x.dtype == jnp.float64 else jnp.int32)
+    zero = jnp.zeros((), bits.dtype)
+    bits = lax.reduce(jnp.stack([bits, jnp.zeros_like(bits)]), zero, lax.bitwise_or, (0,))
+    return _unstack(lax.bitcast_convert_type(bits, x.dtype))
+
+
+@jax.custom_jvp
 def trig(yaw, pitch, roll):
     """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six transcendentals of
-    ``rotation``. A batched caller may compute them once in their own jitted call: XLA's CPU
-    loop fusion otherwise re-evaluates them (scalar libm calls) in every loop that reads R."""
-    return jnp.cos(yaw), jnp.sin(yaw), jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll)
+    ``rotation``, evaluated once per row (``materialize``); its derivative reuses them
+    (d cos = -sin, d sin = cos) instead of evaluating them again as jnp.cos/jnp.sin would."""
+    yaw, pitch, roll = jnp.broadcast_arrays(yaw, pitch, roll)
+    return materialize(jnp.cos(yaw), jnp.sin(yaw), jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll))
+
+
+@trig.defjvp
+def _trig_jvp(primals, tangents):
+    values = trig(*primals)
+    out = []
+    for (c, s), dx in zip(zip(values[::2], values[1::2]), tangents):
+        out += [-s * dx, c * dx]
+    return values, tuple(out)
+
+
+def rotation_c(cz, sz, cy, sy, cx, sx):
+    """R (components) from ``trig``'s six values."""
+    return (
+        (cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx),
+        (sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx),
+        (-sy, cy * sx, cy * cx),
+    )
 
 
 def rotation_from_trig(cz, sz, cy, sy, cx, sx):
     """R from ``trig``'s six values."""
-    return jnp.stack(
-        [
-            jnp.stack([cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx]),
-            jnp.stack([sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx]),
-            jnp.stack([-sy, cy * sx, cy * cx]),
-        ]
-    )
+    return from_rows(rotation_c(cz, sz, cy, sy, cx, sx))
 
 
 def rotation(yaw, pitch, roll):
@@ -74,7 +193,7 @@ def rotation(yaw, pitch, roll):
 
 def safe_norm(v):
     """|v|, with gradient 0 (not NaN) at v = 0."""
-    sq = dot(v, v) if v.shape[-1] == 3 else jnp.sum(v * v, -1)
+    sq = dot(v, v) if isinstance(v, (tuple, list)) or v.shape[-1] == 3 else jnp.sum(v * v, -1)
     pos = sq > 0
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
@@ -100,3 +219,4 @@ def degrees_0_360(rad):
     """Radians -> degrees in [0, 360)."""
     d = jnp.mod(jnp.degrees(rad), 360.0)
     return jnp.where((d >= 360.0) | (d == 0.0), jnp.where(d == 0.0, 0.0, d - 360.0), d)
+
