@@ -3,15 +3,19 @@
     .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--quick]
 
 Prints the machine, the command and the date, then (median of --repeats runs each):
-- the kernel's rate (exchanges/s, all section-4 results, float64 and float32), as ``ks_jax.sweep``
-  computes it: three jitted calls, the per-row status and sines/cosines (``exchange.prepare``), the
-  impulse (``exchange.impulse_stage``), the results (``exchange.results_stage``); for comparison the
-  previous path (prepare, then ``exchange_with_status``) and the single call ``jit(vmap(exchange))``;
+- the kernel's rate (exchanges/s, all section-4 results, float64 and float32) as the library
+  computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
+  jitted calls per chunk: ``exchange.prepare``, ``exchange.impulse_stage``,
+  ``exchange.results_stage``; ``ks_jax.sweep`` does the same per chunk); for comparison the
+  single call ``jit(vmap(exchange))`` over the whole batch;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
   kernel's inputs and outputs together (one read and one write of each, as the kernel does);
-- the ratios kernel/NumPy and kernel/streaming; gradient / forward of a batched loss
-  (sum of both delta-V magnitudes); the first-call (compile) time;
+- the ratios kernel/NumPy and kernel/streaming; gradient / forward of two batched losses, each
+  against its own forward (``jax.value_and_grad`` of ``sum(vmap(exchange))`` over every input):
+  the sum of both delta-V magnitudes (the forward needs only the impulse) and a
+  reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
+  after impact; the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
@@ -45,10 +49,10 @@ import numpy_ks  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.exchange import exchange, exchange_with_status, impulse_stage, input_status, results_stage, prepare  # noqa: E402
+from ks_jax.batch import exchange_batch  # noqa: E402
+from ks_jax.exchange import exchange, exchange_with_status, impulse_stage, input_status, prepare, results_stage  # noqa: E402
 from ks_jax.sweeps import sweep  # noqa: E402
 
-CHUNK = 16384
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 
 
@@ -111,25 +115,20 @@ def random_batch(n, seed=0):
     return nps, last
 
 
-def kernel_staged(smoothing=0.0):
-    """What ks_jax.sweep does per chunk: three jitted calls, each result stored once per row:
-    prepare (status, sines/cosines), impulse_stage (J and what the results need), results_stage."""
-    prep = jax.jit(jax.vmap(prepare, in_axes=-1, out_axes=-1))
-    imp = jax.jit(jax.vmap(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:]), in_axes=-1, out_axes=-1))
-    body = jax.jit(jax.vmap(lambda *a: results_stage(*a[:5], *a[5:]), in_axes=-1, out_axes=-1))
+def kernel_chunk():
+    """What ``ks_jax.sweep`` computes per chunk, on batch-last inputs already cut into chunks
+    (the sweep builds each chunk's inputs inside its first call): three jitted calls,
+    ``exchange.prepare``, ``exchange.impulse_stage``, ``exchange.results_stage``."""
+    v = lambda f: jax.vmap(f, in_axes=-1, out_axes=-1)  # noqa: E731
+    prep = jax.jit(v(prepare))
+    imp = jax.jit(v(lambda *a: impulse_stage(*a[:5], 0.0, *a[5:])))
+    body = jax.jit(v(results_stage))
 
     def run(args):
         status, trig = prep(*args)
         return body(*args, status, imp(*args, status, trig))
 
     return run
-
-
-def kernel_status_only():
-    """The previous library path: prepare, then the whole exchange in one second call."""
-    prep = jax.jit(jax.vmap(prepare, in_axes=-1, out_axes=-1))
-    body = jax.jit(jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, *a[5:]), in_axes=-1, out_axes=-1))
-    return lambda args: body(*args, *prep(*args))
 
 
 def kernel_one_call():
@@ -194,26 +193,28 @@ def main():
     print(f"  rows     {n} per batch, median of {reps} runs\n")
 
     nps, last = random_batch(n)
-    two = kernel_staged()
+    first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)  # batch-first, as users hold it
     one = kernel_one_call()
 
     # --- kernel float64 / float32
     res = {}
-    t64, first64 = timed(lambda: jax.block_until_ready(two(last)), reps)
-    out = two(last)
-    io_bytes = nbytes(last) + nbytes(out)
-    last32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), last)
-    t32, first32 = timed(lambda: jax.block_until_ready(two(last32)), reps)
+    t64, first64 = timed(lambda: jax.block_until_ready(exchange_batch(*first)), reps)
+    out = exchange_batch(*first)
+    io_bytes = nbytes(first) + nbytes(out)
+    first32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first)
+    t32, first32_s = timed(lambda: jax.block_until_ready(exchange_batch(*first32)), reps)
     t1, first1 = timed(lambda: jax.block_until_ready(one(last)), max(1, reps // 2))
-    prev = kernel_status_only()
-    tp, _ = timed(lambda: jax.block_until_ready(prev(last)), max(1, reps // 2))
-    # the same two calls on chunks of CHUNK rows (inputs already in chunks, as ks_jax.sweep makes them
-    # inside its jitted call): the ~130 loops XLA makes then work on cache-resident arrays
-    chunks = [jax.tree_util.tree_map(lambda x: x[..., i:i + CHUNK], last) for i in range(0, n, CHUNK)]
-    tc, _ = timed(lambda: jax.block_until_ready([two(a) for a in chunks]), reps)
     res["kernel64"], res["kernel32"], res["kernel1"] = n / t64, n / t32, n / t1
-    res["prev"], res["chunk"] = n / tp, n / tc
+    chunk = 1 << 14
+    chunks = [jax.tree_util.tree_map(lambda x: x[..., i:i + chunk], last) for i in range(0, n, chunk)]
+    per_chunk = kernel_chunk()
+    tc, _ = timed(lambda: jax.block_until_ready([per_chunk(a) for a in chunks]), reps)
+    res["chunk"] = n / tc
     statuses = np.bincount(np.asarray(out.contact.status).ravel())
+    one_out = one(last)
+    same = max(float(np.nanmax(np.abs(np.asarray(a) - np.moveaxis(np.asarray(b), -1, 0))))
+               for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(one_out))
+               if np.asarray(a).dtype.kind == "f")
 
     # --- NumPy, same equations (and a check that it agrees)
     tnp, _ = timed(lambda: numpy_ks.exchange(*nps), max(1, reps // 2))
@@ -227,28 +228,42 @@ def main():
     )
 
     # --- streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
-    flat = [x.astype(jnp.float64) for x in jax.tree_util.tree_leaves((last, out))]
+    flat = [x.astype(jnp.float64) for x in jax.tree_util.tree_leaves((first, out))]
     copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
     tstream, _ = timed(lambda: jax.block_until_ready(copy(flat)), reps)
     stream_bytes = sum(x.size * 8 for x in flat)
     res["stream"] = n / tstream
 
-    # --- gradient / forward of a batched loss
+    # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap))))
     floats = (last[0], last[1], last[2], last[3], last[4])
-    status_fn = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))
-    st = status_fn(*last)
+    st = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))(*last)
 
-    def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
-        r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1)(*args, status)
-        dv = r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
-        return jnp.sum(jnp.where(r.contact.status == 0, dv, 0.0))
+    def batched(row_loss):
+        def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
+            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1)(*args, status)
+            return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
+        return loss
 
-    fwd = jax.jit(loss)
-    grad = jax.jit(jax.value_and_grad(loss))
-    tf, _ = timed(lambda: jax.block_until_ready(fwd(floats, st)), reps)
-    tg, firstg = timed(lambda: jax.block_until_ready(grad(floats, st)), reps)
-    g = grad(floats, st)[1]
-    gfinite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
+    def delta_v(r):
+        return r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
+
+    def residuals(r):  # squared residuals against made-up evidence; angles compared on the circle
+        total = 0.0
+        for k, v in enumerate(r.vehicles):
+            total = total + (v.delta_v_magnitude - 5.0) ** 2 + (v.speed_after - 8.0) ** 2 \
+                + (1 - jnp.cos(jnp.radians(v.course_after - 10.0))) \
+                + (1 - jnp.cos(jnp.radians(v.pdof - 30.0 * k))) + (v.yaw_rate_after - 0.1) ** 2
+        return total
+
+    grads = {}
+    for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
+        loss = batched(row_loss)
+        fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
+        tf, _ = timed(lambda: jax.block_until_ready(fwd(floats, st)), reps)
+        tg, firstg = timed(lambda: jax.block_until_ready(grad(floats, st)), reps)
+        g = grad(floats, st)[1]
+        finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
+        grads[name] = (tf, tg, firstg, finite)
 
     # --- sweep of a million-point grid
     case = ks_jax.load_case(CASE)
@@ -263,20 +278,25 @@ def main():
 
     w = 44
     print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
-    print(f"{'kernel float64 (prepare, impulse, results)':{w}} {res['kernel64']:14.4g}")
+    print(f"{'kernel float64 (exchange_batch)':{w}} {res['kernel64']:14.4g}")
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {res['kernel32'] / res['kernel64']:8.2f}  (f32/f64)")
-    print(f"{'single jit(vmap(exchange)), float64':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  (/kernel)")
-    print(f"{'previous: prepare + exchange_with_status':{w}} {res['prev']:14.4g}  {res['prev'] / res['kernel64']:8.2f}  (/kernel)")
-    print(f"{f'kernel float64, chunks of {CHUNK} rows':{w}} {res['chunk']:14.4g}  {res['chunk'] / res['kernel64']:8.2f}  (/kernel)")
+    print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  "
+          f"(/kernel; largest difference {same:.1e})")
+    print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {res['chunk'] / res['kernel64']:8.2f}  "
+          f"(/kernel; the three calls on inputs already cut into chunks)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
-          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e}; chunked/NumPy "
-          f"{res['chunk'] / res['numpy']:.2f})")
+          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
+          f"{res['chunk'] / res['numpy']:.2f}; single jit/NumPy {res['kernel1'] / res['numpy']:.2f})")
     print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {res['kernel64'] / res['stream']:8.2f}  "
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
-          f" {2 * stream_bytes / tstream / 1e9:.2f}; chunked/streaming {res['chunk'] / res['stream']:.2f})")
-    print(f"{'gradient/forward, sum of delta-V':{w}} {n / tg:14.4g}  {tg / tf:8.2f}  (grad finite: {gfinite})")
-    print(f"first call (compile + run) kernel float64: {first64:.2f} s (steady run {t64:.3f} s); float32: {first32:.2f} s; "
-          f"single jit: {first1:.2f} s; value_and_grad: {firstg:.2f} s")
+          f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {res['chunk'] / res['stream']:.2f}; "
+          f"single jit/streaming {res['kernel1'] / res['stream']:.2f})")
+    for name, (tf, tg, firstg, finite) in grads.items():
+        label = f"gradient/forward, loss: {name}"
+        print(f"{label:{w}} {n / tg:14.4g}  {tg / tf:8.2f}  (forward {n / tf:.4g}/s; gradient/kernel "
+              f"{res['kernel1'] * tg / n:.2f} of the single jit; grad finite: {finite}; first call {firstg:.2f} s)")
+    print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
+          f"float32: {first32_s:.2f} s; single jit: {first1:.2f} s")
     print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
           f"({r.points / tsw:.3g} points/s; first call incl. compile {tsw_first:.2f} s)")
     if pc is None:

@@ -1,12 +1,13 @@
 """ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
 
 See MODEL.md (the contract) for frames, equations and result names. Public surface:
-``Vehicle``, ``State``, ``Contact``, ``exchange``, ``load_case``, ``solve``, ``sweep``, ``units``;
+``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``load_case``, ``solve``, ``sweep``, ``units``;
 ``ks_jax.plot`` (matplotlib) loads on first use.
 """
 
 from . import units
 from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case, load_cases, set_input
+from .batch import exchange_batch
 from .exchange import exchange
 from .solve import Solution, solve, solve_inputs
 from .sweeps import SweepResult, sweep
@@ -42,6 +43,7 @@ __all__ = [
     "Vehicle",
     "VehicleResult",
     "exchange",
+    "exchange_batch",
     "normal_from_angles",
     "status_text",
     "units",

@@ -1,0 +1,71 @@
+"""ks_jax.exchange_batch: the chunked batch path gives the values of vmap(exchange), row for row,
+across chunk boundaries (including a last chunk that overlaps the one before), with bad rows."""
+
+from __future__ import annotations
+
+import copy
+
+import jax
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax import types as t
+
+
+def _leaves(result):
+    return jax.tree_util.tree_leaves(result)
+
+
+def _assert_same(batched, reference):
+    for a, b in zip(_leaves(batched), _leaves(reference)):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_exchange_batch_equals_vmap(kit, random_cases, kind):
+    cases = random_cases[kind][:150]
+    # rows with invalid inputs among them: each keeps its own status, the others are solved
+    bad = copy.deepcopy(cases[7])
+    bad["vehicles"][1]["mass"] = -5.0
+    nan = copy.deepcopy(cases[40])
+    nan["contact"]["point"] = np.array([0.0, np.nan, 0.0])
+    cases = cases[:7] + [bad] + cases[8:40] + [nan] + cases[41:]
+    args = kit.inputs(cases)
+    reference = jax.vmap(ks_jax.exchange)(*args)
+    # 150 rows in chunks of 64: 64, 64, then a last chunk aligned to the end (rows 86..149)
+    for chunk in (64, 150, 1000):
+        batched = ks_jax.exchange_batch(*args, chunk=chunk)
+        _assert_same(batched, reference)
+    status = np.asarray(batched.contact.status)
+    assert status[7] == t.INVALID_MASS_2 and status[40] == t.INVALID_NONFINITE
+    assert np.all(np.isnan(np.asarray(batched.vehicles[0].delta_v)[[7, 40]]))
+    good = np.ones(len(cases), bool)
+    good[[7, 40]] = False
+    assert np.all(np.isfinite(np.asarray(batched.contact.impulse)[good]))
+    # and against the independent NumPy reference
+    kit.assert_matches(kit.engine_dict(jax.tree_util.tree_map(lambda x: x[good], batched)),
+                       kit.reference_batch([c for c, g in zip(cases, good) if g]), 1e-9,
+                       [c for c, g in zip(cases, good) if g])
+
+
+def test_exchange_batch_smoothing_matches_vmap(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:40])
+    reference = jax.vmap(lambda *a: ks_jax.exchange(*a, 0.05))(*args)
+    _assert_same(ks_jax.exchange_batch(*args, smoothing=0.05, chunk=16), reference)
+
+
+def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:10])
+    short = args[4]._replace(friction=args[4].friction[:9])
+    with pytest.raises(ValueError, match="same leading batch axis"):
+        ks_jax.exchange_batch(*args[:4], short)
+    with pytest.raises(ValueError, match="smoothing must be in"):
+        ks_jax.exchange_batch(*args, smoothing=1.5)
+    with pytest.raises(ValueError, match="chunk must be a positive"):
+        ks_jax.exchange_batch(*args, chunk=0)
