@@ -196,7 +196,7 @@ def prepare(vehicle1, state1, vehicle2, state2, contact):
     ok = status == OK
 
     def tr(s):
-        return la.trig(*(jnp.where(ok, a, jnp.zeros_like(a)) for a in (s.yaw, s.pitch, s.roll)))
+        return la.trig_values(*(jnp.where(ok, a, jnp.zeros_like(a)) for a in (s.yaw, s.pitch, s.roll)))
 
     return status, (tr(state1), tr(state2))
 
@@ -210,20 +210,21 @@ def exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing,
 
 
 class ImpulseStage(NamedTuple):
-    """What ``results_stage`` needs from ``impulse_stage``: J (3,) on vehicle 1, sliding,
-    approaching, n (3,), u (3,), I^-1 (3, 3) and R (3, 3) of both vehicles, r_i = P - x_i (3,)."""
+    """What ``results_stage`` needs from ``impulse_stage``: J on vehicle 1, sliding, approaching,
+    n, u, I^-1 and R of both vehicles, r_i = P - x_i. Vectors as 3-tuples and matrices as rows of
+    3-tuples (``linalg.vec``/``linalg.mat``)."""
 
-    j: jnp.ndarray
+    j: tuple
     sliding: jnp.ndarray
     approaching: jnp.ndarray
-    n: jnp.ndarray
-    u: jnp.ndarray
-    a1: jnp.ndarray
-    rot1: jnp.ndarray
-    a2: jnp.ndarray
-    rot2: jnp.ndarray
-    r1: jnp.ndarray
-    r2: jnp.ndarray
+    n: tuple
+    u: tuple
+    a1: tuple
+    rot1: tuple
+    a2: tuple
+    rot2: tuple
+    r1: tuple
+    r2: tuple
 
 
 def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status, trig=None) -> ImpulseStage:
@@ -250,7 +251,11 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
     )
     K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
     j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
-    return ImpulseStage(j, sliding, approaching, n, u, a1, rot1, a2, rot2, r1, r2)
+    # components, not (3,) and (3, 3) arrays: stored by a batched caller as one array each, with no
+    # concatenate loop to assemble them (XLA's CPU concatenate loops are slow on long expressions)
+    vec, mat = la.vec, la.mat
+    return ImpulseStage(vec(j), sliding, approaching, vec(n), vec(u), mat(a1), mat(rot1), mat(a2), mat(rot2),
+                        vec(r1), vec(r2))
 
 
 def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
@@ -258,6 +263,9 @@ def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: Im
     ok = status == OK
     vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
     status = jnp.where(ok & ~stage.approaching, jnp.int32(SEPARATING), status)
+    vec, mat = la.array, la.from_rows
+    stage = stage._replace(j=vec(stage.j), n=vec(stage.n), u=vec(stage.u), a1=mat(stage.a1), rot1=mat(stage.rot1),
+                           a2=mat(stage.a2), rot2=mat(stage.rot2), r1=vec(stage.r1), r2=vec(stage.r2))
     result = derived.results(
         stage.j, stage.n, contact.point, stage.u, stage.sliding, status,
         (vehicle1, state1, stage.rot1, stage.a1, stage.r1),

@@ -148,7 +148,7 @@ def materialize(*xs):
     (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
     own derivative). On a GPU it costs one small kernel."""
     x = jnp.stack(xs)
-    bits = lax.bitcast_convert_type(x, jnp.int64 if x.dtype == jnp.float64 else jnp.int32)
+    bits = lax.bitcast_convert_type(x, {8: jnp.int64, 4: jnp.int32, 2: jnp.int16}[x.dtype.itemsize])
     zero = jnp.zeros((), bits.dtype)
     bits = lax.reduce(jnp.stack([bits, jnp.zeros_like(bits)]), zero, lax.bitwise_or, (0,))
     return _unstack(lax.bitcast_convert_type(bits, x.dtype))
@@ -159,8 +159,14 @@ def trig(yaw, pitch, roll):
     """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six transcendentals of
     ``rotation``, evaluated once per row (``materialize``); its derivative reuses them
     (d cos = -sin, d sin = cos) instead of evaluating them again as jnp.cos/jnp.sin would."""
+    return materialize(*trig_values(yaw, pitch, roll))
+
+
+def trig_values(yaw, pitch, roll):
+    """``trig``'s six values, computed where they are used (no ``materialize``): for a caller
+    that stores them itself, such as the first of the batched stages (``exchange.prepare``)."""
     yaw, pitch, roll = jnp.broadcast_arrays(yaw, pitch, roll)
-    return materialize(jnp.cos(yaw), jnp.sin(yaw), jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll))
+    return jnp.cos(yaw), jnp.sin(yaw), jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll)
 
 
 @trig.defjvp
