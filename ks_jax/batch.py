@@ -6,7 +6,7 @@ memory. ``exchange_batch`` computes the same values in chunks of ``chunk`` rows 
 each in three jitted calls whose outputs are stored once per row (the last writes its rows into
 the result in place): the status and sines/cosines
 (``exchange.prepare``), the impulse (``exchange.impulse_stage``), the results
-(``exchange.results_stage``). That is 2-3x the rate of the single call on a million rows
+(``exchange.results_stage``). That is 1.7-2.1x the rate of the single call on a million rows
 (benchmarks/RESULTS.md). Each chunk is read out of the full arrays inside the jitted calls; the
 last chunk is aligned to the end of the batch, so one compiled program serves every chunk.
 

@@ -187,10 +187,10 @@ def prepare(vehicle1, state1, vehicle2, state2, contact):
     """(status, trig): ``input_status`` and, for both vehicles, ``linalg.trig`` of the angles
     the exchange uses (those of ``_benign``: 0 in a row with invalid inputs).
 
-    Batched callers run this in its own jitted call and hand both to ``exchange_with_status``:
-    stored once, the status and the twelve sines/cosines are not re-evaluated by every loop
-    XLA's CPU fusion makes of the exchange (the sines/cosines are scalar libm calls, ~15 ns
-    each per row, and were evaluated 16 times each instead of once).
+    Batched callers run this in its own jitted call and hand both to the next stages
+    (``impulse_stage``, ``exchange_with_status``): the status and the twelve sines/cosines are
+    stored once per row by the call boundary (``linalg.trig_values``; inside one program
+    ``linalg.trig`` stores them itself).
     """
     status = input_status(vehicle1, state1, vehicle2, state2, contact)
     ok = status == OK
