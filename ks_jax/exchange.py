@@ -253,9 +253,8 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
     j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
     # components, not (3,) and (3, 3) arrays: stored by a batched caller as one array each, with no
     # concatenate loop to assemble them (XLA's CPU concatenate loops are slow on long expressions)
-    vec, mat = la.vec, la.mat
-    return ImpulseStage(vec(j), sliding, approaching, vec(n), vec(u), mat(a1), mat(rot1), mat(a2), mat(rot2),
-                        vec(r1), vec(r2))
+    return ImpulseStage(la.vec(j), sliding, approaching, la.vec(n), la.vec(u), la.mat(a1), la.mat(rot1),
+                        la.mat(a2), la.mat(rot2), la.vec(r1), la.vec(r2))
 
 
 def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
@@ -263,9 +262,9 @@ def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: Im
     ok = status == OK
     vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
     status = jnp.where(ok & ~stage.approaching, jnp.int32(SEPARATING), status)
-    vec, mat = la.array, la.from_rows
-    stage = stage._replace(j=vec(stage.j), n=vec(stage.n), u=vec(stage.u), a1=mat(stage.a1), rot1=mat(stage.rot1),
-                           a2=mat(stage.a2), rot2=mat(stage.rot2), r1=vec(stage.r1), r2=vec(stage.r2))
+    arr, rows = la.array, la.from_rows  # back to (3,) and (3, 3) arrays for derived.results
+    stage = stage._replace(j=arr(stage.j), n=arr(stage.n), u=arr(stage.u), a1=rows(stage.a1), rot1=rows(stage.rot1),
+                           a2=rows(stage.a2), rot2=rows(stage.rot2), r1=arr(stage.r1), r2=arr(stage.r2))
     result = derived.results(
         stage.j, stage.n, contact.point, stage.u, stage.sliding, status,
         (vehicle1, state1, stage.rot1, stage.a1, stage.r1),

@@ -23,6 +23,7 @@ import pytest  # noqa: E402
 
 import fit  # noqa: E402
 from fit.problem import to_x, to_z, wrap  # noqa: E402
+from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
@@ -34,41 +35,13 @@ RECOVER = 1e-5
 LAPLACE_FD = 1e-5
 LAPLACE_FD_HESSIAN = 1e-3
 
-UNKNOWNS = ["vehicles[0].speed", "vehicles[1].speed", "contact.restitution", "contact.friction",
-            "contact.point[0]", "contact.point[1]"]
-EVIDENCE = [("vehicles[0].delta_v_body[0]", 0.2), ("vehicles[0].delta_v_body[1]", 0.2),
-            ("vehicles[1].delta_v_body[0]", 0.2), ("vehicles[1].delta_v_body[1]", 0.2),
-            ("vehicles[0].yaw_rate_after", 0.02), ("vehicles[1].yaw_rate_after", 0.02),
-            ("vehicles[0].speed_after", 0.2), ("vehicles[1].speed_after", 0.2),
-            ("vehicles[0].crush", 0.03), ("vehicles[1].crush", 0.03)]
-
-
-def _oblique(rng):
-    """A random oblique side impact (vehicle 2's front into vehicle 1's right side), SI."""
-    L1, L2 = rng.uniform(4.4, 5.0, 2)
-    m1, m2 = rng.uniform(1200, 2200, 2)
-    yaw2 = rng.uniform(60, 120)
-    x_front = rng.uniform(-1.0, 1.2)
-    cf2 = 0.5 * L2
-    c2 = [x_front - cf2 * math.cos(math.radians(yaw2)), -0.55 - cf2 * math.sin(math.radians(yaw2))]
-    return {"name": "oblique", "vehicles": [
-        {"mass": m1, "inertia": [500, 2200, 1.6 * m1], "length": L1, "width": 1.85, "height": 1.45,
-         "cg_to_front": 0.45 * L1, "cg_height": 0.55, "position": [0, 0], "yaw": 0,
-         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)},
-        {"mass": m2, "inertia": [500, 2200, 1.6 * m2], "length": L2, "width": 1.8, "height": 1.5,
-         "cg_to_front": cf2, "cg_height": 0.55, "position": c2, "yaw": yaw2,
-         "speed": rng.uniform(8, 20), "yaw_rate": rng.uniform(-10, 10)}],
-        "contact": {"point": [x_front + rng.uniform(-0.3, 0.3), -0.65, 0.55], "normal": 90 + rng.uniform(-15, 15),
-                    "restitution": rng.uniform(0.05, 0.3), "friction": rng.uniform(0.1, 0.35)}}
-
-
 @pytest.fixture(scope="module")
 def oblique():
     """Four sliding oblique cases, noise-free evidence from the engine, fitted in one batch."""
     rng = np.random.default_rng(7)
     cases, truths, evidence, unknowns = [], [], [], []
     while len(cases) < 4:
-        d = _oblique(rng)
+        d = oblique_case(rng)
         case = case_from_dict(d)
         sol = solve(case, smoothing=1e-3)
         harder = solve(case_from_dict(dict(d, contact=dict(d["contact"], friction=1.5 * d["contact"]["friction"]))))
