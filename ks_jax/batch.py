@@ -3,15 +3,16 @@
 ``jax.jit(jax.vmap(exchange))`` over a whole batch is correct and differentiable, but on a CPU
 XLA turns the ~40 results into ~120 elementwise loops, each streaming batch-sized arrays through
 memory. ``exchange_batch`` computes the same values in chunks of ``chunk`` rows (cache-sized),
-each in three jitted calls whose outputs are stored once per row (the last writes its rows into
-the result in place): the status and sines/cosines
+each in three jitted calls whose outputs are stored once per row: the status and sines/cosines
 (``exchange.prepare``), the impulse (``exchange.impulse_stage``), the results
-(``exchange.results_stage``). That is 1.7-2.1x the rate of the single call on a million rows
-(benchmarks/RESULTS.md). Each chunk is read out of the full arrays inside the jitted calls; the
-last chunk is aligned to the end of the batch, so one compiled program serves every chunk.
+(``exchange.results_stage``). Each chunk is read out of the full arrays inside the jitted calls;
+the last chunk is aligned to the end of the batch, so one compiled program serves every chunk.
 
-It is for values. To differentiate, vmap ``exchange`` (``jax.grad`` of ``exchange_batch`` also
-works, chunk by chunk, but gains nothing).
+The results are NumPy arrays, as ``sweep``'s are: each chunk is copied into them while the next
+one is computed. NumPy backs large arrays with huge pages; a batch-sized result allocated by XLA
+is first touched page by page, which cost more than the copy (benchmarks/RESULTS.md).
+
+It is for values. To differentiate, vmap ``exchange``.
 """
 
 from __future__ import annotations
@@ -41,17 +42,10 @@ def _stages(size, smoothing):
         status, trig = prepared
         return jax.vmap(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:]))(*_rows(args, start, size), status, trig)
 
-    def res(args, start, prepared, stage, out):
-        chunk = jax.vmap(results_stage)(*_rows(args, start, size), prepared[0], stage)
-        return jax.tree_util.tree_map(lambda o, c: jax.lax.dynamic_update_slice_in_dim(o, c, start, 0), out, chunk)
+    def res(args, start, prepared, stage):
+        return jax.vmap(results_stage)(*_rows(args, start, size), prepared[0], stage)
 
-    def res_first(args, prepared, stage, n):  # allocates the result (n rows) around the first chunk
-        chunk = jax.vmap(results_stage)(*_rows(args, 0, size), prepared[0], stage)
-        return jax.tree_util.tree_map(
-            lambda c: jax.lax.dynamic_update_slice_in_dim(jnp.zeros((n,) + c.shape[1:], c.dtype), c, 0, 0), chunk)
-
-    return (jax.jit(prep), jax.jit(imp), jax.jit(res, donate_argnums=4),
-            jax.jit(res_first, static_argnames="n"))
+    return jax.jit(prep), jax.jit(imp), jax.jit(res)
 
 
 def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
@@ -59,8 +53,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     """``jax.vmap(exchange)`` over a leading batch axis of every leaf, in chunks (module docstring).
 
     Every leaf has the batch size N first (a (3,) input becomes (N, 3)). Returns the
-    ExchangeResult with a leading axis N, as jax arrays; rows with invalid inputs get their status
-    code and NaN, as in ``exchange``. ``chunk``: rows per chunk (default 16384).
+    ExchangeResult with a leading axis N, as NumPy arrays; rows with invalid inputs get their
+    status code and NaN, as in ``exchange``. ``chunk``: rows per chunk (default 16384).
     """
     if not 0.0 <= float(smoothing) < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
@@ -76,11 +70,22 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         raise ValueError("exchange_batch: the batch is empty")
     args = jax.tree_util.tree_map(jnp.asarray, args)
     size = min(int(chunk), n)
-    prep, imp, res, res_first = _stages(size, float(smoothing))
-    out = None
+    prep, imp, res = _stages(size, float(smoothing))
+    out, treedef, pending = None, None, None
+
+    def store(lo, start, chunk_result):  # rows lo.. of the batch from a chunk that starts at ``start``
+        for o, x in zip(out, jax.tree_util.tree_leaves(chunk_result)):
+            o[lo:start + size] = np.asarray(x)[lo - start:]
+
     for lo in range(0, n, size):
-        start = min(lo, n - size)  # the last chunk ends at n (rows it repeats get the same values)
+        start = min(lo, n - size)  # the last chunk ends at n (rows it repeats are not copied again)
         prepared = prep(args, start)
-        stage = imp(args, start, prepared)
-        out = res_first(args, prepared, stage, n=n) if out is None else res(args, start, prepared, stage, out)
-    return out
+        result = res(args, start, prepared, imp(args, start, prepared))
+        if out is None:
+            leaves, treedef = jax.tree_util.tree_flatten(result)
+            out = [np.empty((n,) + x.shape[1:], x.dtype) for x in leaves]
+        if pending is not None:  # copy the chunk before while this one is computed
+            store(*pending)
+        pending = (lo, start, result)
+    store(*pending)
+    return jax.tree_util.tree_unflatten(treedef, out)

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from . import linalg as la
 from . import units as U
 from .types import Contact, State, Vehicle, normal_from_angles
 
@@ -388,7 +389,8 @@ def to_pytrees(inputs: CaseInputs):
     out = []
     for v in inputs.vehicles:
         vehicle = Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height)
-        velocity = jnp.stack([v.speed * jnp.cos(v.course), v.speed * jnp.sin(v.course), v.velocity_z * jnp.ones_like(v.speed)])
+        sin, cos = la.sincos(v.course)
+        velocity = jnp.stack([v.speed * cos, v.speed * sin, v.velocity_z * jnp.ones_like(v.speed)])
         state = State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
         out += [vehicle, state]
     c = inputs.contact

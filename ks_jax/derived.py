@@ -17,8 +17,9 @@ def pdof_degrees(force_body):
 
 
 def clock(pdof):
-    """Degrees -> clock position 1..12 (12 = 0 deg, 3 = 90 deg), to the nearest hour."""
-    hour = jnp.mod(jnp.round(pdof / 30.0), 12.0)
+    """Degrees in [0, 360) -> clock position 1..12 (12 = 0 deg, 3 = 90 deg), to the nearest hour
+    (round(pdof / 30) is 0..12 there, and 0 is 12 o'clock)."""
+    hour = jnp.round(pdof / 30.0)
     return jnp.where(hour == 0, 12.0, hour)
 
 

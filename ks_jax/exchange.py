@@ -64,22 +64,44 @@ def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     return la.matmul(la.matmul(rot, inv_body), rot, transpose_b=True), rot
 
 
+def _components(x):
+    """The scalar components of a (), (3,) or (3, 3) leaf."""
+    x = jnp.asarray(x)
+    if x.ndim == 0:
+        return (x,)
+    if x.ndim == 1:
+        return la.vec(x)
+    return tuple(c for row in la.mat(x) for c in row)
+
+
+def _all(flags):
+    out = flags[0]
+    for f in flags[1:]:
+        out = out & f
+    return out
+
+
 def _inertia_ok(inertia):
+    # element by element, no reductions: XLA's CPU reductions over a few components per row
+    # are several times slower than the same checks written out
     inertia = jnp.asarray(inertia)
     if inertia.ndim == 1:
-        return jnp.all(inertia > 0)
-    m = inertia
-    scale = jnp.max(jnp.abs(m))
-    symmetric = jnp.all(jnp.abs(m - m.T) <= 1e-6 * scale)
-    minor1 = m[0, 0]
-    minor2 = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+        return _all([c > 0 for c in la.vec(inertia)])
+    m = la.mat(inertia)
+    scale = jnp.abs(m[0][0])
+    for row in m:
+        for c in row:
+            scale = jnp.maximum(scale, jnp.abs(c))
+    symmetric = _all([jnp.abs(m[i][j] - m[j][i]) <= 1e-6 * scale for i, j in ((0, 1), (0, 2), (1, 2))])
+    minor1 = m[0][0]
+    minor2 = m[0][0] * m[1][1] - m[0][1] * m[1][0]
     return symmetric & (minor1 > 0) & (minor2 > 0) & (la.det3(m) > 0)
 
 
 def input_status(vehicle1, state1, vehicle2, state2, contact):
     """() int32: OK, or the first rule an input breaks (codes in ``ks_jax.types``)."""
     leaves = jax.tree_util.tree_leaves((vehicle1, state1, vehicle2, state2, contact))
-    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
+    finite = _all([jnp.isfinite(c) for x in leaves for c in _components(x)])
 
     def box_ok(v):
         return (v.length > 0) & (v.width > 0) & (v.height > 0)

@@ -13,6 +13,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from . import linalg as la
+
 Array = jnp.ndarray
 
 
@@ -91,7 +93,8 @@ class State(NamedTuple):
                 raise ValueError("State.create needs velocity or speed")
             course = yaw if course is None else _f(course)
             speed = _f(speed)
-            velocity = jnp.stack([speed * jnp.cos(course), speed * jnp.sin(course), jnp.zeros_like(speed)], -1)
+            sin, cos = la.sincos(course)
+            velocity = jnp.stack([speed * cos, speed * sin, jnp.zeros_like(speed)], -1)
         velocity = _f(velocity)
         if velocity.shape[-1] == 2:
             velocity = jnp.concatenate([velocity, jnp.zeros_like(velocity[..., :1])], -1)
@@ -104,8 +107,8 @@ class State(NamedTuple):
 def normal_from_angles(azimuth, pitch=0.0):
     """Unit normal from its azimuth (rad, from +x, counter-clockwise) and pitch (rad, elevation)."""
     azimuth, pitch = _f(azimuth), _f(pitch)
-    cp = jnp.cos(pitch)
-    return jnp.stack([cp * jnp.cos(azimuth), cp * jnp.sin(azimuth), jnp.sin(pitch)], -1)
+    (sa, ca), (sp, cp) = la.sincos(azimuth), la.sincos(pitch)
+    return jnp.stack([cp * ca, cp * sa, sp], -1)
 
 
 class Contact(NamedTuple):
