@@ -1,12 +1,13 @@
 """Benchmark of the batched KS kernel, side by side with its baselines. Not a test.
 
-    .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--quick]
+    .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--grid 1000]
 
 Prints the machine, the command and the date, then (median of --repeats runs each):
 - the kernel's rate (exchanges/s, all section-4 results, float64 and float32) as the library
   computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
   jitted calls per chunk: ``exchange.prepare``, ``exchange.impulse_stage``,
-  ``exchange.results_stage``; ``ks_jax.sweep`` does the same per chunk); for comparison the
+  ``exchange.results_stage``, each chunk's results copied into batch-sized NumPy arrays;
+  ``ks_jax.sweep`` does the same per chunk); for comparison the
   single call ``jit(vmap(exchange))`` over the whole batch;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
