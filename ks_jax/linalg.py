@@ -123,13 +123,14 @@ def materialize(*xs):
     """``xs`` (arrays of one shape and float dtype) unchanged, computed in a loop of their own
     and stored, batched under vmap on CPU.
 
-    XLA's CPU fusion copies an elementwise producer into every loop that reads it. For sin, cos
-    and atan2 (scalar libm calls, 15-25 ns each per row in float64) that means evaluating them
-    many times over, and a libm call inside a loop keeps the rest of that loop from being
-    vectorized. ``lax.optimization_barrier`` is dropped before fusion on CPU, and a max-reduce
-    over copies is rewritten into an elementwise op; a bitwise-or reduction of the bits with
-    zeros is kept as a reduction, which is not copied into elementwise consumers (measured in
-    benchmarks/RESULTS.md: 6 sines and 6 cosines per row remain). The values are exact
+    XLA's CPU fusion copies an elementwise producer into every loop that reads it: the six
+    sines/cosines of a rotation (``sincos``, about 40 operations per angle) would be evaluated
+    again in each of the dozens of loops that read them, several of which (XLA's concatenate
+    loops) are not vectorized. ``lax.optimization_barrier`` is dropped before fusion on CPU, and a
+    max-reduce over copies is rewritten into an elementwise op; a bitwise-or reduction of the
+    bits with zeros is kept as a reduction, which is not copied into elementwise consumers
+    (benchmarks/RESULTS.md: with libm's sin/cos, 6 sines and 6 cosines per row remained of 70
+    in the backward pass). The values are exact
     (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
     own derivative). On a GPU it costs one small kernel."""
     x = jnp.stack(xs)
@@ -249,9 +250,9 @@ def _atan2_jvp(primals, tangents):
 
 @jax.custom_jvp
 def trig(yaw, pitch, roll):
-    """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six transcendentals of
-    ``rotation``, evaluated once per row (``materialize``); its derivative reuses them
-    (d cos = -sin, d sin = cos) instead of evaluating them again as jnp.cos/jnp.sin would."""
+    """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six values of
+    ``rotation``, evaluated once per row (``sincos``, stored by ``materialize``); its derivative
+    reuses them (d cos = -sin, d sin = cos) instead of evaluating them again."""
     return materialize(*trig_values(yaw, pitch, roll))
 
 
