@@ -61,6 +61,9 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     if int(chunk) < 1:
         raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     args = (vehicle1, state1, vehicle2, state2, contact)
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
+        raise TypeError("exchange_batch computes values into NumPy arrays and cannot run under jax.jit, "
+                        "jax.grad or jax.vmap; there, use jax.vmap(ks_jax.exchange)")
     sizes = {int(np.shape(x)[0]) if np.ndim(x) else None for x in jax.tree_util.tree_leaves(args)}
     if len(sizes) != 1 or None in sizes:
         raise ValueError("exchange_batch: every input needs the same leading batch axis; got sizes "

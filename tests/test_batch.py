@@ -70,3 +70,5 @@ def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_c
         ks_jax.exchange_batch(*args, smoothing=1.5)
     with pytest.raises(ValueError, match="chunk must be a positive"):
         ks_jax.exchange_batch(*args, chunk=0)
+    with pytest.raises(TypeError, match="jax.vmap"):  # values only: not under a transformation
+        jax.jit(lambda *a: ks_jax.exchange_batch(*a).contact.impulse_magnitude)(*args)
