@@ -55,13 +55,51 @@ from .types import (
 def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     """I^-1 in the global frame, R I_body^-1 R^T, and R. Closed form, no LAPACK.
     ``trig``: ``linalg.trig(yaw, pitch, roll)`` if the caller already has it."""
-    inertia = jnp.asarray(inertia)
+    trig = la.trig(yaw, pitch, roll) if trig is None else trig
+    return _world_inverse(jnp.asarray(inertia), tuple(trig))
+
+
+def _body_inverse_c(inertia):
+    """I_body^-1 (components) from a (3, 3) inertia or the diagonal (3,)."""
     if inertia.ndim == 1:
-        inv_body = jnp.diag(1.0 / inertia)
+        inverse = tuple(1.0 / c for c in la.vec(inertia))
+        zero = jnp.zeros_like(inverse[0])
+        return tuple(tuple(inverse[i] if i == j else zero for j in range(3)) for i in range(3))
+    det = la.det3(inertia)
+    return tuple(tuple(c / det for c in row) for row in la.adjugate_c(inertia))
+
+
+@jax.custom_jvp
+def _world_inverse(inertia, trig):
+    """(R M R^T, R) with M = I_body^-1 and R from the six sines/cosines; in components, arrays
+    only for the results."""
+    rot = la.rotation_c(*trig)
+    world = la.matmul_c(la.matmul_c(rot, _body_inverse_c(inertia)), rot, transpose_b=True)
+    return la.from_rows(world), la.from_rows(rot)
+
+
+@_world_inverse.defjvp
+def _world_inverse_jvp(primals, tangents):
+    """With W = R M (M = I_body^-1): d(R M R^T) = P + P^T - W dI W^T, P = dR W^T (dM = -M dI M; a
+    diagonal inertia gives dI = diag(d)). Autodiff of the forward gives the same derivative through
+    the adjugate, the determinant and every intermediate 3x3 array; batched, its backward pass
+    assembled those arrays in XLA concatenate loops that recompute shared products for each entry
+    (benchmarks/RESULTS.md). Here each entry of the cotangents is a short sum of its own."""
+    inertia, trig = primals
+    d_inertia, d_trig = tangents
+    rot, d_rot = jax.jvp(la.rotation_c, tuple(trig), tuple(d_trig))
+    w = la.matmul_c(rot, _body_inverse_c(inertia))
+    world = la.matmul_c(w, rot, transpose_b=True)
+    if inertia.ndim == 1:
+        d = la.vec(d_inertia)
+        zero = jnp.zeros_like(d[0])
+        d_i = tuple(tuple(d[i] if i == j else zero for j in range(3)) for i in range(3))
     else:
-        inv_body = la.adjugate3(inertia) / la.det3(inertia)
-    rot = la.rotation_from_trig(*(la.trig(yaw, pitch, roll) if trig is None else trig))
-    return la.matmul(la.matmul(rot, inv_body), rot, transpose_b=True), rot
+        d_i = la.mat(d_inertia)
+    p = la.matmul_c(d_rot, w, transpose_b=True)
+    q = la.matmul_c(la.matmul_c(w, d_i), w, transpose_b=True)
+    d_world = tuple(tuple(p[i][j] + p[j][i] - q[i][j] for j in range(3)) for i in range(3))
+    return (la.from_rows(world), la.from_rows(rot)), (la.from_rows(d_world), la.from_rows(d_rot))
 
 
 def _components(x):

@@ -2,6 +2,7 @@
 in units in the last place, and their derivatives against the exact ones."""
 
 import math
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -96,3 +97,38 @@ def test_degrees_and_clock():
     want = [12 if round(p / 30) % 12 == 0 else round(p / 30) % 12 for p in np.asarray(pdof)]
     np.testing.assert_array_equal(derived.clock(pdof), want)
     assert math.isclose(float(la.degrees_0_360(la.atan2(-1.0, 0.0))), 270.0)
+
+
+@pytest.mark.parametrize("diagonal", [False, True])
+def test_world_inverse_inertia_derivative_matches_plain_autodiff(diagonal):
+    """The hand-written tangent of R I^-1 R^T against autodiff of jnp.linalg.inv and the rotation."""
+    ex = sys.modules["ks_jax.exchange"]  # the module (ks_jax.exchange is also the function)
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((3, 3))
+    inertia = np.array([500.0, 2500.0, 2700.0]) if diagonal else a @ a.T + np.diag([500.0, 2500.0, 2700.0])
+    angles = (0.7, -0.2, 0.1)
+
+    def ours(i, y, p, r):
+        return ex.inverse_inertia_world(i, y, p, r)
+
+    def plain(i, y, p, r):
+        rot = jnp.array(la.rotation_c(jnp.cos(y), jnp.sin(y), jnp.cos(p), jnp.sin(p), jnp.cos(r), jnp.sin(r)))
+        inv = jnp.diag(1.0 / i) if i.ndim == 1 else jnp.linalg.inv(i)
+        return rot @ inv @ rot.T, rot
+
+    primals = (jnp.asarray(inertia), *map(jnp.asarray, angles))
+    tangent_i = rng.standard_normal(inertia.shape)
+    tangent_i = tangent_i if diagonal else tangent_i + tangent_i.T
+    tangents = (jnp.asarray(tangent_i), *map(jnp.asarray, rng.standard_normal(3)))
+    (a1, r1), (da1, dr1) = jax.jvp(ours, primals, tangents)
+    (a2, r2), (da2, dr2) = jax.jvp(plain, primals, tangents)
+    np.testing.assert_allclose(a1, a2, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(r1, r2, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(da1, da2, rtol=1e-10, atol=1e-20)
+    np.testing.assert_allclose(dr1, dr2, rtol=0, atol=1e-15)
+    # and reverse mode: the vector-Jacobian products agree
+    ct = (jnp.asarray(rng.standard_normal((3, 3))), jnp.asarray(rng.standard_normal((3, 3))))
+    g1 = jax.vjp(ours, *primals)[1](ct)
+    g2 = jax.vjp(plain, *primals)[1](ct)
+    for x, y in zip(g1, g2):
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-14)
