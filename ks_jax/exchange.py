@@ -24,6 +24,8 @@ C = ln 2 * s |dJ/ds| / |J| depends on mu and K (measured: below 1.2 for mu <= 1.
 
 from __future__ import annotations
 
+import functools
+import operator
 from typing import NamedTuple
 
 import jax
@@ -59,12 +61,16 @@ def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     return _world_inverse(jnp.asarray(inertia), tuple(trig))
 
 
+def _diagonal_c(values):
+    """The 3x3 diagonal matrix (components) with ``values`` on its diagonal."""
+    zero = jnp.zeros_like(values[0])
+    return tuple(tuple(values[i] if i == j else zero for j in range(3)) for i in range(3))
+
+
 def _body_inverse_c(inertia):
     """I_body^-1 (components) from a (3, 3) inertia or the diagonal (3,)."""
     if inertia.ndim == 1:
-        inverse = tuple(1.0 / c for c in la.vec(inertia))
-        zero = jnp.zeros_like(inverse[0])
-        return tuple(tuple(inverse[i] if i == j else zero for j in range(3)) for i in range(3))
+        return _diagonal_c(tuple(1.0 / c for c in la.vec(inertia)))
     det = la.det3(inertia)
     return tuple(tuple(c / det for c in row) for row in la.adjugate_c(inertia))
 
@@ -90,12 +96,7 @@ def _world_inverse_jvp(primals, tangents):
     rot, d_rot = jax.jvp(la.rotation_c, tuple(trig), tuple(d_trig))
     w = la.matmul_c(rot, _body_inverse_c(inertia))
     world = la.matmul_c(w, rot, transpose_b=True)
-    if inertia.ndim == 1:
-        d = la.vec(d_inertia)
-        zero = jnp.zeros_like(d[0])
-        d_i = tuple(tuple(d[i] if i == j else zero for j in range(3)) for i in range(3))
-    else:
-        d_i = la.mat(d_inertia)
+    d_i = _diagonal_c(la.vec(d_inertia)) if inertia.ndim == 1 else la.mat(d_inertia)
     p = la.matmul_c(d_rot, w, transpose_b=True)
     q = la.matmul_c(la.matmul_c(w, d_i), w, transpose_b=True)
     d_world = tuple(tuple(p[i][j] + p[j][i] - q[i][j] for j in range(3)) for i in range(3))
@@ -113,10 +114,7 @@ def _components(x):
 
 
 def _all(flags):
-    out = flags[0]
-    for f in flags[1:]:
-        out = out & f
-    return out
+    return functools.reduce(operator.and_, flags)
 
 
 def _inertia_ok(inertia):

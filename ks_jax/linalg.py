@@ -14,6 +14,7 @@ the backward pass. The transpose of one ``unstack`` is one ``stack`` (benchmarks
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import jax
 import jax.numpy as jnp
@@ -154,7 +155,6 @@ def materialize(*xs):
 def _pio2_parts(head_bits, dtype):
     """pi/2 = p1 + p2 + p3 in ``dtype``, p1 and p2 with ``head_bits`` significant bits (so that
     k * p1 and k * p2 are exact for integers |k| < 2^(mantissa - head_bits))."""
-    from fractions import Fraction
     rest = Fraction(_PI_DIGITS) / 2
     parts = []
     for last in (False, False, True):
