@@ -247,14 +247,13 @@ def prepare(vehicle1, state1, vehicle2, state2, contact):
 
     Batched callers run this in its own jitted call and hand both to the next stages
     (``impulse_stage``, ``exchange_with_status``): the status and the twelve sines/cosines are
-    stored once per row by the call boundary (``linalg.trig_values``; inside one program
-    ``linalg.trig`` stores them itself).
+    stored once per row.
     """
     status = input_status(vehicle1, state1, vehicle2, state2, contact)
     ok = status == OK
 
     def tr(s):
-        return la.trig_values(*(jnp.where(ok, a, jnp.zeros_like(a)) for a in (s.yaw, s.pitch, s.roll)))
+        return la.trig(*(jnp.where(ok, a, jnp.zeros_like(a)) for a in (s.yaw, s.pitch, s.roll)))
 
     return status, (tr(state1), tr(state2))
 

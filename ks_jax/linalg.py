@@ -255,29 +255,13 @@ def _atan2_jvp(primals, tangents):
     return atan2(y, x), safe_div(x * dy - y * dx, r2)
 
 
-@jax.custom_jvp
 def trig(yaw, pitch, roll):
     """(cos yaw, sin yaw, cos pitch, sin pitch, cos roll, sin roll): the six values of
-    ``rotation``, evaluated once per row (``sincos``, stored by ``materialize``); its derivative
-    reuses them (d cos = -sin, d sin = cos) instead of evaluating them again."""
-    return materialize(*trig_values(yaw, pitch, roll))
-
-
-def trig_values(yaw, pitch, roll):
-    """``trig``'s six values, computed where they are used (no ``materialize``): for a caller
-    that stores them itself, such as the first of the batched stages (``exchange.prepare``)."""
+    ``rotation``, each evaluated and stored once per row by ``sincos``, whose derivative reuses
+    them (d cos = -sin, d sin = cos)."""
     yaw, pitch, roll = jnp.broadcast_arrays(yaw, pitch, roll)
     (sz, cz), (sy, cy), (sx, cx) = sincos(yaw), sincos(pitch), sincos(roll)
     return cz, sz, cy, sy, cx, sx
-
-
-@trig.defjvp
-def _trig_jvp(primals, tangents):
-    values = trig(*primals)
-    out = []
-    for (c, s), dx in zip(zip(values[::2], values[1::2]), tangents):
-        out += [-s * dx, c * dx]
-    return values, tuple(out)
 
 
 def rotation_c(cz, sz, cy, sy, cx, sx):
