@@ -13,6 +13,7 @@ the backward pass. The transpose of one ``unstack`` is one ``stack`` (benchmarks
 
 from __future__ import annotations
 
+import functools
 import math
 from fractions import Fraction
 
@@ -143,8 +144,16 @@ def materialize(*xs):
     # backward pass 218 -> 74 ns of CPU per row in the profile)
     zero = jnp.zeros((), int_type)
     out = lax.reduce([jnp.stack([b, jnp.zeros_like(b)]) for b in bits], [zero] * len(bits),
-                     lambda a, b: tuple(x | y for x, y in zip(a, b)), (0,))
+                     _bitwise_or(len(bits)), (0,))
     return tuple(lax.bitcast_convert_type(o, dtype) for o in out)
+
+
+@functools.lru_cache(maxsize=None)
+def _bitwise_or(count):
+    """The reduction of ``materialize`` over ``count`` values. One function object per count:
+    ``lax.reduce`` caches its compiled computation by this object, so outside ``jit`` (eager
+    calls) a new function each time would compile the reduction again on every call."""
+    return lambda a, b: tuple(x | y for x, y in zip(a, b))
 
 
 # sin, cos and atan2 written as polynomials in elementwise operations. XLA's CPU backend
