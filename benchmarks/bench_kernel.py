@@ -122,7 +122,7 @@ def kernel_chunk():
     ``exchange.prepare``, ``exchange.impulse_stage``, ``exchange.results_stage``."""
     v = lambda f: jax.vmap(f, in_axes=-1, out_axes=-1)  # noqa: E731
     prep = jax.jit(v(prepare))
-    imp = jax.jit(v(lambda *a: impulse_stage(*a[:5], 0.0, *a[5:])))
+    imp = jax.jit(v(lambda *a: impulse_stage(*a[:5], 0.0, *a[5:], for_gradients=False)))
     body = jax.jit(v(results_stage))
 
     def run(args):

@@ -75,12 +75,16 @@ def _body_inverse_c(inertia):
     return tuple(tuple(c / det for c in row) for row in la.adjugate_c(inertia))
 
 
+def _world_inverse_c(inertia, trig):
+    """(R M R^T, R) as rows of components, M = I_body^-1, R from the six sines/cosines."""
+    rot = la.rotation_c(*trig)
+    return la.matmul_c(la.matmul_c(rot, _body_inverse_c(jnp.asarray(inertia))), rot, transpose_b=True), rot
+
+
 @jax.custom_jvp
 def _world_inverse(inertia, trig):
-    """(R M R^T, R) with M = I_body^-1 and R from the six sines/cosines; in components, arrays
-    only for the results."""
-    rot = la.rotation_c(*trig)
-    world = la.matmul_c(la.matmul_c(rot, _body_inverse_c(inertia)), rot, transpose_b=True)
+    """``_world_inverse_c`` as (3, 3) arrays, with a hand-written derivative."""
+    world, rot = _world_inverse_c(inertia, trig)
     return la.from_rows(world), la.from_rows(rot)
 
 
@@ -215,17 +219,51 @@ def impulse(K, u, n, restitution, friction, smoothing=0.0):
     return j, sliding, approaching
 
 
+def _impulse_c(K, u, n, restitution, friction, smoothing):
+    """``impulse``, step for step, on components: K as rows, u and n as 3-tuples; J as a 3-tuple.
+    For values only (``impulse_stage(for_gradients=False)``): differentiated on K's array, this
+    form made value_and_grad of a batched loss 1.5x slower than ``impulse``, and on K's
+    components 70x slower (benchmarks/RESULTS.md). tests/test_batch.py holds the two forms to the
+    same values."""
+    un = la.dot(n, u)
+    approaching = un < 0
+    det = la.det3(K)
+    j_stick = tuple(-c / det for c in la.matvec_c(la.adjugate_c(K), u))
+    n_c = la.dot(n, j_stick)
+    t_c = tuple(js - n_c * nk for js, nk in zip(j_stick, n))
+    t_norm = la.safe_norm(t_c)
+    a = friction * jnp.maximum(n_c, 0.0)
+    m = _cone_scale(a, t_norm, smoothing)
+    f = la.safe_div(friction, m)
+    d = tuple(nk + f * tk for nk, tk in zip(n, t_c))
+    denom = la.dot(n, la.matvec_c(K, d))
+    normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
+    scale = (1.0 + restitution) * normal
+    j = tuple(scale * dk for dk in d)
+    sliding = approaching & (t_norm > a)
+    return j, sliding, approaching
+
+
+def _arm_c(r, a):
+    """-[r]x A [r]x (rows of components) for r (3,) and A (3, 3)."""
+    x, y, z = la.vec(r)
+    zero = jnp.zeros_like(x)
+    rx = ((zero, -z, y), (z, zero, -x), (-y, x, zero))
+    return la.matmul_c(la.matmul_c(rx, a), rx, transpose_b=True)
+
+
 def collision_matrix(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
     """K = (1/m1 + 1/m2) Id - [r1]x I1^-1 [r1]x - [r2]x I2^-1 [r2]x (MODEL.md section 3, step 2)."""
-
-    def arm(r, a):
-        x, y, z = la.vec(r)
-        zero = jnp.zeros_like(x)
-        rx = ((zero, -z, y), (z, zero, -x), (-y, x, zero))
-        return la.matmul(la.matmul_c(rx, a), rx, transpose_b=True)  # = -[r]x A [r]x
-
     eye = jnp.eye(3, dtype=r1.dtype)
-    return (1.0 / mass1 + 1.0 / mass2) * eye + arm(r1, inv_inertia1) + arm(r2, inv_inertia2)
+    return ((1.0 / mass1 + 1.0 / mass2) * eye + la.from_rows(_arm_c(r1, inv_inertia1))
+            + la.from_rows(_arm_c(r2, inv_inertia2)))
+
+
+def _collision_matrix_c(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
+    """``collision_matrix`` as rows of components."""
+    s = 1.0 / mass1 + 1.0 / mass2
+    b1, b2 = _arm_c(r1, inv_inertia1), _arm_c(r2, inv_inertia2)
+    return tuple(tuple(b1[i][k] + b2[i][k] + (s if i == k else 0.0) for k in range(3)) for i in range(3))
 
 
 def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
@@ -284,13 +322,20 @@ class ImpulseStage(NamedTuple):
     r2: tuple
 
 
-def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status, trig=None) -> ImpulseStage:
+def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status, trig=None,
+                  for_gradients=True) -> ImpulseStage:
     """MODEL.md section 3, steps 1-6: the impulse and what the results are derived from.
 
     ``exchange_with_status`` is ``results_stage(impulse_stage(...))``. A batched caller on CPU
     may run the two stages as separate jitted calls: the ~60 numbers of ``ImpulseStage`` are then
     stored once per row instead of being re-derived inside every loop XLA's fusion makes of the
-    ~40 results (half the time per row at cache-sized chunks; benchmarks/RESULTS.md)."""
+    ~40 results (half the time per row at cache-sized chunks; benchmarks/RESULTS.md).
+
+    ``for_gradients``: the same values either way. True (the default) passes the world inverse
+    inertias, R and K between the steps as (3, 3) arrays; XLA's backward pass needs those
+    boundaries (``_impulse_c`` says what components cost there). The
+    stage path of ``sweep`` and ``exchange_batch`` computes values only and passes False: the
+    same algebra in components, 8-17% faster there (benchmarks/RESULTS.md)."""
     if isinstance(smoothing, (int, float)) and not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     ok = status == OK
@@ -299,15 +344,25 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
     n = contact.normal / la.safe_norm(contact.normal)
     p = contact.point
     trig1, trig2 = (None, None) if trig is None else trig
-    a1, rot1 = inverse_inertia_world(vehicle1.inertia, state1.yaw, state1.pitch, state1.roll, trig1)
-    a2, rot2 = inverse_inertia_world(vehicle2.inertia, state2.yaw, state2.pitch, state2.roll, trig2)
+    if for_gradients:
+        a1, rot1 = inverse_inertia_world(vehicle1.inertia, state1.yaw, state1.pitch, state1.roll, trig1)
+        a2, rot2 = inverse_inertia_world(vehicle2.inertia, state2.yaw, state2.pitch, state2.roll, trig2)
+    else:
+        a1, rot1 = _world_inverse_c(vehicle1.inertia, tuple(la.trig(state1.yaw, state1.pitch, state1.roll)
+                                                            if trig1 is None else trig1))
+        a2, rot2 = _world_inverse_c(vehicle2.inertia, tuple(la.trig(state2.yaw, state2.pitch, state2.roll)
+                                                            if trig2 is None else trig2))
     r1 = p - state1.position
     r2 = p - state2.position
     u = (state1.velocity + la.cross(state1.angular_velocity, r1)) - (
         state2.velocity + la.cross(state2.angular_velocity, r2)
     )
-    K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
-    j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
+    if for_gradients:
+        K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
+        j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
+    else:
+        K = _collision_matrix_c(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
+        j, sliding, approaching = _impulse_c(K, la.vec(u), la.vec(n), contact.restitution, contact.friction, smoothing)
     # components, not (3,) and (3, 3) arrays: stored by a batched caller as one array each, with no
     # concatenate loop to assemble them (XLA's CPU concatenate loops are slow on long expressions)
     return ImpulseStage(la.vec(j), sliding, approaching, la.vec(n), la.vec(u), la.mat(a1), la.mat(rot1),

@@ -192,8 +192,8 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
             return None
         vals = values(start, axes, total)
         status, trig = prepared
-        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v)), smoothing, st, tr))(
-            status, trig, *vals)
+        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v)), smoothing, st, tr,
+                                                         for_gradients=False))(status, trig, *vals)
 
     def solve_fn(start, axes, total, base, prepared, stage):
         vals = values(start, axes, total)

@@ -1,5 +1,8 @@
 """ks_jax.exchange_batch: the chunked batch path gives the values of vmap(exchange), row for row,
-across chunk boundaries (including a last chunk that overlaps the one before), with bad rows."""
+across chunk boundaries (including a last chunk that overlaps the one before), with bad rows.
+
+The two compute the impulse in two forms (``impulse_stage(for_gradients=False)``: components;
+``exchange``: (3, 3) arrays), so these tests also hold the two forms to the same values."""
 
 from __future__ import annotations
 
