@@ -2,7 +2,9 @@
 
     .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--grid 1000]
 
-Prints the machine, the command and the date, then (median of --repeats runs each):
+Prints the machine, the command and the date, then, measured in --repeats rounds that run every
+variant once in turn (rates: the median time; ratios: the median of the ratios within a round, so
+that a change in the machine's load moves both sides of a ratio alike):
 - the kernel's rate (exchanges/s, all section-4 results, float64 and float32) as the library
   computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
   jitted calls per chunk: ``exchange.prepare``, ``exchange.impulse_stage``,
@@ -67,17 +69,29 @@ def cpu_model():
     return platform.processor() or platform.machine()
 
 
-def timed(fn, repeats):
-    """(median seconds, first-call seconds) of fn() (which blocks until done)."""
+def first_call(fn):
+    """Seconds of the first call of fn() (compile + run; fn blocks until done)."""
     t = time.perf_counter()
     fn()
-    first = time.perf_counter() - t
-    runs = []
+    return time.perf_counter() - t
+
+
+def rounds(fns, repeats):
+    """Times of each fn() (blocking), measured in ``repeats`` rounds that run every fn once, in
+    turn: a ratio of two of them is then taken round by round (``ratio``), so a change in the
+    machine's load during the run moves both sides of it alike."""
+    times = {name: [] for name in fns}
     for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        runs.append(time.perf_counter() - t)
-    return statistics.median(runs), first
+        for name, fn in fns.items():
+            t = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t)
+    return times
+
+
+def ratio(times, a, b):
+    """Median over rounds of time[b] / time[a] (how many times faster a is than b)."""
+    return statistics.median(tb / ta for ta, tb in zip(times[a], times[b]))
 
 
 def random_batch(n, seed=0):
@@ -191,49 +205,54 @@ def main():
     print(f"  machine  {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}")
     print(f"  jax      {jax.__version__}, backend {jax.default_backend()}, devices {jax.devices()}")
     print(f"  numpy    {np.__version__}")
-    print(f"  rows     {n} per batch, median of {reps} runs\n")
+    print(f"  rows     {n} per batch, {reps} interleaved rounds (medians)\n")
 
     nps, last = random_batch(n)
     first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)  # batch-first, as users hold it
     one = kernel_one_call()
 
-    # --- kernel float64 / float32
-    res = {}
-    t64, first64 = timed(lambda: jax.block_until_ready(exchange_batch(*first)), reps)
-    out = exchange_batch(*first)
-    io_bytes = nbytes(first) + nbytes(out)
+    # --- first calls (compile + run), then everything in interleaved rounds
     first32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first)
-    t32, first32_s = timed(lambda: jax.block_until_ready(exchange_batch(*first32)), reps)
-    t1, first1 = timed(lambda: jax.block_until_ready(one(last)), max(1, reps // 2))
-    res["kernel64"], res["kernel32"], res["kernel1"] = n / t64, n / t32, n / t1
     chunk = 1 << 14
     chunks = [jax.tree_util.tree_map(lambda x: x[..., i:i + chunk], last) for i in range(0, n, chunk)]
     per_chunk = kernel_chunk()
-    tc, _ = timed(lambda: jax.block_until_ready([per_chunk(a) for a in chunks]), reps)
-    res["chunk"] = n / tc
+    first64 = first_call(lambda: exchange_batch(*first))
+    first32_s = first_call(lambda: exchange_batch(*first32))
+    first1 = first_call(lambda: jax.block_until_ready(one(last)))
+    out = exchange_batch(*first)
+    io_bytes = nbytes(first) + nbytes(out)
+    # streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
+    flat = [jnp.asarray(x).astype(jnp.float64) for x in jax.tree_util.tree_leaves((first, out))]
+    copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
+    stream_bytes = sum(x.size * 8 for x in flat)
+    fns = {
+        "kernel64": lambda: exchange_batch(*first),
+        "kernel32": lambda: exchange_batch(*first32),
+        "kernel1": lambda: jax.block_until_ready(one(last)),
+        "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
+        "numpy": lambda: numpy_ks.exchange(*nps),
+        "stream": lambda: jax.block_until_ready(copy(flat)),
+    }
+    for fn in fns.values():  # warm
+        fn()
+    times = rounds(fns, reps)
+    res = {k: n / statistics.median(v) for k, v in times.items()}
+    t64 = statistics.median(times["kernel64"])
+    tstream = statistics.median(times["stream"])
     statuses = np.bincount(np.asarray(out.contact.status).ravel())
     one_out = one(last)
     same = max(float(np.nanmax(np.abs(np.asarray(a) - np.moveaxis(np.asarray(b), -1, 0))))
                for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(one_out))
                if np.asarray(a).dtype.kind == "f")
-
-    # --- NumPy, same equations (and a check that it agrees)
-    tnp, _ = timed(lambda: numpy_ks.exchange(*nps), max(1, reps // 2))
-    res["numpy"] = n / tnp
+    # NumPy agrees with the kernel (the invalid rows, NaN in both, are left out)
     ref_c, ref_v = numpy_ks.exchange(*jax.tree_util.tree_map(lambda x: x[:4096], nps))
+    valid = np.asarray(out.contact.status[:4096]) == 0
     diff = max(
-        np.nanmax(np.abs(np.asarray(out.contact.impulse_magnitude[:4096]) - ref_c["impulse_magnitude"])
-                  / np.abs(ref_c["impulse_magnitude"])),
-        np.nanmax(np.abs(np.asarray(out.vehicles[1].delta_v_magnitude[:4096]) - ref_v[1]["delta_v_magnitude"])
-                  / np.abs(ref_v[1]["delta_v_magnitude"])),
+        np.max(np.abs(np.asarray(out.contact.impulse_magnitude[:4096]) - ref_c["impulse_magnitude"])[valid]
+               / np.abs(ref_c["impulse_magnitude"])[valid]),
+        np.max(np.abs(np.asarray(out.vehicles[1].delta_v_magnitude[:4096]) - ref_v[1]["delta_v_magnitude"])[valid]
+               / np.abs(ref_v[1]["delta_v_magnitude"])[valid]),
     )
-
-    # --- streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
-    flat = [x.astype(jnp.float64) for x in jax.tree_util.tree_leaves((first, out))]
-    copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
-    tstream, _ = timed(lambda: jax.block_until_ready(copy(flat)), reps)
-    stream_bytes = sum(x.size * 8 for x in flat)
-    res["stream"] = n / tstream
 
     # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap))))
     floats = (last[0], last[1], last[2], last[3], last[4])
@@ -260,11 +279,14 @@ def main():
     for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
         loss = batched(row_loss)
         fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
-        tf, _ = timed(lambda: jax.block_until_ready(fwd(floats, st)), reps)
-        tg, firstg = timed(lambda: jax.block_until_ready(grad(floats, st)), reps)
+        first_call(lambda: jax.block_until_ready(fwd(floats, st)))
+        firstg = first_call(lambda: jax.block_until_ready(grad(floats, st)))
+        gt = rounds({"forward": lambda: jax.block_until_ready(fwd(floats, st)),
+                     "gradient": lambda: jax.block_until_ready(grad(floats, st))}, reps)
         g = grad(floats, st)[1]
         finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
-        grads[name] = (tf, tg, firstg, finite)
+        grads[name] = (statistics.median(gt["forward"]), statistics.median(gt["gradient"]),
+                       ratio(gt, "forward", "gradient"), firstg, finite)
 
     # --- sweep of a million-point grid
     case = ks_jax.load_case(CASE)
@@ -278,23 +300,24 @@ def main():
     pc, pc_note = pycrash_rate(3)
 
     w = 44
+    q = lambda a, b: ratio(times, a, b)  # noqa: E731
     print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
     print(f"{'kernel float64 (exchange_batch)':{w}} {res['kernel64']:14.4g}")
-    print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {res['kernel32'] / res['kernel64']:8.2f}  (f32/f64)")
-    print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {res['kernel1'] / res['kernel64']:8.2f}  "
+    print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {q('kernel32', 'kernel64'):8.2f}  (f32/f64)")
+    print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
           f"(/kernel; largest difference {same:.1e})")
-    print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {res['chunk'] / res['kernel64']:8.2f}  "
+    print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {q('chunk', 'kernel64'):8.2f}  "
           f"(/kernel; the three calls on inputs already cut into chunks)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
-          f"{res['kernel64'] / res['numpy']:8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
-          f"{res['chunk'] / res['numpy']:.2f}; single jit/NumPy {res['kernel1'] / res['numpy']:.2f})")
-    print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {res['kernel64'] / res['stream']:8.2f}  "
+          f"{q('kernel64', 'numpy'):8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
+          f"{q('chunk', 'numpy'):.2f}; single jit/NumPy {q('kernel1', 'numpy'):.2f})")
+    print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {q('kernel64', 'stream'):8.2f}  "
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
-          f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {res['chunk'] / res['stream']:.2f}; "
-          f"single jit/streaming {res['kernel1'] / res['stream']:.2f})")
-    for name, (tf, tg, firstg, finite) in grads.items():
+          f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
+          f"single jit/streaming {q('kernel1', 'stream'):.2f})")
+    for name, (tf, tg, gf, firstg, finite) in grads.items():
         label = f"gradient/forward, loss: {name}"
-        print(f"{label:{w}} {n / tg:14.4g}  {tg / tf:8.2f}  (forward {n / tf:.4g}/s; gradient/kernel "
+        print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; gradient/kernel "
               f"{res['kernel1'] * tg / n:.2f} of the single jit; grad finite: {finite}; first call {firstg:.2f} s)")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
           f"float32: {first32_s:.2f} s; single jit: {first1:.2f} s")
