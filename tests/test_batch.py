@@ -46,6 +46,8 @@ def test_exchange_batch_equals_vmap(kit, random_cases, kind):
         batched = ks_jax.exchange_batch(*args, chunk=chunk)
         _assert_same(batched, reference)
     assert all(isinstance(x, np.ndarray) for x in _leaves(batched))  # NumPy results, like sweep's
+    one = ks_jax.exchange_batch(*jax.tree_util.tree_map(lambda x: x[3:4], args))  # a batch of one row
+    _assert_same(one, jax.tree_util.tree_map(lambda x: x[3:4], reference))
     status = np.asarray(batched.contact.status)
     assert status[7] == t.INVALID_MASS_2 and status[40] == t.INVALID_NONFINITE
     assert np.all(np.isnan(np.asarray(batched.vehicles[0].delta_v)[[7, 40]]))
