@@ -333,9 +333,9 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
 
     ``for_gradients``: the same values either way. True (the default) passes the world inverse
     inertias, R and K between the steps as (3, 3) arrays; XLA's backward pass needs those
-    boundaries (``_impulse_c`` says what components cost there). The
-    stage path of ``sweep`` and ``exchange_batch`` computes values only and passes False: the
-    same algebra in components, 8-17% faster there (benchmarks/RESULTS.md)."""
+    boundaries (``_impulse_c`` says what components cost there). The stage path of ``sweep`` and
+    ``exchange_batch`` computes values only and passes False: the same algebra in components,
+    about 10% faster there (benchmarks/RESULTS.md)."""
     if isinstance(smoothing, (int, float)) and not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     ok = status == OK
@@ -348,10 +348,10 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
         a1, rot1 = inverse_inertia_world(vehicle1.inertia, state1.yaw, state1.pitch, state1.roll, trig1)
         a2, rot2 = inverse_inertia_world(vehicle2.inertia, state2.yaw, state2.pitch, state2.roll, trig2)
     else:
-        a1, rot1 = _world_inverse_c(vehicle1.inertia, tuple(la.trig(state1.yaw, state1.pitch, state1.roll)
-                                                            if trig1 is None else trig1))
-        a2, rot2 = _world_inverse_c(vehicle2.inertia, tuple(la.trig(state2.yaw, state2.pitch, state2.roll)
-                                                            if trig2 is None else trig2))
+        trig1 = la.trig(state1.yaw, state1.pitch, state1.roll) if trig1 is None else trig1
+        trig2 = la.trig(state2.yaw, state2.pitch, state2.roll) if trig2 is None else trig2
+        a1, rot1 = _world_inverse_c(vehicle1.inertia, tuple(trig1))
+        a2, rot2 = _world_inverse_c(vehicle2.inertia, tuple(trig2))
     r1 = p - state1.position
     r2 = p - state2.position
     u = (state1.velocity + la.cross(state1.angular_velocity, r1)) - (
