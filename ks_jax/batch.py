@@ -40,7 +40,8 @@ def _stages(size, smoothing):
 
     def imp(args, start, prepared):
         status, trig = prepared
-        return jax.vmap(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False))(*_rows(args, start, size), status, trig)
+        stage = lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False)  # noqa: E731
+        return jax.vmap(stage)(*_rows(args, start, size), status, trig)
 
     def res(args, start, prepared, stage):
         return jax.vmap(results_stage)(*_rows(args, start, size), prepared[0], stage)

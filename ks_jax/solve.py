@@ -31,14 +31,14 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
 
 @partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))
 def _solve_batch(inputs, smoothing, auto_point, auto_normal):
-    return jax.vmap(lambda x: solve_inputs(x, auto_point, auto_normal, smoothing))(inputs)
-
-
-@partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))
-def _solve_one(inputs, smoothing, auto_point, auto_normal):
-    # one case unbatched: XLA compiles the vmapped program for a batch of one 3-4x slower than
-    # for two rows or for no batch axis (6.1 against 1.5 s explicit, 17.5 against 5.9 s automatic)
-    return jax.tree_util.tree_map(lambda x: x[None], solve_inputs(inputs, auto_point, auto_normal, smoothing))
+    solve_row = lambda x: solve_inputs(x, auto_point, auto_normal, smoothing)  # noqa: E731
+    if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
+        # one case, unbatched: XLA compiles the vmapped program for a batch of one 3-4x slower
+        # than for two rows or for no batch axis (6.1 against 1.5 s explicit, 17.5 against 5.9 s
+        # automatic)
+        row = solve_row(jax.tree_util.tree_map(lambda x: x[0], inputs))
+        return jax.tree_util.tree_map(lambda x: x[None], row)
+    return jax.vmap(solve_row)(inputs)
 
 
 @dataclass
@@ -75,10 +75,7 @@ def solve(cases, smoothing: float = 0.0):
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
     for (auto_point, auto_normal), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
-        if len(idx) == 1:
-            res = _solve_one(as_arrays(cases[idx[0]].inputs), float(smoothing), auto_point, auto_normal)
-        else:
-            res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
+        res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
         res = jax.tree_util.tree_map(np.asarray, res)
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)
