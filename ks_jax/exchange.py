@@ -247,9 +247,14 @@ def _impulse_c(K, u, n, restitution, friction, smoothing):
 def _arm_c(r, a):
     """-[r]x A [r]x (rows of components) for r (3,) and A (3, 3)."""
     x, y, z = la.vec(r)
-    zero = jnp.zeros_like(x)
-    rx = ((zero, -z, y), (z, zero, -x), (-y, x, zero))
-    return la.matmul_c(la.matmul_c(rx, a), rx, transpose_b=True)
+    a = la.mat(a)
+
+    def cross_rows(m):  # [r]x m, written without the zeros of [r]x (x * 0 is not folded: NaN * 0)
+        return (tuple(y * m[2][k] - z * m[1][k] for k in range(3)), tuple(z * m[0][k] - x * m[2][k] for k in range(3)),
+                tuple(x * m[1][k] - y * m[0][k] for k in range(3)))
+
+    b = cross_rows(a)  # [r]x A; then ([r]x (([r]x A)^T))^T = [r]x A [r]x^T
+    return la.transpose_c(cross_rows(la.transpose_c(b)))
 
 
 def collision_matrix(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
