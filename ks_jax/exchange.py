@@ -61,16 +61,20 @@ def inverse_inertia_world(inertia, yaw, pitch, roll, trig=None):
     return _world_inverse(jnp.asarray(inertia), tuple(trig))
 
 
-def _diagonal_c(values):
-    """The 3x3 diagonal matrix (components) with ``values`` on its diagonal."""
-    zero = jnp.zeros_like(values[0])
-    return tuple(tuple(values[i] if i == j else zero for j in range(3)) for i in range(3))
+def _times_body_c(a, m):
+    """a M (components): M as rows of components, or a (3,) array, the diagonal of M (each column
+    of a scaled: XLA would compute every product by the zeros of a diagonal matrix, NaN * 0 being
+    NaN)."""
+    if isinstance(m, (tuple, list)):
+        return la.matmul_c(a, m)
+    d = la.vec(m)
+    return tuple(tuple(row[j] * d[j] for j in range(3)) for row in la.mat(a))
 
 
-def _body_inverse_c(inertia):
-    """I_body^-1 (components) from a (3, 3) inertia or the diagonal (3,)."""
+def _body_inverse(inertia):
+    """I_body^-1 from a (3, 3) inertia (rows of components) or the diagonal (3,) (a (3,) array)."""
     if inertia.ndim == 1:
-        return _diagonal_c(tuple(1.0 / c for c in la.vec(inertia)))
+        return 1.0 / inertia
     det = la.det3(inertia)
     return tuple(tuple(c / det for c in row) for row in la.adjugate_c(inertia))
 
@@ -78,7 +82,7 @@ def _body_inverse_c(inertia):
 def _world_inverse_c(inertia, trig):
     """(R M R^T, R) as rows of components, M = I_body^-1, R from the six sines/cosines."""
     rot = la.rotation_c(*trig)
-    return la.matmul_c(la.matmul_c(rot, _body_inverse_c(jnp.asarray(inertia))), rot, transpose_b=True), rot
+    return la.matmul_c(_times_body_c(rot, _body_inverse(jnp.asarray(inertia))), rot, transpose_b=True), rot
 
 
 @jax.custom_jvp
@@ -98,11 +102,10 @@ def _world_inverse_jvp(primals, tangents):
     inertia, trig = primals
     d_inertia, d_trig = tangents
     rot, d_rot = jax.jvp(la.rotation_c, tuple(trig), tuple(d_trig))
-    w = la.matmul_c(rot, _body_inverse_c(inertia))
+    w = _times_body_c(rot, _body_inverse(inertia))
     world = la.matmul_c(w, rot, transpose_b=True)
-    d_i = _diagonal_c(la.vec(d_inertia)) if inertia.ndim == 1 else la.mat(d_inertia)
     p = la.matmul_c(d_rot, w, transpose_b=True)
-    q = la.matmul_c(la.matmul_c(w, d_i), w, transpose_b=True)
+    q = la.matmul_c(_times_body_c(w, d_inertia if inertia.ndim == 1 else la.mat(d_inertia)), w, transpose_b=True)
     d_world = tuple(tuple(p[i][j] + p[j][i] - q[i][j] for j in range(3)) for i in range(3))
     return (la.from_rows(world), la.from_rows(rot)), (la.from_rows(d_world), la.from_rows(d_rot))
 
