@@ -10,20 +10,22 @@ that a change in the machine's load moves both sides of a ratio alike):
   jitted calls per chunk: ``exchange.prepare``, ``exchange.impulse_stage``,
   ``exchange.results_stage``, each chunk's results copied into batch-sized NumPy arrays;
   ``ks_jax.sweep`` does the same per chunk); for comparison the
-  single call ``jit(vmap(exchange))`` over the whole batch;
+  single call ``jit(vmap(exchange))`` over the whole batch, batch-last and batch-first;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
   kernel's inputs and outputs together (one read and one write of each, as the kernel does);
 - the ratios kernel/NumPy and kernel/streaming; gradient / forward of two batched losses, each
-  against its own forward (``jax.value_and_grad`` of ``sum(vmap(exchange))`` over every input):
+  against its own forward (``jax.value_and_grad`` of ``sum(vmap(exchange))`` over every input), with
+  the batch axis first (``jax.vmap``'s default) and last:
   the sum of both delta-V magnitudes (the forward needs only the impulse) and a
   reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
   after impact; the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
-The layout is batch-last (every leaf (..., N)): each component of a vector is one contiguous
-array, which is what XLA's elementwise loops want.
+Batch-last (every leaf (..., N)) makes each component of a vector one contiguous array, which is
+what XLA's elementwise loops want in the forward; the gradients' cotangents of (3, 3) inputs are
+then transposed, so batch-first differentiates faster.
 """
 
 from __future__ import annotations
@@ -146,8 +148,8 @@ def kernel_chunk():
     return run
 
 
-def kernel_one_call():
-    f = jax.jit(jax.vmap(exchange, in_axes=-1, out_axes=-1))
+def kernel_one_call(axis=-1):
+    f = jax.jit(jax.vmap(exchange, in_axes=axis, out_axes=axis))
     return lambda args: f(*args)
 
 
@@ -209,7 +211,7 @@ def main():
 
     nps, last = random_batch(n)
     first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)  # batch-first, as users hold it
-    one = kernel_one_call()
+    one, one_first = kernel_one_call(), kernel_one_call(0)
 
     # --- first calls (compile + run), then everything in interleaved rounds
     first32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first)
@@ -219,6 +221,7 @@ def main():
     first64 = first_call(lambda: exchange_batch(*first))
     first32_s = first_call(lambda: exchange_batch(*first32))
     first1 = first_call(lambda: jax.block_until_ready(one(last)))
+    first1f = first_call(lambda: jax.block_until_ready(one_first(first)))
     out = exchange_batch(*first)
     io_bytes = nbytes(first) + nbytes(out)
     # streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
@@ -229,6 +232,7 @@ def main():
         "kernel64": lambda: exchange_batch(*first),
         "kernel32": lambda: exchange_batch(*first32),
         "kernel1": lambda: jax.block_until_ready(one(last)),
+        "kernel1f": lambda: jax.block_until_ready(one_first(first)),
         "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
         "numpy": lambda: numpy_ks.exchange(*nps),
         "stream": lambda: jax.block_until_ready(copy(flat)),
@@ -254,13 +258,11 @@ def main():
                / np.abs(ref_v[1]["delta_v_magnitude"])[valid]),
     )
 
-    # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap))))
-    floats = (last[0], last[1], last[2], last[3], last[4])
-    st = jax.jit(jax.vmap(input_status, in_axes=-1, out_axes=-1))(*last)
-
-    def batched(row_loss):
+    # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap)))), in both
+    # layouts: batch-first (jax.vmap's default in_axes=0, how exchange_batch takes its inputs) and batch-last
+    def batched(row_loss, axis):
         def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
-            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=-1, out_axes=-1)(*args, status)
+            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
             return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
         return loss
 
@@ -275,18 +277,24 @@ def main():
                 + (1 - jnp.cos(jnp.radians(v.pdof - 30.0 * k))) + (v.yaw_rate_after - 0.1) ** 2
         return total
 
-    grads = {}
-    for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
-        loss = batched(row_loss)
-        fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
-        first_call(lambda: jax.block_until_ready(fwd(floats, st)))
-        firstg = first_call(lambda: jax.block_until_ready(grad(floats, st)))
-        gt = rounds({"forward": lambda: jax.block_until_ready(fwd(floats, st)),
-                     "gradient": lambda: jax.block_until_ready(grad(floats, st))}, reps)
-        g = grad(floats, st)[1]
-        finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
-        grads[name] = (statistics.median(gt["forward"]), statistics.median(gt["gradient"]),
-                       ratio(gt, "forward", "gradient"), firstg, finite)
+    gfns, firsts, finite = {}, {}, {}
+    for layout, data, axis in (("batch-first", first, 0), ("batch-last", last, -1)):
+        floats = tuple(data[:5])
+        st = jax.jit(jax.vmap(input_status, in_axes=axis, out_axes=axis))(*data)
+        for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
+            key = (name, layout)
+            loss = batched(row_loss, axis)
+            fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
+            first_call(lambda: jax.block_until_ready(fwd(floats, st)))
+            firsts[key] = first_call(lambda: jax.block_until_ready(grad(floats, st)))
+            g = grad(floats, st)[1]
+            finite[key] = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
+            del g
+            gfns[key + ("forward",)] = lambda fwd=fwd, floats=floats, st=st: jax.block_until_ready(fwd(floats, st))
+            gfns[key + ("gradient",)] = lambda grad=grad, floats=floats, st=st: jax.block_until_ready(grad(floats, st))
+    gt = rounds(gfns, reps)
+    grads = {key: (statistics.median(gt[key + ("forward",)]), statistics.median(gt[key + ("gradient",)]),
+                   ratio(gt, key + ("forward",), key + ("gradient",)), firsts[key], finite[key]) for key in firsts}
 
     # --- sweep of a million-point grid
     case = ks_jax.load_case(CASE)
@@ -306,19 +314,21 @@ def main():
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {q('kernel32', 'kernel64'):8.2f}  (f32/f64)")
     print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
           f"(/kernel; largest difference {same:.1e})")
+    print(f"{'same, batch-first (jax.vmap default)':{w}} {res['kernel1f']:14.4g}  {q('kernel1f', 'kernel64'):8.2f}  "
+          f"(/kernel; first call {first1f:.2f} s)")
     print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {q('chunk', 'kernel64'):8.2f}  "
           f"(/kernel; the three calls on inputs already cut into chunks)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
           f"{q('kernel64', 'numpy'):8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
-          f"{q('chunk', 'numpy'):.2f}; single jit/NumPy {q('kernel1', 'numpy'):.2f})")
+          f"{q('chunk', 'numpy'):.2f}; single jit/NumPy {q('kernel1', 'numpy'):.2f}, batch-first {q('kernel1f', 'numpy'):.2f})")
     print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {q('kernel64', 'stream'):8.2f}  "
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
           f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
           f"single jit/streaming {q('kernel1', 'stream'):.2f})")
-    for name, (tf, tg, gf, firstg, finite) in grads.items():
-        label = f"gradient/forward, loss: {name}"
-        print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; gradient/kernel "
-              f"{res['kernel1'] * tg / n:.2f} of the single jit; grad finite: {finite}; first call {firstg:.2f} s)")
+    for (name, layout), (tf, tg, gf, firstg, ok) in grads.items():
+        label = f"gradient/forward, {name}, {layout}"
+        print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
+              f"first call {firstg:.2f} s)")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
           f"float32: {first32_s:.2f} s; single jit: {first1:.2f} s")
     print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
