@@ -108,7 +108,7 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
         impulse_normal=jn,
         impulse_tangential=la.safe_norm(j - jn * n),
         impulse_azimuth=la.degrees_0_360(la.safe_atan2(jy, jx)),
-        impulse_elevation=jnp.degrees(la.safe_atan2(jz, la.safe_norm((jx, jy, 0.0 * jz)))),
+        impulse_elevation=jnp.degrees(la.safe_atan2(jz, la.safe_sqrt(jx * jx + jy * jy))),
         sliding=sliding,
         closing_velocity=u,
         separation_velocity=u_after,
