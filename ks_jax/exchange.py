@@ -72,7 +72,8 @@ def _times_body_c(a, m):
 
 
 def _body_inverse(inertia):
-    """I_body^-1 from a (3, 3) inertia (rows of components) or the diagonal (3,) (a (3,) array)."""
+    """I_body^-1: rows of components from a (3, 3) inertia; from the principal moments (3,), the (3,)
+    array of its diagonal (for ``_times_body_c``)."""
     if inertia.ndim == 1:
         return 1.0 / inertia
     det = la.det3(inertia)
