@@ -250,15 +250,11 @@ def _impulse_c(K, u, n, restitution, friction, smoothing):
 
 def _arm_c(r, a):
     """-[r]x A [r]x (rows of components) for r (3,) and A (3, 3)."""
-    x, y, z = la.vec(r)
-    a = la.mat(a)
-
-    def cross_rows(m):  # [r]x m, written without the zeros of [r]x (x * 0 is not folded: NaN * 0)
-        return (tuple(y * m[2][k] - z * m[1][k] for k in range(3)), tuple(z * m[0][k] - x * m[2][k] for k in range(3)),
-                tuple(x * m[1][k] - y * m[0][k] for k in range(3)))
-
-    b = cross_rows(a)  # [r]x A; then ([r]x (([r]x A)^T))^T = [r]x A [r]x^T
-    return la.transpose_c(cross_rows(la.transpose_c(b)))
+    # cross products, not products with the matrix [r]x: XLA computes every x * 0 (NaN * 0 is NaN).
+    # The columns of B = [r]x A are r x (columns of A); the rows of B [r]x^T are r x (rows of B).
+    r = la.vec(r)
+    b_columns = [la.cross_c(r, column) for column in la.transpose_c(a)]
+    return tuple(la.cross_c(r, row) for row in zip(*b_columns))
 
 
 def collision_matrix(mass1, inv_inertia1, r1, mass2, inv_inertia2, r2):
