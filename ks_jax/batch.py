@@ -5,8 +5,10 @@ XLA turns the ~40 results into ~120 elementwise loops, each streaming batch-size
 memory. ``exchange_batch`` computes the same values in chunks of ``chunk`` rows (cache-sized),
 each in three jitted calls whose outputs are stored once per row: the status and sines/cosines
 (``exchange.prepare``), the impulse (``exchange.impulse_stage``), the results
-(``exchange.results_stage``). Each chunk is read out of the full arrays inside the jitted calls;
-the last chunk is aligned to the end of the batch, so one compiled program serves every chunk.
+(``exchange.results_stage``). The first call also copies the chunk's rows out of the full arrays
+(into arrays that stay in the cache for the other two: each call reading its rows out of the
+full arrays itself was 1.25x slower, benchmarks/RESULTS.md); the last chunk is aligned to the end
+of the batch, so one compiled program serves every chunk.
 
 The results are NumPy arrays, as ``sweep``'s are: each chunk is copied into them while the next
 one is computed. NumPy backs large arrays with huge pages; a batch-sized result allocated by XLA
@@ -35,16 +37,17 @@ def _rows(tree, start, size):
 
 @lru_cache(maxsize=32)
 def _stages(size, smoothing):
-    def prep(args, start):
-        return jax.vmap(prepare)(*_rows(args, start, size))
+    def prep(args, start):  # the chunk's rows, cut once, and what ``prepare`` makes of them
+        rows = _rows(args, start, size)
+        return rows, jax.vmap(prepare)(*rows)
 
-    def imp(args, start, prepared):
+    def imp(rows, prepared):
         status, trig = prepared
         stage = lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False)  # noqa: E731
-        return jax.vmap(stage)(*_rows(args, start, size), status, trig)
+        return jax.vmap(stage)(*rows, status, trig)
 
-    def res(args, start, prepared, stage):
-        return jax.vmap(results_stage)(*_rows(args, start, size), prepared[0], stage)
+    def res(rows, prepared, stage):
+        return jax.vmap(results_stage)(*rows, prepared[0], stage)
 
     return jax.jit(prep), jax.jit(imp), jax.jit(res)
 
@@ -83,8 +86,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
 
     for lo in range(0, n, size):
         start = min(lo, n - size)  # the last chunk ends at n (rows it repeats are not copied again)
-        prepared = prep(args, start)
-        result = res(args, start, prepared, imp(args, start, prepared))
+        rows, prepared = prep(args, start)
+        result = res(rows, prepared, imp(rows, prepared))
         if out is None:
             leaves, treedef = jax.tree_util.tree_flatten(result)
             out = [np.empty((n,) + x.shape[1:], x.dtype) for x in leaves]
