@@ -168,6 +168,7 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
     (``exchange.prepare``), the impulse (``exchange.impulse_stage``), then the results
     (``exchange.results_stage``). Each call's outputs are stored once per row; in one program
     XLA's CPU fusion would re-derive them inside every loop that reads them (2x slower here).
+    The first call also returns the chunk's swept values, which the other two read.
     """
     from .exchange import impulse_stage, prepare, results_stage
     from .solve import solve_inputs
@@ -181,22 +182,20 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
         vals = _chunk_values(start, axes, mode, sizes, n_rows, total)
         return [jax.lax.with_sharding_constraint(v, rows) for v in vals]
 
-    def status_fn(start, axes, total, base):
+    def status_fn(start, axes, total, base):  # the chunk's swept values, made once, and their status
         vals = values(start, axes, total)
         if split:
-            return jnp.zeros(n_rows, jnp.int32), None
-        return jax.vmap(lambda *v: prepare(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
+            return vals, (jnp.zeros(n_rows, jnp.int32), None)
+        return vals, jax.vmap(lambda *v: prepare(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
 
-    def impulse_fn(start, axes, total, base, prepared):
+    def impulse_fn(base, vals, prepared):
         if split:
             return None
-        vals = values(start, axes, total)
         status, trig = prepared
         return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v)), smoothing, st, tr,
                                                          for_gradients=False))(status, trig, *vals)
 
-    def solve_fn(start, axes, total, base, prepared, stage):
-        vals = values(start, axes, total)
+    def solve_fn(base, vals, prepared, stage):
         status, _ = prepared
 
         def one(st, stg, *v):
@@ -216,10 +215,8 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
 
     status_jit = jax.jit(status_fn, in_shardings=(replicated, replicated, replicated, replicated),
                          out_shardings=rows)
-    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, replicated, replicated, replicated, rows),
-                          out_shardings=rows)
-    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, replicated, replicated, replicated, rows, rows),
-                        out_shardings=rows)
+    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, rows, rows), out_shardings=rows)
+    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, rows, rows, rows), out_shardings=rows)
     return status_jit, impulse_jit, solve_jit
 
 
@@ -358,9 +355,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 
     def launch(start):
         s = jnp.asarray(start, dtype=index_dtype)
-        status = status_jit(s, dev_axes, total_arr, base)
-        stage = impulse_jit(s, dev_axes, total_arr, base, status)
-        return start, solve_jit(s, dev_axes, total_arr, base, status, stage)
+        vals, status = status_jit(s, dev_axes, total_arr, base)
+        stage = impulse_jit(base, vals, status)
+        return start, solve_jit(base, vals, status, stage)
 
     def collect(item):
         start, out = item
