@@ -7,8 +7,9 @@ variant once in turn (rates: the median time; ratios: the median of the ratios w
 that a change in the machine's load moves both sides of a ratio alike):
 - the kernel's rate (exchanges/s, all section-4 results, float64 and float32) as the library
   computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
-  jitted calls per chunk: ``exchange.prepare``, ``exchange.impulse_stage``,
-  ``exchange.results_stage``, each chunk's results copied into batch-sized NumPy arrays;
+  jitted calls per chunk: ``exchange.prepare``, which also copies the chunk's rows for the other
+  two, ``exchange.impulse_stage``, ``exchange.results_stage``, each chunk's results copied into
+  batch-sized NumPy arrays;
   ``ks_jax.sweep`` does the same per chunk); for comparison the
   single call ``jit(vmap(exchange))`` over the whole batch, batch-last and batch-first;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
