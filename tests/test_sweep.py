@@ -79,6 +79,25 @@ def test_chunk_boundaries_do_not_change_results(case):
             np.testing.assert_array_equal(part[p], whole[p], err_msg=f"{p}, chunk {chunk}")
 
 
+def test_automatic_contact_case_matches_single_solves():
+    """A case with automatic contact goes through the geometry in its sweep (``solve_inputs``), not the
+    three-call explicit path: the same values as solving a point alone, across chunk boundaries."""
+    auto = ks_jax.load_case(CASES / "auto_tbone.json")
+    assert auto.auto_point and auto.auto_normal
+    speeds = np.array([11.0, 13.4112, 16.0])  # the pickup (its case speed: 30 mph)
+    mus = np.array([0.2, 0.8])
+    outputs = ["contact.time", "contact.impulse_magnitude", "vehicles[0].pdof", "vehicles[1].delta_v[1]"]
+    r = sweep(auto, {"vehicles[1].speed": speeds, "contact.friction": mus}, outputs=outputs, chunk_size=4)
+    assert r.shape == (3, 2) and r.status_counts == {"ok": 6}
+    for i, j in [(0, 0), (2, 1), (1, 1)]:  # (2, 1) and (1, 1) are in the second chunk
+        inputs = set_input(set_input(auto.inputs, "vehicles[1].speed", speeds[i]), "contact.friction", mus[j])
+        res = ks_jax.solve_inputs(as_arrays(inputs), True, True)
+        assert int(res.contact.status) == 0
+        for path in outputs:
+            np.testing.assert_allclose(r[path][i, j], get_output(res, path), rtol=RTOL, atol=1e-9, err_msg=path)
+    assert len(set(np.round(r["contact.time"][:, 0], 12))) == 3  # the time to contact depends on the speed
+
+
 def test_default_outputs_and_status(case):
     r = sweep(case, {"contact.restitution": [0.0, 0.1]})
     assert set(r) == set(DEFAULT_OUTPUTS) | {"status"}
