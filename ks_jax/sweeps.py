@@ -355,9 +355,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 
     def launch(start):
         s = jnp.asarray(start, dtype=index_dtype)
-        vals, status = status_jit(s, dev_axes, total_arr, base)
-        stage = impulse_jit(base, vals, status)
-        return start, solve_jit(base, vals, status, stage)
+        vals, prepared = status_jit(s, dev_axes, total_arr, base)
+        stage = impulse_jit(base, vals, prepared)
+        return start, solve_jit(base, vals, prepared, stage)
 
     def collect(item):
         start, out = item
