@@ -14,8 +14,9 @@ How it scales
   ``points x (sum of output itemsizes + 1)`` bytes: 10^8 points x one float32 output is about
   0.5 GB; x k float64 outputs 8e8 k bytes. For more, pass ``on_chunk`` (a callback that gets
   every chunk's outputs: reduce or stream them to disk) with ``keep=False``: memory then stays
-  at a few chunks whatever the number of points. ``output_dtype=np.float32`` halves the
-  stored results (the computation stays in the case's float type).
+  at a few chunks whatever the number of points (``ResultWriter`` streams every chunk to a
+  .csv, .npz or .parquet file that way; ``ks-jax sweep`` uses it). ``output_dtype=np.float32``
+  halves the stored results (the computation stays in the case's float type).
 - Invalid rows (e.g. a restitution above 1) get their status code (``ks_jax.status_text``)
   and NaN results; the other rows are solved as usual.
 - An explicit-contact chunk is solved in three jitted calls whose outputs are stored once per
@@ -112,13 +113,7 @@ class SweepResult(Mapping):
 
     def inputs(self):
         """path -> the input value (SI) at every point, flat (in the order of the outputs)."""
-        lo, hi = self.index_range
-        idx = np.arange(lo, hi)
-        if self.mode == "zip":
-            return {p: np.asarray(v)[idx] for p, v in self.axes.items()}
-        sizes = tuple(len(v) for v in self.axes.values())
-        pos = np.unravel_index(idx, sizes)
-        return {p: np.asarray(v)[k] for (p, v), k in zip(self.axes.items(), pos)}
+        return _grid_inputs(self.axes, self.mode, *self.index_range)
 
     def table(self):
         """Flat columns (one row per point): the inputs, the outputs, status code and text."""
@@ -444,44 +439,175 @@ def parse_over(text):
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N or V1,V2,...")
 
 
-def write_results(result: SweepResult, out):
-    """Write a sweep to .csv (one row per point), .npz (arrays) or .parquet (pyarrow)."""
-    out = Path(out)
-    suffix = out.suffix.lower()
-    if suffix == ".npz":
-        arrays = {p: np.asarray(v) for p, v in result.outputs.items()}
-        arrays.update({f"axis:{p}": v for p, v in result.axes.items()})
-        codes = np.array(sorted(STATUS_TEXT))
-        arrays["status_codes"] = codes
-        arrays["status_texts"] = np.array([STATUS_TEXT[c] for c in codes])
-        np.savez(out, **arrays)
-        return
-    cols = result.table()
-    if suffix == ".csv":
+def _grid_inputs(axes, mode, lo, hi):
+    """path -> the swept input value (SI) at flat indices lo .. hi - 1 (``SweepResult.inputs``)."""
+    idx = np.arange(lo, hi)
+    if mode == "zip":
+        return {p: np.asarray(v)[idx] for p, v in axes.items()}
+    pos = np.unravel_index(idx, tuple(len(v) for v in axes.values()))
+    return {p: np.asarray(v)[k] for (p, v), k in zip(axes.items(), pos)}
+
+
+def _status_texts(codes):
+    """The status text of each code (an object array sharing one string per distinct code)."""
+    distinct, which = np.unique(codes, return_inverse=True)
+    return np.array([STATUS_TEXT.get(c, status_text(c)) for c in distinct.tolist()], dtype=object)[which]
+
+
+class ResultWriter:
+    """Writes a sweep to ``out`` (.csv, .npz or .parquet) chunk by chunk, as ``sweep`` computes it:
+    pass ``writer.chunk`` as ``on_chunk`` (with ``keep=False``), then call ``close()`` (or ``abort()``
+    on an error). Memory stays at a few chunks whatever the number of points (``ks-jax sweep``).
+
+    .csv: one row per point: the swept inputs (SI), the outputs, ``status``, ``status_text``.
+    .parquet: the same columns (pyarrow), in row groups of about 2^18 points.
+    .npz: one array per output in the result's shape, ``axis:<path>`` for the axes, the status codes
+    and texts. Each array is appended to a temporary .npy file beside ``out``, chunk by chunk; ``close``
+    stores them in ``out`` (uncompressed, as ``np.savez``), so the disk briefly holds them twice.
+    """
+
+    ROW_GROUP = 1 << 18
+
+    def __init__(self, out, axes, mode, shape, first=0):
+        """axes: path -> the swept values (SI); shape: the result's shape; first: the flat index of
+        its first point (a sweep's ``index_range[0]``)."""
+        self.out = Path(out)
+        self.kind = self.out.suffix.lower()
+        if self.kind not in (".csv", ".npz", ".parquet"):
+            raise CaseError(f"--out {out}: unknown file type '{self.out.suffix}' (use .csv, .npz or .parquet)")
+        if self.kind == ".parquet":
+            try:
+                import pyarrow  # noqa: F401
+            except ImportError:
+                raise CaseError("parquet output needs pyarrow: pip install 'ks-jax[parquet]' "
+                                "(or write .csv / .npz)") from None
+        self.axes, self.mode, self.shape, self.first = dict(axes), mode, tuple(shape), int(first)
+        self.points = math.prod(self.shape)
+        self._file = self._parquet = self._tmpdir = None
+        self._arrays, self._pending, self._written, self._created = {}, [], 0, False
+
+    def chunk(self, lo, hi, chunk):
+        """Points lo .. hi - 1 (flat indices, in order): ``chunk`` maps each output path and "status"
+        to an array of hi - lo values."""
+        if lo - self.first != self._written:
+            raise CaseError(f"{self.out}: points {lo}..{hi - 1} arrived after {self._written} of {self.points}")
+        if self.kind == ".npz":
+            self._npz_chunk(chunk)
+        else:
+            cols = dict(_grid_inputs(self.axes, self.mode, lo, hi))
+            for p, v in chunk.items():
+                if p != "status":
+                    cols[p] = np.ravel(v)
+            cols["status"] = np.ravel(chunk["status"]).astype(np.int32)
+            cols["status_text"] = _status_texts(cols["status"])
+            if self.kind == ".csv":
+                self._csv_chunk(cols)
+            else:
+                self._pending.append(cols)
+                if sum(len(c["status"]) for c in self._pending) >= self.ROW_GROUP:
+                    self._flush_parquet()
+        self._written += hi - lo
+
+    def _csv_chunk(self, cols):
         import csv
 
-        names = list(cols) + ["status_text"]
-        n = len(cols["status"])
-        with out.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(names)
-            block = 100_000
-            for a in range(0, n, block):
-                b = min(n, a + block)
-                data = [cols[k][a:b].tolist() for k in cols]
-                text = [STATUS_TEXT.get(c, status_text(c)) for c in data[-1]]
-                w.writerows(zip(*data, text))
-        return
-    if suffix == ".parquet":
+        if self._file is None:
+            self._file, self._created = self.out.open("w", newline=""), True
+            self._csv = csv.writer(self._file)
+            self._csv.writerow(list(cols))
+        self._csv.writerows(zip(*(c.tolist() for c in cols.values())))
+
+    def _flush_parquet(self):
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        if not self._pending:
+            return
+        table = pa.table({k: np.concatenate([c[k] for c in self._pending]) for k in self._pending[0]})
+        if self._parquet is None:
+            self._parquet, self._created = pq.ParquetWriter(self.out, table.schema), True
+        self._parquet.write_table(table)
+        self._pending = []
+
+    def _npz_chunk(self, chunk):
+        import tempfile
+
+        if self._tmpdir is None:
+            self._tmpdir = tempfile.TemporaryDirectory(prefix=self.out.name + ".", dir=self.out.parent)
+        for k, (p, v) in enumerate(chunk.items()):
+            if p not in self._arrays:
+                path = Path(self._tmpdir.name) / f"{k}.npy"
+                f = path.open("wb")
+                header = {"descr": np.lib.format.dtype_to_descr(v.dtype), "fortran_order": False, "shape": self.shape}
+                np.lib.format.write_array_header_2_0(f, header)
+                self._arrays[p] = (path, f)
+            self._arrays[p][1].write(np.ascontiguousarray(v).tobytes())
+
+    def close(self):
+        """Finish the file (.npz: store the arrays). Raises if not every point was written."""
         try:
-            import pyarrow as pa
-            import pyarrow.parquet as pq
-        except ImportError:
-            raise CaseError("parquet output needs pyarrow: pip install 'ks-jax[parquet]' (or write .csv / .npz)") from None
-        cols["status_text"] = np.array([STATUS_TEXT.get(c, status_text(c)) for c in cols["status"]])
-        pq.write_table(pa.table(cols), out)
-        return
-    raise CaseError(f"--out {out}: unknown file type '{out.suffix}' (use .csv, .npz or .parquet)")
+            if self._written != self.points:
+                raise CaseError(f"{self.out}: {self._written} of {self.points} points written")
+            if self.kind == ".csv":
+                self._file.close()
+            elif self.kind == ".parquet":
+                self._flush_parquet()
+                self._parquet.close()
+            else:
+                self._write_npz()
+        finally:
+            self.abort(remove=False)
+
+    def _write_npz(self):
+        import io
+        import zipfile
+
+        for _, f in self._arrays.values():
+            f.close()
+        codes = np.array(sorted(STATUS_TEXT))
+        small = {f"axis:{p}": np.asarray(v) for p, v in self.axes.items()}
+        small.update(status_codes=codes, status_texts=np.array([STATUS_TEXT[c] for c in codes]))
+        self._created = True
+        with zipfile.ZipFile(self.out, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for p, (path, _) in self._arrays.items():
+                zf.write(path, f"{p}.npy")
+            for name, v in small.items():
+                buf = io.BytesIO()
+                np.save(buf, v)
+                zf.writestr(f"{name}.npy", buf.getvalue())
+
+    def abort(self, remove=True):
+        """Close what is open; ``remove``: delete the unfinished file (only one this writer began)."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        if self._parquet is not None:
+            self._parquet.close()
+            self._parquet = None
+        for _, f in self._arrays.values():
+            f.close()
+        self._arrays = {}
+        if self._tmpdir is not None:
+            self._tmpdir.cleanup()
+            self._tmpdir = None
+        if remove and self._created:
+            self.out.unlink(missing_ok=True)
+
+
+def write_results(result: SweepResult, out):
+    """Write a kept sweep (``SweepResult``) to .csv (one row per point), .npz (arrays) or .parquet
+    (pyarrow), in the format of ``ks-jax sweep`` (``ResultWriter``)."""
+    lo, hi = result.index_range
+    writer = ResultWriter(out, result.axes, result.mode, result.shape, first=lo)
+    flat = {p: np.ravel(v) for p, v in result.outputs.items()}
+    try:
+        for a in range(0, hi - lo, DEFAULT_CHUNK):
+            b = min(hi - lo, a + DEFAULT_CHUNK)
+            writer.chunk(lo + a, lo + b, {p: v[a:b] for p, v in flat.items()})
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
 
 
 def run(args) -> int:
@@ -499,15 +625,18 @@ def run(args) -> int:
     if not case.valid:
         raise CaseError(case.error)
     over = dict(parse_over(t) for t in args.over)
-    suffix = Path(args.out).suffix.lower()
-    if suffix not in (".csv", ".npz", ".parquet"):
-        raise CaseError(f"--out {args.out}: unknown file type '{suffix}' (use .csv, .npz or .parquet)")
-    result = sweep(case, over, outputs=args.output, mode=args.mode, chunk_size=args.chunk_size,
-                   smoothing=args.smoothing, progress=False if args.no_progress else None,
-                   output_dtype=np.float32 if args.float32 else None)
+    shape = (len(next(iter(over.values()))),) if args.mode == "zip" else tuple(len(v) for v in over.values())
+    writer = ResultWriter(args.out, over, args.mode, shape)  # written chunk by chunk: memory stays bounded
     t = time.perf_counter()
-    write_results(result, args.out)
+    try:
+        result = sweep(case, over, outputs=args.output, mode=args.mode, chunk_size=args.chunk_size,
+                       smoothing=args.smoothing, progress=False if args.no_progress else None,
+                       output_dtype=np.float32 if args.float32 else None, on_chunk=writer.chunk, keep=False)
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
     print(f"ks-jax sweep: {case.name}")
     print(f"  {result.summary()}")
-    print(f"  written to {args.out} in {time.perf_counter() - t:.3g} s")
+    print(f"  written to {args.out} ({time.perf_counter() - t:.3g} s in all)")
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import subprocess
@@ -17,7 +18,7 @@ jax.config.update("jax_enable_x64", True)  # also set by conftest; kept so the m
 import ks_jax  # noqa: E402
 from ks_jax.case import CaseError, as_arrays, get_output, set_input  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
-from ks_jax.sweeps import DEFAULT_OUTPUTS, parse_over, sweep  # noqa: E402
+from ks_jax.sweeps import DEFAULT_OUTPUTS, ResultWriter, parse_over, sweep, write_results  # noqa: E402
 
 CASES = Path(ks_jax.__file__).parent / "cases"
 SEED0 = CASES / "seed_000_saturn_pontiac.json"
@@ -188,6 +189,79 @@ def test_cli_writes_csv_and_npz(tmp_path, capsys):
     row = lines[1 + 4 * 2 + 1].split(",")  # speed index 2, restitution index 1
     np.testing.assert_allclose(float(row[2]), data["contact.impulse_magnitude"][2, 1], rtol=1e-15)
     np.testing.assert_allclose(data["axis:vehicles[1].speed"], np.linspace(10, 30, 5) * ks_jax.units.MPH)
+
+
+def read_table(path):
+    """Columns of a .csv or .parquet sweep file as NumPy arrays (status_text as str)."""
+    if path.suffix == ".parquet":
+        table = pytest.importorskip("pyarrow.parquet").read_table(path)
+        return {c: table[c].to_numpy(zero_copy_only=False) for c in table.column_names}
+    with path.open(newline="") as f:
+        names, *rows = list(csv.reader(f))
+
+    def column(values):
+        if values[0] in ("True", "False"):
+            return np.array([v == "True" for v in values])
+        try:
+            return np.array(values, dtype=float)
+        except ValueError:
+            return np.array(values, dtype=str)
+
+    return {n: column([r[k] for r in rows]) for k, n in enumerate(names)}
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".parquet"])
+def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
+    """``ks-jax sweep`` writes chunk by chunk (7 points a chunk here, so 39 chunks over a grid of 273
+    points with invalid rows); the file holds what ``write_results`` writes from the same sweep kept
+    in memory, and its values equal the sweep's."""
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    outs = ["contact.impulse_magnitude", "contact.sliding", "vehicles[1].delta_v[0]"]
+    over = ["vehicles[1].speed=2:30:21", "contact.restitution=0:1.2:13"]  # restitution > 1: invalid rows
+    args = ["sweep", str(SEED0), *sum((["--over", o] for o in over), []), *sum((["--output", o] for o in outs), []),
+            "--chunk-size", "7", "--out", str(tmp_path / f"cli{suffix}")]
+    assert main(args) == 0
+    capsys.readouterr()
+    kept = sweep(ks_jax.load_case(SEED0), dict(parse_over(o) for o in over), outputs=outs)
+    assert 0 < kept.status_counts["ok"] < 273
+    write_results(kept, tmp_path / f"kept{suffix}")
+    if suffix == ".npz":
+        a, b = np.load(tmp_path / "cli.npz"), np.load(tmp_path / "kept.npz")
+        assert sorted(a.files) == sorted(b.files)
+        for k in a.files:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+        for p in outs + ["status"]:
+            np.testing.assert_array_equal(a[p], kept[p], err_msg=p)
+        return
+    a, b = read_table(tmp_path / f"cli{suffix}"), read_table(tmp_path / f"kept{suffix}")
+    assert list(a) == ["vehicles[1].speed", "contact.restitution", *outs, "status", "status_text"] == list(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    np.testing.assert_array_equal(a["vehicles[1].delta_v[0]"], kept["vehicles[1].delta_v[0]"].ravel())
+    np.testing.assert_array_equal(a["contact.restitution"], np.tile(np.linspace(0, 1.2, 13), 21))
+    assert list(a["status_text"]) == [ks_jax.status_text(int(c)) for c in a["status"]]
+    assert {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"} == set(a["status_text"])
+
+
+def test_writer_errors_keep_other_files(tmp_path, capsys):
+    """A sweep that fails leaves no file of its own and does not remove a file already there; a writer
+    refuses chunks out of order and an incomplete file."""
+    out = tmp_path / "r.csv"
+    out.write_text("earlier results\n")
+    code = main(["sweep", str(SEED0), "--mode", "zip", "--over", "vehicles[1].speed=1,2,3",
+                 "--over", "contact.restitution=0,0.1", "--out", str(out)])
+    assert code == 2 and "same number of values" in capsys.readouterr().err
+    assert out.read_text() == "earlier results\n"
+    for suffix in (".csv", ".npz"):
+        w = ResultWriter(tmp_path / f"w{suffix}", {"contact.friction": np.array([0.1, 0.2, 0.3])}, "grid", (3,))
+        w.chunk(0, 1, {"contact.impulse_magnitude": np.array([1.0]), "status": np.array([0], np.int8)})
+        with pytest.raises(CaseError, match="arrived after 1 of 3"):
+            w.chunk(2, 3, {"contact.impulse_magnitude": np.array([1.0]), "status": np.array([0], np.int8)})
+        with pytest.raises(CaseError, match="1 of 3 points written"):
+            w.close()
+        w.abort()
+        assert not (tmp_path / f"w{suffix}").exists()
 
 
 def test_cli_bad_path_is_a_clear_error(tmp_path, capsys):
