@@ -558,6 +558,8 @@ class ResultWriter:
         try:
             if self._written != self.points:
                 raise CaseError(f"{self.out}: {self._written} of {self.points} points written")
+            if self.points == 0:
+                raise CaseError(f"{self.out}: the sweep has no points to write")
             if self.kind == ".csv":
                 self._file.close()
             elif self.kind == ".parquet":

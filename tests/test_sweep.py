@@ -262,6 +262,10 @@ def test_writer_errors_keep_other_files(tmp_path, capsys):
             w.close()
         w.abort()
         assert not (tmp_path / f"w{suffix}").exists()
+    empty = sweep(ks_jax.load_case(SEED0), {"contact.friction": [0.1, 0.2]}, index_range=(1, 1))
+    with pytest.raises(CaseError, match="no points to write"):
+        write_results(empty, tmp_path / "empty.csv")
+    assert not (tmp_path / "empty.csv").exists()
 
 
 def test_cli_bad_path_is_a_clear_error(tmp_path, capsys):
