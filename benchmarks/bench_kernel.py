@@ -9,7 +9,8 @@ that a change in the machine's load moves both sides of a ratio alike):
   computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
   jitted calls per chunk: ``exchange.prepare``, which also copies the chunk's rows for the other
   two, ``exchange.impulse_stage``, ``exchange.results_stage``, each chunk's results copied into
-  batch-sized NumPy arrays;
+  batch-sized NumPy arrays; and the same writing into the arrays of an earlier result (``out=``),
+  which needs no new memory;
   ``ks_jax.sweep`` does the same per chunk); for comparison the
   single call ``jit(vmap(exchange))`` over the whole batch, batch-last and batch-first;
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
@@ -233,6 +234,7 @@ def main():
     fns = {
         "kernel64": lambda: exchange_batch(*first),
         "kernel32": lambda: exchange_batch(*first32),
+        "kernel64out": lambda: exchange_batch(*first, out=out),
         "kernel1": lambda: jax.block_until_ready(one(last)),
         "kernel1f": lambda: jax.block_until_ready(one_first(first)),
         "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
@@ -313,6 +315,8 @@ def main():
     q = lambda a, b: ratio(times, a, b)  # noqa: E731
     print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
     print(f"{'kernel float64 (exchange_batch)':{w}} {res['kernel64']:14.4g}")
+    print(f"{'same, out= an earlier result (no new memory)':{w}} {res['kernel64out']:14.4g}  "
+          f"{q('kernel64out', 'kernel64'):8.2f}  (/kernel; kernel/NumPy {q('kernel64out', 'numpy'):.2f})")
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {q('kernel32', 'kernel64'):8.2f}  (f32/f64)")
     print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
           f"(/kernel; largest difference {same:.1e})")
