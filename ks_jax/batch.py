@@ -61,8 +61,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     status code and NaN, as in ``exchange``. ``chunk``: rows per chunk (default 16384).
     ``out``: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an
     earlier result of a batch of the same size), written in place and returned. In a loop over
-    batches this saves the first touch of ~520 bytes of new memory per row (at 2^20 rows 411
-    against 475 ns per row, benchmarks/RESULTS.md).
+    batches this saves the first touch of ~520 bytes of new memory per row, whose cost on the
+    benchmark machine varied from nothing to 0.7x the rest of the time (benchmarks/RESULTS.md).
     """
     if not 0.0 <= float(smoothing) < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
