@@ -464,6 +464,8 @@ class ResultWriter:
     .npz: one array per output in the result's shape, ``axis:<path>`` for the axes, the status codes
     and texts. Each array is appended to a temporary .npy file beside ``out``, chunk by chunk; ``close``
     stores them in ``out`` (uncompressed, as ``np.savez``), so the disk briefly holds them twice.
+    The file is written as ``.<name>.partial`` beside ``out`` and renamed to ``out`` by ``close``: a
+    sweep that fails leaves an earlier ``out`` as it was.
     """
 
     ROW_GROUP = 1 << 18
@@ -483,8 +485,9 @@ class ResultWriter:
                                 "(or write .csv / .npz)") from None
         self.axes, self.mode, self.shape, self.first = dict(axes), mode, tuple(shape), int(first)
         self.points = math.prod(self.shape)
+        self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
-        self._arrays, self._pending, self._written, self._created = {}, [], 0, False
+        self._arrays, self._pending, self._written = {}, [], 0
         self.seconds = self.chunk_seconds = 0.0  # spent writing: in all, and inside ``chunk``
 
     def chunk(self, lo, hi, chunk):
@@ -521,7 +524,7 @@ class ResultWriter:
         import csv
 
         if self._file is None:
-            self._file, self._created = self.out.open("w", newline=""), True
+            self._file = self._partial.open("w", newline="")
             self._csv = csv.writer(self._file)
             self._csv.writerow(list(cols))
         self._csv.writerows(zip(*(c.tolist() for c in cols.values())))
@@ -534,7 +537,7 @@ class ResultWriter:
             return
         table = pa.table({k: np.concatenate([c[k] for c in self._pending]) for k in self._pending[0]})
         if self._parquet is None:
-            self._parquet, self._created = pq.ParquetWriter(self.out, table.schema), True
+            self._parquet = pq.ParquetWriter(self._partial, table.schema)
         self._parquet.write_table(table)
         self._pending = []
 
@@ -567,8 +570,10 @@ class ResultWriter:
                 self._parquet.close()
             else:
                 self._write_npz()
+            self._file = self._parquet = None
+            self._partial.replace(self.out)
         finally:
-            self.abort(remove=False)
+            self.abort()
             self.seconds += time.perf_counter() - t
 
     def _write_npz(self):
@@ -580,8 +585,7 @@ class ResultWriter:
         codes = np.array(sorted(STATUS_TEXT))
         small = {f"axis:{p}": np.asarray(v) for p, v in self.axes.items()}
         small.update(status_codes=codes, status_texts=np.array([STATUS_TEXT[c] for c in codes]))
-        self._created = True
-        with zipfile.ZipFile(self.out, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+        with zipfile.ZipFile(self._partial, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
             for p, (path, _) in self._arrays.items():
                 zf.write(path, f"{p}.npy")
             for name, v in small.items():
@@ -589,8 +593,8 @@ class ResultWriter:
                 np.save(buf, v)
                 zf.writestr(f"{name}.npy", buf.getvalue())
 
-    def abort(self, remove=True):
-        """Close what is open; ``remove``: delete the unfinished file (only one this writer began)."""
+    def abort(self):
+        """Close what is open and delete the unfinished file (``out`` itself is left as it was)."""
         if self._file is not None:
             self._file.close()
             self._file = None
@@ -603,8 +607,7 @@ class ResultWriter:
         if self._tmpdir is not None:
             self._tmpdir.cleanup()
             self._tmpdir = None
-        if remove and self._created:
-            self.out.unlink(missing_ok=True)
+        self._partial.unlink(missing_ok=True)
 
 
 def write_results(result: SweepResult, out):

@@ -245,8 +245,8 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
 
 
 def test_writer_errors_keep_other_files(tmp_path, capsys):
-    """A sweep that fails leaves no file of its own and does not remove a file already there; a writer
-    refuses chunks out of order and an incomplete file."""
+    """A sweep that fails leaves no file of its own and an earlier file as it was, even after some
+    chunks were written; a writer refuses chunks out of order and an incomplete file."""
     out = tmp_path / "r.csv"
     out.write_text("earlier results\n")
     code = main(["sweep", str(SEED0), "--mode", "zip", "--over", "vehicles[1].speed=1,2,3",
@@ -254,6 +254,7 @@ def test_writer_errors_keep_other_files(tmp_path, capsys):
     assert code == 2 and "same number of values" in capsys.readouterr().err
     assert out.read_text() == "earlier results\n"
     for suffix in (".csv", ".npz"):
+        (tmp_path / f"w{suffix}").write_text("earlier results\n")  # kept until a new file is complete
         w = ResultWriter(tmp_path / f"w{suffix}", {"contact.friction": np.array([0.1, 0.2, 0.3])}, "grid", (3,))
         w.chunk(0, 1, {"contact.impulse_magnitude": np.array([1.0]), "status": np.array([0], np.int8)})
         with pytest.raises(CaseError, match="arrived after 1 of 3"):
@@ -261,7 +262,8 @@ def test_writer_errors_keep_other_files(tmp_path, capsys):
         with pytest.raises(CaseError, match="1 of 3 points written"):
             w.close()
         w.abort()
-        assert not (tmp_path / f"w{suffix}").exists()
+        assert (tmp_path / f"w{suffix}").read_text() == "earlier results\n"
+        assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # nothing left behind
     empty = sweep(ks_jax.load_case(SEED0), {"contact.friction": [0.1, 0.2]}, index_range=(1, 1))
     with pytest.raises(CaseError, match="no points to write"):
         write_results(empty, tmp_path / "empty.csv")
