@@ -116,12 +116,8 @@ class SweepResult(Mapping):
         return _grid_inputs(self.axes, self.mode, *self.index_range)
 
     def table(self):
-        """Flat columns (one row per point): the inputs, the outputs, status code and text."""
-        cols = dict(self.inputs())
-        for p in self.output_paths:
-            cols[p] = np.ravel(self.outputs[p])
-        cols["status"] = np.ravel(self.outputs["status"]).astype(np.int32)
-        return cols
+        """Flat columns (one row per point): the inputs, the outputs, the status code."""
+        return _columns(self.axes, self.mode, *self.index_range, self.outputs)
 
     def summary(self) -> str:
         counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
@@ -448,6 +444,15 @@ def _grid_inputs(axes, mode, lo, hi):
     return {p: np.asarray(v)[k] for (p, v), k in zip(axes.items(), pos)}
 
 
+def _columns(axes, mode, lo, hi, outputs):
+    """Flat columns of points lo .. hi - 1: the swept inputs, then ``outputs`` (path -> values, with
+    "status" among them) in their order, the status code (int32) last."""
+    cols = _grid_inputs(axes, mode, lo, hi)
+    cols.update((p, np.ravel(v)) for p, v in outputs.items() if p != "status")
+    cols["status"] = np.ravel(outputs["status"]).astype(np.int32)
+    return cols
+
+
 def _status_texts(codes):
     """The status text of each code (an object array sharing one string per distinct code)."""
     distinct, which = np.unique(codes, return_inverse=True)
@@ -506,11 +511,7 @@ class ResultWriter:
         if self.kind == ".npz":
             self._npz_chunk(chunk)
         else:
-            cols = dict(_grid_inputs(self.axes, self.mode, lo, hi))
-            for p, v in chunk.items():
-                if p != "status":
-                    cols[p] = np.ravel(v)
-            cols["status"] = np.ravel(chunk["status"]).astype(np.int32)
+            cols = _columns(self.axes, self.mode, lo, hi, chunk)
             cols["status_text"] = _status_texts(cols["status"])
             if self.kind == ".csv":
                 self._csv_chunk(cols)
