@@ -11,8 +11,10 @@ that a change in the machine's load moves both sides of a ratio alike):
   two, ``exchange.impulse_stage``, ``exchange.results_stage``, each chunk's results copied into
   batch-sized NumPy arrays; and the same writing into the arrays of an earlier result (``out=``),
   which needs no new memory;
-  ``ks_jax.sweep`` does the same per chunk); for comparison the
-  single call ``jit(vmap(exchange))`` over the whole batch, batch-last and batch-first;
+  ``ks_jax.sweep`` does the same per chunk); ``jit(vmap(exchange))``, batch-last and batch-first
+  (on one CPU device its vmap rule runs the same three stages in chunks inside one loop); and for
+  comparison the whole-batch program that vmap made of ``exchange`` before that rule (``jit(vmap)`` of
+  ``exchange_with_status`` after ``input_status``, batch-first);
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
   kernel's inputs and outputs together (one read and one write of each, as the kernel does);
@@ -21,7 +23,9 @@ that a change in the machine's load moves both sides of a ratio alike):
   the batch axis first (``jax.vmap``'s default) and last:
   the sum of both delta-V magnitudes (the forward needs only the impulse) and a
   reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
-  after impact; the first-call (compile) times;
+  after impact, through ``exchange_with_status`` (one whole-batch program, forward and gradient
+  alike) and, batch-first, through ``exchange`` (the forward in chunks; the gradient is the
+  whole-batch one); the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
@@ -151,8 +155,10 @@ def kernel_chunk():
     return run
 
 
-def kernel_one_call(axis=-1):
-    f = jax.jit(jax.vmap(exchange, in_axes=axis, out_axes=axis))
+def kernel_one_call(axis=-1, whole=False):
+    """``jit(vmap(exchange))``; ``whole``: the whole-batch program (no chunks)."""
+    fn = (lambda *a: exchange_with_status(*a, 0.0, input_status(*a))) if whole else exchange
+    f = jax.jit(jax.vmap(fn, in_axes=axis, out_axes=axis))
     return lambda args: f(*args)
 
 
@@ -214,7 +220,7 @@ def main():
 
     nps, last = random_batch(n)
     first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)  # batch-first, as users hold it
-    one, one_first = kernel_one_call(), kernel_one_call(0)
+    one, one_first, whole = kernel_one_call(), kernel_one_call(0), kernel_one_call(0, whole=True)
 
     # --- first calls (compile + run), then everything in interleaved rounds
     first32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first)
@@ -225,6 +231,7 @@ def main():
     first32_s = first_call(lambda: exchange_batch(*first32))
     first1 = first_call(lambda: jax.block_until_ready(one(last)))
     first1f = first_call(lambda: jax.block_until_ready(one_first(first)))
+    first_whole = first_call(lambda: jax.block_until_ready(whole(first)))
     out = exchange_batch(*first)
     io_bytes = nbytes(first) + nbytes(out)
     # streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
@@ -237,6 +244,7 @@ def main():
         "kernel64out": lambda: exchange_batch(*first, out=out),
         "kernel1": lambda: jax.block_until_ready(one(last)),
         "kernel1f": lambda: jax.block_until_ready(one_first(first)),
+        "whole": lambda: jax.block_until_ready(whole(first)),
         "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
         "numpy": lambda: numpy_ks.exchange(*nps),
         "stream": lambda: jax.block_until_ready(copy(flat)),
@@ -264,9 +272,12 @@ def main():
 
     # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap)))), in both
     # layouts: batch-first (jax.vmap's default in_axes=0, how exchange_batch takes its inputs) and batch-last
-    def batched(row_loss, axis):
+    def batched(row_loss, axis, chunked=False):
         def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
-            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
+            if chunked:  # exchange: its own status; the forward runs in chunks (one CPU device)
+                r = jax.vmap(exchange, in_axes=axis, out_axes=axis)(*args)
+            else:
+                r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
             return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
         return loss
 
@@ -282,12 +293,13 @@ def main():
         return total
 
     gfns, firsts, finite = {}, {}, {}
-    for layout, data, axis in (("batch-first", first, 0), ("batch-last", last, -1)):
+    for layout, data, axis, chunked in (("batch-first", first, 0, False), ("batch-last", last, -1, False),
+                                        ("exchange, batch-first", first, 0, True)):
         floats = tuple(data[:5])
         st = jax.jit(jax.vmap(input_status, in_axes=axis, out_axes=axis))(*data)
         for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
             key = (name, layout)
-            loss = batched(row_loss, axis)
+            loss = batched(row_loss, axis, chunked)
             fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
             first_call(lambda: jax.block_until_ready(fwd(floats, st)))
             firsts[key] = first_call(lambda: jax.block_until_ready(grad(floats, st)))
@@ -318,25 +330,28 @@ def main():
     print(f"{'same, out= an earlier result (no new memory)':{w}} {res['kernel64out']:14.4g}  "
           f"{q('kernel64out', 'kernel64'):8.2f}  (/kernel; kernel/NumPy {q('kernel64out', 'numpy'):.2f})")
     print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {q('kernel32', 'kernel64'):8.2f}  (f32/f64)")
-    print(f"{'single jit(vmap(exchange)), whole batch':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
-          f"(/kernel; largest difference {same:.1e})")
+    print(f"{'jit(vmap(exchange)), batch-last':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
+          f"(/kernel; largest difference {same:.1e}; first call {first1:.2f} s)")
     print(f"{'same, batch-first (jax.vmap default)':{w}} {res['kernel1f']:14.4g}  {q('kernel1f', 'kernel64'):8.2f}  "
           f"(/kernel; first call {first1f:.2f} s)")
+    print(f"{'whole-batch jit(vmap), batch-first':{w}} {res['whole']:14.4g}  {q('whole', 'kernel64'):8.2f}  "
+          f"(/kernel; jit(vmap(exchange)) batch-first is {q('kernel1f', 'whole'):.2f}x it; first call {first_whole:.2f} s)")
     print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {q('chunk', 'kernel64'):8.2f}  "
           f"(/kernel; the three calls on inputs already cut into chunks)")
     print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
           f"{q('kernel64', 'numpy'):8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
-          f"{q('chunk', 'numpy'):.2f}; single jit/NumPy {q('kernel1', 'numpy'):.2f}, batch-first {q('kernel1f', 'numpy'):.2f})")
+          f"{q('chunk', 'numpy'):.2f}; jit(vmap(exchange))/NumPy {q('kernel1', 'numpy'):.2f}, batch-first "
+          f"{q('kernel1f', 'numpy'):.2f}; whole-batch/NumPy {q('whole', 'numpy'):.2f})")
     print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {q('kernel64', 'stream'):8.2f}  "
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
           f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
-          f"single jit/streaming {q('kernel1', 'stream'):.2f})")
+          f"jit(vmap(exchange))/streaming {q('kernel1', 'stream'):.2f}, batch-first {q('kernel1f', 'stream'):.2f})")
     for (name, layout), (tf, tg, gf, firstg, ok) in grads.items():
         label = f"gradient/forward, {name}, {layout}"
         print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
               f"first call {firstg:.2f} s)")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
-          f"float32: {first32_s:.2f} s; single jit: {first1:.2f} s")
+          f"float32: {first32_s:.2f} s; jit(vmap(exchange)): {first1f:.2f} s batch-first")
     print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
           f"({r.points / tsw:.3g} points/s; first call incl. compile {tsw_first:.2f} s)")
     if pc is None:

@@ -1,10 +1,9 @@
 """``exchange_batch``: the exchange over a batch of given inputs, computed the way ``sweep`` does.
 
-``jax.jit(jax.vmap(exchange))`` over a whole batch is correct and differentiable, but on a CPU
-XLA turns the ~40 results into ~120 elementwise loops, each streaming batch-sized arrays through
-memory. ``exchange_batch`` computes the same values in chunks of ``chunk`` rows (cache-sized),
-each in three jitted calls whose outputs are stored once per row: the status and sines/cosines
-(``exchange.prepare``), the impulse (``exchange.impulse_stage``), the results
+A whole batch in one XLA program makes XLA's CPU loops stream batch-sized arrays through memory.
+``exchange_batch`` computes the values of ``jax.vmap(exchange)`` in chunks of ``chunk`` rows
+(cache-sized), each in three jitted calls whose outputs are stored once per row: the status and
+sines/cosines (``exchange.prepare``), the impulse (``exchange.impulse_stage``), the results
 (``exchange.results_stage``). The first call also copies the chunk's rows out of the full arrays
 (into arrays that stay in the cache for the other two: each call reading its rows out of the
 full arrays itself was 1.25x slower, benchmarks/RESULTS.md); the last chunk is aligned to the end
@@ -14,7 +13,10 @@ The results are NumPy arrays, as ``sweep``'s are: each chunk is copied into them
 one is computed. NumPy backs large arrays with huge pages; a batch-sized result allocated by XLA
 is first touched page by page, which cost more than the copy (benchmarks/RESULTS.md).
 
-It is for values. To differentiate, vmap ``exchange``.
+It is for values. To differentiate, vmap ``exchange``, whose own vmap rule runs the same three
+stages in a loop over chunks inside one program (``ks_jax.exchange``'s module docstring);
+``exchange_batch`` differs in giving NumPy results (or writing into earlier ones, ``out=``) and in
+keeping no batch-sized XLA buffers.
 """
 
 from __future__ import annotations

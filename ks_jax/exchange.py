@@ -1,9 +1,21 @@
 """The Kudlich-Slibar impulse exchange for one collision (MODEL.md section 3).
 
-``exchange`` is pure and unbatched: the caller jits and vmaps it. Nothing here branches in
+``exchange`` is pure and unbatched: the caller jits and vmaps it (below: what vmap does on a CPU). Nothing here branches in
 Python on array values, so one bad row in a batch gets its own status code while the others
 are solved; every quantity that could be singular (|T_c| = 0, mu = 0, the cone boundary,
 eps = -1, a separating contact) goes through the double-where helpers of ``linalg``.
+
+``jax.vmap(exchange)`` on a CPU
+-------------------------------
+Over a whole batch in one program, XLA's CPU loops stream hundreds of batch-sized temporaries
+through memory (at 2^20 rows, 1.3-1.8 us per row against 0.4-0.9 for the same values in
+cache-sized chunks; benchmarks/RESULTS.md). So ``exchange`` has a vmap rule
+(``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS rows, on a CPU, with one device,
+it computes the batch in a loop over chunks of CHUNK_ROWS rows, each in ``exchange_batch``'s three
+stages with their outputs stored. Elsewhere (a GPU, several devices, a short batch, a traced
+``smoothing``) the rule is ``jax.vmap`` of the same function. Derivatives never use the rule: a
+custom JVP, ``exchange``'s own, carries every derivative (forward and reverse, batched or not), so
+gradients are those of the whole-batch program, bit for bit.
 
 The friction-cone limit, written without dividing by N_c or |T_c|
 ----------------------------------------------------------------------
@@ -280,8 +292,97 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
     friction-cone limit, O(tau) from it (see the module docstring). A row whose inputs break a
     rule gets that rule's status code and NaN in every numeric result; it never affects other rows.
     """
+    if isinstance(smoothing, jax.core.Tracer):  # a traced tau: the one-program form (module docstring)
+        return _exchange(vehicle1, state1, vehicle2, state2, contact, smoothing)
+    return _vmappable(float(smoothing))(vehicle1, state1, vehicle2, state2, contact)
+
+
+def _exchange(vehicle1, state1, vehicle2, state2, contact, smoothing):
+    """``exchange`` as written: every transformation sees these operations."""
     status = input_status(vehicle1, state1, vehicle2, state2, contact)
     return exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing, status)
+
+
+@functools.lru_cache(maxsize=None)
+def _vmappable(smoothing):
+    """``exchange`` at a fixed tau: ``_exchange``, whose batching on one CPU device is
+    ``_batched`` (module docstring). Derivatives, of any order and under vmap too, are those of
+    ``_exchange`` (the custom JVP is ``_exchange``'s own), so gradients are unchanged."""
+    plain = functools.partial(_exchange, smoothing=smoothing)
+    values = jax.custom_batching.custom_vmap(plain)
+    values.def_vmap(functools.partial(_batched, smoothing))
+
+    @jax.custom_jvp
+    def vmappable(vehicle1, state1, vehicle2, state2, contact):
+        return values(vehicle1, state1, vehicle2, state2, contact)
+
+    vmappable.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    return vmappable
+
+
+CHUNK_ROWS = 1 << 14  # rows per chunk of a batched exchange on a CPU: its arrays stay in a 2 MiB L2 cache
+
+
+def _batched(smoothing, axis_size, in_batched, *args):
+    """The vmap rule of ``_vmappable``: leaves with ``in_batched`` True have the batch first."""
+    axes = tuple(jax.tree_util.tree_map(lambda b: 0 if b else None, b) for b in in_batched)
+
+    def whole(*args):
+        return jax.vmap(functools.partial(_exchange, smoothing=smoothing), in_axes=axes)(*args)
+
+    if axis_size <= CHUNK_ROWS or jax.device_count() > 1:  # several devices: leave sharding to XLA
+        out = whole(*args)
+    else:
+        chunks = functools.partial(_in_chunks, smoothing, axis_size, tuple(in_batched), axes)
+        out = jax.lax.platform_dependent(*args, cpu=chunks, default=whole)
+    return out, jax.tree_util.tree_map(lambda _: True, out)
+
+
+def _in_chunks(smoothing, n, in_batched, axes, *args):
+    """``_exchange`` over the n rows of ``args`` in chunks of CHUNK_ROWS, each in the three stages
+    of ``exchange_batch`` with their outputs stored (``_stored``), inside one loop; the last chunk
+    ends at row n (it recomputes rows of the one before, which get the same values)."""
+    size = CHUNK_ROWS
+
+    def vmapped(fn, *extra):
+        return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
+
+    def chunk(rows):
+        rows = _stored(rows, in_batched)  # cut out of the batch once, read from the cache after
+        status, trig = vmapped(prepare)(*rows)
+        trig = _stored(trig)
+        stage = vmapped(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False), 0, 0)(
+            *rows, status, trig)
+        return vmapped(results_stage, 0, 0)(*rows, status, _stored(stage))
+
+    def cut(start):
+        return jax.tree_util.tree_map(
+            lambda x, b: jax.lax.dynamic_slice_in_dim(x, start, size, 0) if b else x, args, in_batched)
+
+    def step(i, out):
+        start = jnp.minimum(i * size, n - size)
+        return jax.tree_util.tree_map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, start, 0),
+                                      out, chunk(cut(start)))
+
+    shapes = jax.eval_shape(chunk, cut(0))
+    out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+    return jax.lax.fori_loop(0, -(-n // size), step, out)
+
+
+def _stored(tree, mask=None):
+    """``tree`` with its float leaves (where ``mask`` is True) through ``linalg.materialize``,
+    one call per shape and dtype: computed once and stored, not recomputed in every loop XLA's
+    fusion makes of their readers."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    keep = [True] * len(leaves) if mask is None else jax.tree_util.tree_leaves(mask)
+    groups = {}
+    for i, (x, k) in enumerate(zip(leaves, keep)):
+        if k and jnp.issubdtype(x.dtype, jnp.floating):
+            groups.setdefault((x.shape, x.dtype), []).append(i)
+    for index in groups.values():
+        for i, x in zip(index, la.materialize(*(leaves[i] for i in index))):
+            leaves[i] = x
+    return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
 def prepare(vehicle1, state1, vehicle2, state2, contact):

@@ -284,6 +284,7 @@ def kit():
         batch_exchange=batch_exchange, value_and_grad=value_and_grad, output_vector=output_vector,
         outputs=OUTPUTS, output_slices=OUTPUT_SLICES, n_outputs=N_OUTPUTS, traces=TRACES,
         jitted={"single": EXCHANGE, "batch": BATCH_JIT, "grad": GRAD_JIT},
+        cheap_jit=lambda fn: jax.jit(fn, compiler_options=_CHEAP),  # for programs a test compiles once
     )
 
 

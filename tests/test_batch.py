@@ -7,13 +7,17 @@ The two compute the impulse in two forms (``impulse_stage(for_gradients=False)``
 from __future__ import annotations
 
 import copy
+import importlib
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import ks_jax
 from ks_jax import types as t
+
+EXCHANGE_MODULE = importlib.import_module("ks_jax.exchange")  # ks_jax.exchange is the function
 
 
 def _leaves(result):
@@ -102,3 +106,89 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
     aliased = out._replace(contact=out.contact._replace(energy_loss=numpy_inputs[4].friction))
     with pytest.raises(ValueError, match="out.contact.energy_loss shares memory with an input"):
         ks_jax.exchange_batch(*numpy_inputs, out=aliased)
+
+
+# --------------------------------------------------------------------------- jax.vmap(exchange) in chunks
+@pytest.fixture
+def small_chunks(monkeypatch):
+    """``jax.vmap(exchange)`` over more than CHUNK_ROWS rows runs in chunks on one CPU device;
+    64-row chunks exercise that path on small batches."""
+    monkeypatch.setattr(EXCHANGE_MODULE, "CHUNK_ROWS", 64)
+    return 64
+
+
+def _with_bad_rows(cases):
+    bad = copy.deepcopy(cases[63])  # the last row of the first chunk
+    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
+    wild = copy.deepcopy(cases[100])  # a row the end-aligned last chunk computes again (restitution > 1)
+    wild["contact"]["restitution"] = 1.5
+    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
+
+
+def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
+    cases = _with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
+    args = kit.inputs(cases)
+    fn = jax.jit(jax.vmap(ks_jax.exchange))
+    assert "scan" in str(jax.make_jaxpr(fn)(*args))  # the loop over chunks, not the whole-batch program
+    batched = fn(*args)
+    singles = [kit.exchange(*kit.inputs(c)) for c in cases]
+    stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
+    _assert_same(batched, stacked)
+    status = np.asarray(batched.contact.status)
+    assert status[63] == t.INVALID_INERTIA_1 and status[100] == t.INVALID_RESTITUTION
+    good = np.ones(len(cases), bool)
+    good[[63, 100]] = False
+    kit.assert_matches(kit.engine_dict(jax.tree_util.tree_map(lambda x: np.asarray(x)[good], batched)),
+                       kit.reference_batch([c for c, g in zip(cases, good) if g]), 1e-9,
+                       [c for c, g in zip(cases, good) if g])
+    # a batch of at most one chunk is one whole-batch program
+    assert "scan" not in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*kit.inputs(cases[:64])))
+
+
+def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, random_cases, small_chunks):
+    cases = random_cases["principal"][:130]
+    v1, s1, v2, s2, c = kit.inputs(cases)
+    first = jax.tree_util.tree_map(lambda x: x[0], (v1, v2))  # both vehicles the same in every row
+    fn = jax.jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
+    batched = fn(s1, s2, c)
+    reference = jax.jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))(
+        *jax.tree_util.tree_map(lambda x: x[:64], (s1, s2, c)))  # one chunk: the whole-batch program
+    _assert_same(jax.tree_util.tree_map(lambda x: x[:64], batched), reference)
+    row = ks_jax.exchange(first[0], *jax.tree_util.tree_map(lambda x: x[129], (s1,)), first[1],
+                          *jax.tree_util.tree_map(lambda x: x[129], (s2, c)), smoothing=0.05)
+    _assert_same(jax.tree_util.tree_map(lambda x: x[129], batched), row)
+
+
+def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chunks):
+    """Forward and reverse mode through the chunked batch: the derivatives are those of the
+    whole-batch program (per-row gradients), and match central differences."""
+    args = kit.inputs(random_cases["principal"][:100])
+
+    def loss(args):
+        r = jax.vmap(ks_jax.exchange)(*args)
+        return jnp.sum(r.vehicles[0].delta_v_magnitude + r.contact.energy_loss * 1e-4)
+
+    def row_loss(*row):
+        r = ks_jax.exchange(*row)
+        return r.vehicles[0].delta_v_magnitude + r.contact.energy_loss * 1e-4
+
+    grad = kit.cheap_jit(jax.grad(loss))(args)
+    per_row = kit.cheap_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 1, 2, 3, 4))))(*args)
+    for a, b in zip(jax.tree_util.tree_leaves(grad), jax.tree_util.tree_leaves(per_row)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
+    # central differences along the speed of vehicle 1 in every row at once
+    direction = np.zeros_like(np.asarray(args[1].velocity))
+    direction[:, 0] = 1.0
+    h = 1e-5
+
+    @kit.cheap_jit
+    def shifted(step):
+        return loss((args[0], args[1]._replace(velocity=args[1].velocity + step * direction), *args[2:]))
+
+    fd = (shifted(h) - shifted(-h)) / (2 * h)
+    np.testing.assert_allclose(float(np.sum(np.asarray(grad[1].velocity) * direction)), float(fd), rtol=1e-6)
+    # forward mode of the batch (fit uses jax.jacfwd)
+    tangents = jax.tree_util.tree_map(jnp.zeros_like, args)
+    tangents = (tangents[0], tangents[1]._replace(velocity=jnp.asarray(direction)), *tangents[2:])
+    _, along = kit.cheap_jit(lambda a, t: jax.jvp(loss, (a,), (t,)))(args, tangents)
+    np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
