@@ -1,15 +1,16 @@
 """The Kudlich-Slibar impulse exchange for one collision (MODEL.md section 3).
 
-``exchange`` is pure and unbatched: the caller jits and vmaps it (below: what vmap does on a CPU). Nothing here branches in
-Python on array values, so one bad row in a batch gets its own status code while the others
-are solved; every quantity that could be singular (|T_c| = 0, mu = 0, the cone boundary,
-eps = -1, a separating contact) goes through the double-where helpers of ``linalg``.
+``exchange`` is pure and unbatched: the caller jits and vmaps it (below: what vmap does on a
+CPU). Nothing here branches in Python on array values, so one bad row in a batch gets its own
+status code while the others are solved; every quantity that could be singular (|T_c| = 0,
+mu = 0, the cone boundary, eps = -1, a separating contact) goes through the double-where
+helpers of ``linalg``.
 
 ``jax.vmap(exchange)`` on a CPU
 -------------------------------
 Over a whole batch in one program, XLA's CPU loops stream hundreds of batch-sized temporaries
-through memory (at 2^20 rows, 1.3-1.8 us per row against 0.4-0.9 for the same values in
-cache-sized chunks; benchmarks/RESULTS.md). So ``exchange`` has a vmap rule
+through memory (at 2^20 rows in two benchmark runs, 1.2-1.7 us per row; in cache-sized chunks
+0.7-1.0; benchmarks/RESULTS.md). So ``exchange`` has a vmap rule
 (``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS rows, on a CPU, with one device,
 it computes the batch in a loop over chunks of CHUNK_ROWS rows, each in ``exchange_batch``'s three
 stages with their outputs stored. Elsewhere (a GPU, several devices, a short batch, a traced
