@@ -9,7 +9,7 @@ helpers of ``linalg``.
 ``jax.vmap(exchange)`` on a CPU
 -------------------------------
 Over a whole batch in one program, XLA's CPU loops stream hundreds of batch-sized temporaries
-through memory (at 2^20 rows in two benchmark runs, 1.2-1.7 us per row; in cache-sized chunks
+through memory (at 2^20 rows in three benchmark runs, 1.2-1.7 us per row; in cache-sized chunks
 0.7-1.0; benchmarks/RESULTS.md). So ``exchange`` has a vmap rule
 (``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS rows, on a CPU, with one device,
 it computes the batch in a loop over chunks of CHUNK_ROWS rows, each in ``exchange_batch``'s three
