@@ -302,13 +302,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     if not 0.0 <= float(smoothing) < 1.0:
         raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     sizes = tuple(len(a) for a in axes.values())
-    if mode == "zip":
-        if len(set(sizes)) != 1:
-            raise CaseError("sweep mode 'zip' needs the same number of values for every path, got "
-                            + ", ".join(f"{p}: {n}" for p, n in zip(paths, sizes)))
-        shape = (sizes[0],)
-    else:
-        shape = sizes
+    shape = _shape(dict(zip(paths, sizes)), mode)
     total = math.prod(shape)
     lo, hi = (0, total) if index_range is None else (int(index_range[0]), int(index_range[1]))
     if not 0 <= lo <= hi <= total:
@@ -433,6 +427,18 @@ def parse_over(text):
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N or V1,V2,...")
+
+
+def _shape(sizes, mode):
+    """A sweep's result shape from {path: number of values}: one axis per path ("grid") or one axis
+    ("zip", which needs the same number for every path)."""
+    counts = tuple(sizes.values())
+    if mode != "zip":
+        return counts
+    if len(set(counts)) != 1:
+        raise CaseError("sweep mode 'zip' needs the same number of values for every path, got "
+                        + ", ".join(f"{p}: {n}" for p, n in sizes.items()))
+    return counts[:1]
 
 
 def _grid_inputs(axes, mode, lo, hi):
@@ -642,7 +648,7 @@ def run(args) -> int:
     if not case.valid:
         raise CaseError(case.error)
     over = dict(parse_over(t) for t in args.over)
-    shape = (len(next(iter(over.values()))),) if args.mode == "zip" else tuple(len(v) for v in over.values())
+    shape = _shape({p: len(v) for p, v in over.items()}, args.mode)  # sweep's rule, checked before a file exists
     writer = ResultWriter(args.out, over, args.mode, shape)  # written chunk by chunk: memory stays bounded
     t = time.perf_counter()
     try:
