@@ -62,7 +62,7 @@ import numpy_ks  # noqa: E402
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
 from ks_jax.batch import exchange_batch  # noqa: E402
-from ks_jax.exchange import exchange, exchange_with_status, impulse_stage, input_status, prepare, results_stage  # noqa: E402
+from ks_jax.exchange import exchange, exchange_with_status, input_status, prepare, results_stage, values_impulse_stage  # noqa: E402
 from ks_jax.sweeps import sweep  # noqa: E402
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
@@ -145,7 +145,7 @@ def kernel_chunk():
     ``exchange.prepare``, ``exchange.impulse_stage``, ``exchange.results_stage``."""
     v = lambda f: jax.vmap(f, in_axes=-1, out_axes=-1)  # noqa: E731
     prep = jax.jit(v(prepare))
-    imp = jax.jit(v(lambda *a: impulse_stage(*a[:5], 0.0, *a[5:], for_gradients=False)))
+    imp = jax.jit(v(values_impulse_stage(0.0)))
     body = jax.jit(v(results_stage))
 
     def run(args):

@@ -27,10 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .exchange import impulse_stage, prepare, results_stage
+from .exchange import CHUNK_ROWS, prepare, results_stage, values_impulse_stage
 from .types import Contact, ExchangeResult, State, Vehicle
 
-DEFAULT_CHUNK = 1 << 14  # rows: the stages' arrays stay in a 2 MiB L2 cache (as in ``sweep``)
+DEFAULT_CHUNK = CHUNK_ROWS  # rows: the stages' arrays stay in a 2 MiB L2 cache (as in ``sweep``)
 
 
 def _rows(tree, start, size):
@@ -45,8 +45,7 @@ def _stages(size, smoothing):
 
     def imp(rows, prepared):
         status, trig = prepared
-        stage = lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False)  # noqa: E731
-        return jax.vmap(stage)(*rows, status, trig)
+        return jax.vmap(values_impulse_stage(smoothing))(*rows, status, trig)
 
     def res(rows, prepared, stage):
         return jax.vmap(results_stage)(*rows, prepared[0], stage)

@@ -354,8 +354,7 @@ def _in_chunks(smoothing, n, in_batched, axes, *args):
         rows = _stored(rows, in_batched)  # cut out of the batch once, read from the cache after
         status, trig = vmapped(prepare)(*rows)
         trig = _stored(trig)
-        stage = vmapped(lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False), 0, 0)(
-            *rows, status, trig)
+        stage = vmapped(values_impulse_stage(smoothing), 0, 0)(*rows, status, trig)
         return vmapped(results_stage, 0, 0)(*rows, status, _stored(stage))
 
     def cut(start):
@@ -476,6 +475,14 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
     # concatenate loop to assemble them (XLA's CPU concatenate loops are slow on long expressions)
     return ImpulseStage(la.vec(j), sliding, approaching, la.vec(n), la.vec(u), la.mat(a1), la.mat(rot1),
                         la.mat(a2), la.mat(rot2), la.vec(r1), la.vec(r2))
+
+
+def values_impulse_stage(smoothing):
+    """``impulse_stage`` for values only (``for_gradients=False``) at a fixed tau, called as
+    ``(vehicle1, state1, vehicle2, state2, contact, status, trig)``: the stage that the chunked
+    batch paths (``exchange_batch``, ``exchange``'s vmap rule) vmap between ``prepare`` and
+    ``results_stage``."""
+    return lambda *a: impulse_stage(*a[:5], smoothing, *a[5:], for_gradients=False)
 
 
 def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
