@@ -9,11 +9,11 @@ helpers of ``linalg``.
 ``jax.vmap(exchange)`` on a CPU
 -------------------------------
 Over a whole batch in one program, XLA's CPU loops stream hundreds of batch-sized temporaries
-through memory (at 2^20 rows in three benchmark runs, 1.2-1.7 us per row; in cache-sized chunks
-0.7-1.0; benchmarks/RESULTS.md). So ``exchange`` has a vmap rule
-(``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS rows, on a CPU, with one device,
-it computes the batch in a loop over chunks of CHUNK_ROWS rows, each in ``exchange_batch``'s three
-stages with their outputs stored. Elsewhere (a GPU, several devices, a short batch, a traced
+through memory (at 2^20 rows in three benchmark runs, 1.2-1.7 us per row; benchmarks/RESULTS.md).
+So ``exchange`` has a vmap rule (``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS
+rows, on a CPU, with one device, it computes the batch in a loop over chunks of CHUNK_ROWS rows,
+each in ``exchange_batch``'s three stages, each stage fenced off from the others by a conditional
+(``_fenced``) so that XLA compiles it as it would a separate jitted call. Elsewhere (a GPU, several devices, a short batch, a traced
 ``smoothing``) the rule is ``jax.vmap`` of the same function. Derivatives never use the rule: a
 custom JVP, ``exchange``'s own, carries every derivative (forward and reverse, batched or not), so
 gradients are those of the whole-batch program, bit for bit.
@@ -342,49 +342,57 @@ def _batched(smoothing, axis_size, in_batched, *args):
 
 
 def _in_chunks(smoothing, n, in_batched, axes, *args):
-    """``_exchange`` over the n rows of ``args`` in chunks of CHUNK_ROWS, each in the three stages
-    of ``exchange_batch`` with their outputs stored (``_stored``), inside one loop; the last chunk
-    ends at row n (it recomputes rows of the one before, which get the same values)."""
+    """``_exchange`` over the n rows of ``args`` in chunks of CHUNK_ROWS, inside one loop, each
+    chunk in the three stages of ``exchange_batch``, each stage fenced off (``_fenced``) as a
+    separate jitted call would be; the last chunk ends at row n (it recomputes rows of the one
+    before, which get the same values)."""
     size = CHUNK_ROWS
 
     def vmapped(fn, *extra):
         return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
 
-    def chunk(rows):
-        rows = _stored(rows, in_batched)  # cut out of the batch once, read from the cache after
-        status, trig = vmapped(prepare)(*rows)
-        trig = _stored(trig)
-        stage = vmapped(values_impulse_stage(smoothing), 0, 0)(*rows, status, trig)
-        return vmapped(results_stage, 0, 0)(*rows, status, _stored(stage))
-
-    def cut(start):
-        return jax.tree_util.tree_map(
+    def cut_and_prepare(args, start):  # the chunk's rows, cut out of the batch once
+        rows = jax.tree_util.tree_map(
             lambda x, b: jax.lax.dynamic_slice_in_dim(x, start, size, 0) if b else x, args, in_batched)
+        return rows, vmapped(prepare)(*rows)
+
+    def impulse_(rows, status, trig):
+        return vmapped(values_impulse_stage(smoothing), 0, 0)(*rows, status, trig)
+
+    def results(rows, status, stage):
+        return vmapped(results_stage, 0, 0)(*rows, status, stage)
+
+    def chunk(i):
+        start = jnp.minimum(i * size, n - size)
+        fenced = functools.partial(_fenced, i >= 0)  # true, but not to XLA
+        rows, (status, trig) = fenced(cut_and_prepare, args, start)
+        return start, fenced(results, rows, status, fenced(impulse_, rows, status, trig))
 
     def step(i, out):
-        start = jnp.minimum(i * size, n - size)
+        start, result = chunk(i)
         return jax.tree_util.tree_map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, start, 0),
-                                      out, chunk(cut(start)))
+                                      out, result)
 
-    shapes = jax.eval_shape(chunk, cut(0))
+    shapes = jax.eval_shape(chunk, 0)[1]
     out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
     return jax.lax.fori_loop(0, -(-n // size), step, out)
 
 
-def _stored(tree, mask=None):
-    """``tree`` with its float leaves (where ``mask`` is True) through ``linalg.materialize``,
-    one call per shape and dtype: computed once and stored, not recomputed in every loop XLA's
-    fusion makes of their readers."""
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    keep = [True] * len(leaves) if mask is None else jax.tree_util.tree_leaves(mask)
-    groups = {}
-    for i, (x, k) in enumerate(zip(leaves, keep)):
-        if k and jnp.issubdtype(x.dtype, jnp.floating):
-            groups.setdefault((x.shape, x.dtype), []).append(i)
-    for index in groups.values():
-        for i, x in zip(index, la.materialize(*(leaves[i] for i in index))):
-            leaves[i] = x
-    return jax.tree_util.tree_unflatten(treedef, leaves)
+def _fenced(pred, fn, *operands):
+    """``fn(*operands)`` as the taken branch of ``lax.cond(pred, ...)``, ``pred`` true at run time.
+
+    XLA compiles a conditional's branches as computations of their own and fuses nothing across
+    their boundary, so the branch's outputs are computed in loops of their own and stored, as the
+    outputs of a separate jitted call are. Without the fences, one program fuses the stages
+    together: with the outputs of each stage stored by ``linalg.materialize`` instead, the chunked
+    loop took 1.3-1.8x the time per row (benchmarks/RESULTS.md). The other branch returns
+    zeros and never runs."""
+    shapes = jax.eval_shape(fn, *operands)
+
+    def skipped(*_):
+        return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+    return jax.lax.cond(pred, fn, skipped, *operands)
 
 
 def prepare(vehicle1, state1, vehicle2, state2, contact):
