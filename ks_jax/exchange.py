@@ -187,15 +187,17 @@ def _benign(tree, ok):
     values or gradients of a bad row)."""
     vehicle1, state1, vehicle2, state2, contact = tree
 
+    # stand-ins of the inputs' dtypes (a float64 constant would promote float32 inputs under x64)
     def veh(v):
-        inertia = jnp.ones_like(v.inertia) if v.inertia.ndim == 1 else jnp.eye(3)
+        inertia = jnp.ones_like(v.inertia) if v.inertia.ndim == 1 else jnp.eye(3, dtype=v.inertia.dtype)
         good = Vehicle(1.0, inertia, 4.0, 2.0, 1.5, 2.0, 0.5)
         return jax.tree_util.tree_map(lambda x, g: jnp.where(ok, x, g), v, good)
 
     def st(s):
         return jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), s)
 
-    good_contact = Contact(jnp.zeros(3), jnp.array([1.0, 0.0, 0.0]), 0.0, 0.0, 0.0)
+    normal = jnp.asarray(contact.normal)
+    good_contact = Contact(jnp.zeros_like(contact.point), jnp.array([1.0, 0.0, 0.0], dtype=normal.dtype), 0.0, 0.0, 0.0)
     contact = jax.tree_util.tree_map(lambda x, g: jnp.where(ok, x, g), contact, good_contact)
     return veh(vehicle1), st(state1), veh(vehicle2), st(state2), contact
 

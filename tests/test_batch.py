@@ -192,3 +192,15 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
     tangents = (tangents[0], tangents[1]._replace(velocity=jnp.asarray(direction)), *tangents[2:])
     _, along = kit.cheap_jit(lambda a, t: jax.jvp(loss, (a,), (t,)))(args, tangents)
     np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
+
+
+def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
+    """With 64-bit types enabled (as in these tests, the CLI and the benchmarks), float32 inputs give
+    float32 results computed in float32: no float64 constant may promote them (the stand-ins of
+    invalid rows once did). Values against the float64 reference at float32 tolerance."""
+    cases = random_cases["full"][:100]
+    args = kit.inputs(cases, np.float32)
+    for result in (jax.jit(jax.vmap(ks_jax.exchange))(*args), ks_jax.exchange_batch(*args, chunk=64)):
+        floats = [x for x in _leaves(result) if np.asarray(x).dtype.kind == "f"]
+        assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
+        kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), 5e-5, cases)
