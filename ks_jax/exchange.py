@@ -13,10 +13,10 @@ through memory (at 2^20 rows in three benchmark runs, 1.2-1.7 us per row; benchm
 So ``exchange`` has a vmap rule (``jax.custom_batching.custom_vmap``): over more than CHUNK_ROWS
 rows, on a CPU, with one device, it computes the batch in a loop over chunks of CHUNK_ROWS rows,
 each in ``exchange_batch``'s three stages, each stage fenced off from the others by a conditional
-(``_fenced``) so that XLA compiles it as it would a separate jitted call. Elsewhere (a GPU, several devices, a short batch, a traced
-``smoothing``) the rule is ``jax.vmap`` of the same function. Derivatives never use the rule: a
-custom JVP, ``exchange``'s own, carries every derivative (forward and reverse, batched or not), so
-gradients are those of the whole-batch program, bit for bit.
+(``_fenced``) so that XLA compiles it as it would a separate jitted call. Elsewhere (a GPU, several
+devices, a short batch, a traced ``smoothing``) the rule is ``jax.vmap`` of the same function.
+Derivatives never use the rule: a custom JVP, ``exchange``'s own, carries every derivative (forward
+and reverse, batched or not), so gradients are those of the whole-batch program, bit for bit.
 
 The friction-cone limit, written without dividing by N_c or |T_c|
 ----------------------------------------------------------------------
