@@ -15,8 +15,11 @@ rows, on a CPU, with one device, it computes the batch in a loop over chunks of 
 each in ``exchange_batch``'s three stages, each stage fenced off from the others by a conditional
 (``_fenced``) so that XLA compiles it as it would a separate jitted call. Elsewhere (a GPU, several
 devices, a short batch, a traced ``smoothing``) the rule is ``jax.vmap`` of the same function.
-Derivatives never use the rule: a custom JVP, ``exchange``'s own, carries every derivative (forward
-and reverse, batched or not), so gradients are those of the whole-batch program, bit for bit.
+Derivatives: a custom JVP, ``exchange``'s JVP, carries every derivative. Batched by ``jax.vmap``
+(a gradient or a JVP of a batched loss) it has a vmap rule of its own: the same chunks, in a
+``lax.scan`` that reverse mode runs backwards, each chunk computed again in the reverse pass
+rather than keeping the whole batch's intermediate values (``_jvp_in_chunks``). The derivatives
+are those of the whole-batch program, to rounding (about 1e-13 relative).
 
 The friction-cone limit, written without dividing by N_c or |T_c|
 ----------------------------------------------------------------------
@@ -43,6 +46,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import derived
 from . import linalg as la
@@ -310,35 +314,85 @@ def _exchange(vehicle1, state1, vehicle2, state2, contact, smoothing):
 
 @functools.lru_cache(maxsize=None)
 def _vmappable(smoothing):
-    """``exchange`` at a fixed tau: ``_exchange``, whose batching on one CPU device is
-    ``_batched`` (module docstring). Derivatives, of any order and under vmap too, are those of
-    ``_exchange`` (the custom JVP is ``_exchange``'s own), so gradients are unchanged."""
+    """``exchange`` at a fixed tau: ``_exchange``, whose batching on one CPU device runs in chunks
+    (module docstring): the values by ``_batched``, the derivatives by ``_batched_jvp``. Every
+    derivative is that of ``_exchange`` (the custom JVP is its JVP, computed in chunks when the
+    tangents are batched), so the values and derivatives are those of the whole-batch program."""
     plain = functools.partial(_exchange, smoothing=smoothing)
     values = jax.custom_batching.custom_vmap(plain)
     values.def_vmap(functools.partial(_batched, smoothing))
+    jvp = jax.custom_batching.custom_vmap(functools.partial(_float_jvp, plain))
+    jvp.def_vmap(functools.partial(_batched_jvp, smoothing))
 
     @jax.custom_jvp
     def vmappable(vehicle1, state1, vehicle2, state2, contact):
         return values(vehicle1, state1, vehicle2, state2, contact)
 
-    vmappable.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    @vmappable.defjvp
+    def _(primals, tangents):
+        if not any(_is_batched(t) for t in jax.tree_util.tree_leaves(tangents)):
+            return jax.jvp(plain, primals, tangents)
+        out, floats = jvp(primals, tangents)
+        it = iter(floats)
+        return out, jax.tree_util.tree_map(lambda o: next(it) if _is_float(o) else _float0(o), out)
+
     return vmappable
+
+
+def _is_batched(tangent):
+    """Whether a tangent is a ``jax.vmap`` tracer: then the rule above runs inside a vmap (the
+    batch is the innermost transformation, as in ``grad(loss(vmap(exchange)))`` or ``jvp`` of a
+    batch), and the JVP's batching is ``_batched_jvp``. Otherwise (say ``vmap(grad(...))``, where
+    a row's JVP is transposed before it is batched) the JVP is the plain one. Either way the
+    derivatives are the same; only their batching differs. (JAX does not export the tracer's
+    class, so it is recognized by its name; tests/test_batch.py checks that a batched gradient
+    takes the chunked path, so a JAX that renamed it would fail a test, not slow down unseen.)"""
+    return type(tangent).__name__ == "BatchTracer"
+
+
+def _is_float(x):
+    return jnp.issubdtype(x.dtype, jnp.inexact)
+
+
+def _float0(x):
+    return np.zeros(x.shape, jax.dtypes.float0)
+
+
+def _float_jvp(fn, primals, tangents):
+    """``jax.jvp(fn)``: the outputs, and the tangents of the float outputs (a list)."""
+    out, tangents_out = jax.jvp(fn, primals, tangents)
+    return out, [t for t, o in zip(jax.tree_util.tree_leaves(tangents_out), jax.tree_util.tree_leaves(out))
+                 if _is_float(o)]
 
 
 CHUNK_ROWS = 1 << 14  # rows per chunk of a batched exchange on a CPU: its arrays stay in a 2 MiB L2 cache
 
 
 def _batched(smoothing, axis_size, in_batched, *args):
-    """The vmap rule of ``_vmappable``: leaves with ``in_batched`` True have the batch first."""
+    """The vmap rule of ``_vmappable``'s values: leaves with ``in_batched`` True have the batch first."""
+    return _in_chunks_or_whole(functools.partial(_exchange, smoothing=smoothing),
+                               functools.partial(_in_chunks, smoothing), axis_size, in_batched, args)
+
+
+def _batched_jvp(smoothing, axis_size, in_batched, primals, tangents):
+    """The vmap rule of ``_vmappable``'s JVP (``_float_jvp`` of ``_exchange``)."""
+    plain = functools.partial(_float_jvp, functools.partial(_exchange, smoothing=smoothing))
+    return _in_chunks_or_whole(plain, functools.partial(_jvp_in_chunks, smoothing), axis_size, in_batched,
+                               (primals, tangents))
+
+
+def _in_chunks_or_whole(fn, in_chunks, n, in_batched, args):
+    """``jax.vmap(fn)`` over the n rows of ``args``, computed by ``in_chunks(n, in_batched, axes, *args)``
+    on one CPU device over more than CHUNK_ROWS rows."""
     axes = tuple(jax.tree_util.tree_map(lambda b: 0 if b else None, b) for b in in_batched)
 
     def whole(*args):
-        return jax.vmap(functools.partial(_exchange, smoothing=smoothing), in_axes=axes)(*args)
+        return jax.vmap(fn, in_axes=axes)(*args)
 
-    if axis_size <= CHUNK_ROWS or jax.device_count() > 1:  # several devices: leave sharding to XLA
+    if n <= CHUNK_ROWS or jax.device_count() > 1:  # several devices: leave sharding to XLA
         out = whole(*args)
     else:
-        chunks = functools.partial(_in_chunks, smoothing, axis_size, tuple(in_batched), axes)
+        chunks = functools.partial(in_chunks, n, tuple(in_batched), axes)
         out = jax.lax.platform_dependent(*args, cpu=chunks, default=whole)
     return out, jax.tree_util.tree_map(lambda _: True, out)
 
@@ -395,6 +449,63 @@ def _fenced(pred, fn, *operands):
         return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
 
     return jax.lax.cond(pred, fn, skipped, *operands)
+
+
+def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
+    """``_float_jvp`` of ``_exchange`` over n rows: a ``lax.scan`` over chunks of CHUNK_ROWS rows,
+    each in the three stages of ``exchange_with_status`` (``prepare``, ``impulse_stage``,
+    ``results_stage``), each stage's JVP fenced off (``_fenced``) as in ``_in_chunks``.
+
+    Reverse mode transposes it into a scan over the chunks in reverse. The body is a
+    ``jax.checkpoint``: the reverse pass computes each chunk's forward again instead of keeping
+    the whole batch's intermediate values (at 2^20 rows, XLA's temporaries for the gradient of a
+    batched loss went from 1.0-1.7 GiB to 46-164 MiB; benchmarks/RESULTS.md). The rows are scanned
+    over, not cut out of the batch inside a loop: the transpose of a cut is a batch-sized array
+    per chunk. A batch that is not a multiple of CHUNK_ROWS is padded with copies of its last row."""
+    size, axes = CHUNK_ROWS, axes[0]  # the vmap axes of the primals (0 or None per leaf)
+    count = -(-n // size)
+    leaves, treedef = jax.tree_util.tree_flatten((primals, tangents))
+    batched = jax.tree_util.tree_leaves(in_batched)
+
+    def chunked(x):  # (count, size, ...)
+        pad = count * size - n
+        if pad:
+            x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
+        return x.reshape((count, size) + x.shape[1:])
+
+    def body(i, rows_of_batched):
+        fenced = functools.partial(_fenced, i >= 0)  # true, but not to XLA
+        it = iter(rows_of_batched)
+        rows, d_rows = jax.tree_util.tree_unflatten(treedef, [next(it) if b else x for x, b in zip(leaves, batched)])
+
+        def vmapped(fn, *extra):
+            return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
+
+        def prepare_(rows, d_rows):
+            (status, trig), (_, d_trig) = jax.jvp(lambda r: vmapped(prepare)(*r), (rows,), (d_rows,))
+            return status, trig, d_trig
+
+        status, trig, d_trig = fenced(prepare_, rows, d_rows)
+
+        def impulse_(rows, d_rows, trig, d_trig):
+            def floats(r, t):  # the stage's floats; its flags (sliding, approaching) have no tangents
+                stage = vmapped(lambda *a: impulse_stage(*a[:5], smoothing, a[5], a[6]), 0, 0)(*r, status, t)
+                return stage._replace(sliding=None, approaching=None), (stage.sliding, stage.approaching)
+
+            return jax.jvp(floats, (rows, trig), (d_rows, d_trig), has_aux=True)
+
+        stage, d_stage, flags = fenced(impulse_, rows, d_rows, trig, d_trig)
+
+        def results_(rows, d_rows, stage, d_stage):
+            def results(r, s):
+                return vmapped(results_stage, 0, 0)(*r, status, s._replace(sliding=flags[0], approaching=flags[1]))
+
+            return _float_jvp(results, (rows, stage), (d_rows, d_stage))
+
+        return i + 1, fenced(results_, rows, d_rows, stage, d_stage)
+
+    _, out = jax.lax.scan(jax.checkpoint(body), jnp.int32(0), [chunked(x) for x, b in zip(leaves, batched) if b])
+    return jax.tree_util.tree_map(lambda y: y.reshape((count * size,) + y.shape[2:])[:n], out)
 
 
 def prepare(vehicle1, state1, vehicle2, state2, contact):

@@ -160,8 +160,9 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, ran
 
 
 def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chunks):
-    """Forward and reverse mode through the chunked batch: the derivatives are those of the
-    whole-batch program (per-row gradients), and match central differences."""
+    """Forward and reverse mode through the chunked batch (two chunks, the second padded): the
+    derivatives are those of the whole-batch program (per-row gradients, batched after the
+    transpose, which is the plain JVP's), and match central differences."""
     args = kit.inputs(random_cases["principal"][:100])
 
     def loss(args):
@@ -172,8 +173,11 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
         r = ks_jax.exchange(*row)
         return r.vehicles[0].delta_v_magnitude + r.contact.energy_loss * 1e-4
 
+    # the gradient's own batching ran in chunks: a scan over them in the reverse pass too
+    assert str(jax.make_jaxpr(jax.grad(loss))(args)).count("scan[") >= 2
     grad = kit.cheap_jit(jax.grad(loss))(args)
     per_row = kit.cheap_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 1, 2, 3, 4))))(*args)
+    assert "scan[" not in str(jax.make_jaxpr(jax.vmap(jax.grad(row_loss)))(*args))
     for a, b in zip(jax.tree_util.tree_leaves(grad), jax.tree_util.tree_leaves(per_row)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
     # central differences along the speed of vehicle 1 in every row at once
@@ -192,6 +196,55 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
     tangents = (tangents[0], tangents[1]._replace(velocity=jnp.asarray(direction)), *tangents[2:])
     _, along = kit.cheap_jit(lambda a, t: jax.jvp(loss, (a,), (t,)))(args, tangents)
     np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
+
+
+def test_gradient_in_chunks_with_a_shared_vehicle_and_bad_rows(kit, random_cases, small_chunks):
+    """Reverse mode through the chunks with an unbatched input (one vehicle 2 in every row: its
+    gradient is the sum over the rows) and rows with invalid inputs (zero gradient, nothing NaN),
+    against per-row gradients."""
+    cases = _with_bad_rows(random_cases["full"][:150])
+    v1, s1, v2, s2, c = kit.inputs(cases)
+    shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+
+    def row_loss(v2, v1, s1, s2, c):
+        r = ks_jax.exchange(v1, s1, v2, s2, c)
+        return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
+                         + 1e-4 * r.contact.energy_loss, 0.0)
+
+    def loss(v2, s1, c):
+        return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, v1, s1, s2, c))
+
+    assert "scan[" in str(jax.make_jaxpr(jax.grad(loss))(shared, s1, c))
+    grads = kit.cheap_jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
+    per_row = kit.cheap_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
+        shared, v1, s1, s2, c)
+    reference = (jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[0]), *per_row[1:])
+    for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-10)
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
+    for bad in (63, 100):
+        assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves(grads[1:]))
+
+
+def test_second_derivatives_in_chunks(kit, random_cases, small_chunks, monkeypatch):
+    """Forward over reverse (``jax.hessian``) through the chunked gradient equals the same Hessian of
+    the whole-batch program (the chunks switched off)."""
+    v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
+
+    def loss(p):
+        r = jax.vmap(ks_jax.exchange)(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2,
+                                       c._replace(friction=c.friction * p[1]))
+        return jnp.sum(jnp.where(r.contact.status == 0, r.vehicles[0].delta_v_magnitude ** 2
+                                 + r.vehicles[1].speed_after, 0.0))
+
+    p = jnp.array([1.0, 0.9])
+    assert "scan[" in str(jax.make_jaxpr(jax.hessian(loss))(p))
+    chunked = kit.cheap_jit(jax.hessian(loss))(p)
+    monkeypatch.setattr(EXCHANGE_MODULE, "CHUNK_ROWS", 1 << 14)
+    assert "scan[" not in str(jax.make_jaxpr(jax.hessian(loss))(p))
+    whole = kit.cheap_jit(jax.hessian(loss))(p)
+    np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-11)
+    assert abs(float(whole[0, 1])) > 1.0  # the two parameters interact
 
 
 def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
