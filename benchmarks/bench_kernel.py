@@ -24,8 +24,8 @@ that a change in the machine's load moves both sides of a ratio alike):
   the sum of both delta-V magnitudes (the forward needs only the impulse) and a
   reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
   after impact, through ``exchange_with_status`` (one whole-batch program, forward and gradient
-  alike) and, batch-first, through ``exchange`` (the forward in chunks; the gradient is the
-  whole-batch one); the first-call (compile) times;
+  alike) and, batch-first, through ``exchange`` (forward and gradient in chunks, with the
+  whole-batch gradient / the chunked one); the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
@@ -202,6 +202,35 @@ def pycrash_rate(repeats):
     return statistics.median(runs), "pycrash.impc.impc_calcs (planar, scalar Python, prints redirected)"
 
 
+def batched_loss(row_loss, axis, chunked=False):
+    """sum over valid rows of ``row_loss`` of the batch's results, as a function of (inputs, status):
+    through ``exchange`` (``chunked``: its own status; on one CPU device its values and derivatives
+    run in chunks), or through ``exchange_with_status`` (one whole-batch program, forward and
+    gradient alike)."""
+    def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
+        if chunked:
+            r = jax.vmap(exchange, in_axes=axis, out_axes=axis)(*args)
+        else:
+            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
+        return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
+    return loss
+
+
+def delta_v(r):
+    """Both delta-V magnitudes (the forward needs only the impulse)."""
+    return r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
+
+
+def residuals(r):
+    """Squared residuals against made-up evidence; angles compared on the circle."""
+    total = 0.0
+    for k, v in enumerate(r.vehicles):
+        total = total + (v.delta_v_magnitude - 5.0) ** 2 + (v.speed_after - 8.0) ** 2 \
+            + (1 - jnp.cos(jnp.radians(v.course_after - 10.0))) \
+            + (1 - jnp.cos(jnp.radians(v.pdof - 30.0 * k))) + (v.yaw_rate_after - 0.1) ** 2
+    return total
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rows", type=int, default=1 << 20)
@@ -270,28 +299,8 @@ def main():
                / np.abs(ref_v[1]["delta_v_magnitude"])[valid]),
     )
 
-    # --- gradient / forward of two batched losses (whole batch, jit(value_and_grad(sum(vmap)))), in both
-    # layouts: batch-first (jax.vmap's default in_axes=0, how exchange_batch takes its inputs) and batch-last
-    def batched(row_loss, axis, chunked=False):
-        def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
-            if chunked:  # exchange: its own status; the forward runs in chunks (one CPU device)
-                r = jax.vmap(exchange, in_axes=axis, out_axes=axis)(*args)
-            else:
-                r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
-            return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
-        return loss
-
-    def delta_v(r):
-        return r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
-
-    def residuals(r):  # squared residuals against made-up evidence; angles compared on the circle
-        total = 0.0
-        for k, v in enumerate(r.vehicles):
-            total = total + (v.delta_v_magnitude - 5.0) ** 2 + (v.speed_after - 8.0) ** 2 \
-                + (1 - jnp.cos(jnp.radians(v.course_after - 10.0))) \
-                + (1 - jnp.cos(jnp.radians(v.pdof - 30.0 * k))) + (v.yaw_rate_after - 0.1) ** 2
-        return total
-
+    # --- gradient / forward of two batched losses, in both layouts: batch-first (jax.vmap's default
+    # in_axes=0, how exchange_batch takes its inputs) and batch-last
     gfns, firsts, finite = {}, {}, {}
     for layout, data, axis, chunked in (("batch-first", first, 0, False), ("batch-last", last, -1, False),
                                         ("exchange, batch-first", first, 0, True)):
@@ -299,7 +308,7 @@ def main():
         st = jax.jit(jax.vmap(input_status, in_axes=axis, out_axes=axis))(*data)
         for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
             key = (name, layout)
-            loss = batched(row_loss, axis, chunked)
+            loss = batched_loss(row_loss, axis, chunked)
             fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
             first_call(lambda: jax.block_until_ready(fwd(floats, st)))
             firsts[key] = first_call(lambda: jax.block_until_ready(grad(floats, st)))
@@ -348,8 +357,12 @@ def main():
           f"jit(vmap(exchange))/streaming {q('kernel1', 'stream'):.2f}, batch-first {q('kernel1f', 'stream'):.2f})")
     for (name, layout), (tf, tg, gf, firstg, ok) in grads.items():
         label = f"gradient/forward, {name}, {layout}"
+        versus = ""
+        if layout == "exchange, batch-first":  # its gradient in chunks against the whole-batch gradient
+            versus = (f"; whole-batch gradient (batch-first) / this gradient "
+                      f"{ratio(gt, (name, layout, 'gradient'), (name, 'batch-first', 'gradient')):.2f}")
         print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
-              f"first call {firstg:.2f} s)")
+              f"first call {firstg:.2f} s{versus})")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
           f"float32: {first32_s:.2f} s; jit(vmap(exchange)): {first1f:.2f} s batch-first")
     print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
