@@ -404,8 +404,7 @@ def _in_chunks(smoothing, n, in_batched, axes, *args):
     before, which get the same values)."""
     size = CHUNK_ROWS
 
-    def vmapped(fn, *extra):
-        return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
+    vmapped = functools.partial(_vmapped, axes)
 
     def cut_and_prepare(args, start):  # the chunk's rows, cut out of the batch once
         rows = jax.tree_util.tree_map(
@@ -434,6 +433,12 @@ def _in_chunks(smoothing, n, in_batched, axes, *args):
     return jax.lax.fori_loop(0, -(-n // size), step, out)
 
 
+def _vmapped(axes, fn, *extra):
+    """``jax.vmap(fn)`` over a chunk's rows (``axes``: 0 or None per leaf of the five inputs), with
+    one batched argument after them for each of ``extra``."""
+    return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
+
+
 def _fenced(pred, fn, *operands):
     """``fn(*operands)`` as the taken branch of ``lax.cond(pred, ...)``, ``pred`` true at run time.
 
@@ -459,10 +464,11 @@ def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
     Reverse mode transposes it into a scan over the chunks in reverse. The body is a
     ``jax.checkpoint``: the reverse pass computes each chunk's forward again instead of keeping
     the whole batch's intermediate values (at 2^20 rows, XLA's temporaries for the gradient of a
-    batched loss went from 1.0-1.7 GiB to 46-164 MiB; benchmarks/RESULTS.md). The rows are scanned
+    batched loss went from 1033-1685 MiB to 46-164 MiB; benchmarks/RESULTS.md). The rows are scanned
     over, not cut out of the batch inside a loop: the transpose of a cut is a batch-sized array
     per chunk. A batch that is not a multiple of CHUNK_ROWS is padded with copies of its last row."""
     size, axes = CHUNK_ROWS, axes[0]  # the vmap axes of the primals (0 or None per leaf)
+    vmapped = functools.partial(_vmapped, axes)
     count = -(-n // size)
     leaves, treedef = jax.tree_util.tree_flatten((primals, tangents))
     batched = jax.tree_util.tree_leaves(in_batched)
@@ -477,9 +483,6 @@ def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
         fenced = functools.partial(_fenced, i >= 0)  # true, but not to XLA
         it = iter(rows_of_batched)
         rows, d_rows = jax.tree_util.tree_unflatten(treedef, [next(it) if b else x for x, b in zip(leaves, batched)])
-
-        def vmapped(fn, *extra):
-            return jax.vmap(fn, in_axes=axes + (0,) * len(extra))
 
         def prepare_(rows, d_rows):
             (status, trig), (_, d_trig) = jax.jvp(lambda r: vmapped(prepare)(*r), (rows,), (d_rows,))
