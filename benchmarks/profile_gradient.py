@@ -8,8 +8,8 @@ trace) with XLA's optimized program dumped beside it, and prints, per row and su
 cores (thread time, so it adds up to more than the wall time):
 - each XLA thunk's own time (its children's taken out), grouped by phase: the forward pass, the
   forward computed again in the reverse pass (``rematted``), and the transposed derivative; and by
-  the kind of operation its fusion is named after (loops of arithmetic, or moving data: slices,
-  concatenates, copies, dynamic slices and updates);
+  the kind of operation its fusion is named after (moving data: concatenates, slices, dynamic
+  slices and updates, copies, pads, transposes; arithmetic: the rest);
 - the bytes per row that leave each fenced stage (an XLA conditional): in the reverse pass these
   are the residuals that the transposed stage reads back.
 The profile itself slows the program down; read the shares, not the absolute times.
@@ -95,21 +95,21 @@ def main():
                 stack[-1]["own"] -= e["dur"]
             stack.append(e)
 
-    def phase(name):
-        o = op_name.get(name, "")
-        if "transpose(" not in o:
-            return "forward pass" if o else "outside the loops (no op name)"
-        return "forward again (reverse pass)" if "rematted" in o else "transposed derivative"
+    def phase(op):  # from the op name XLA keeps of the JAX transformations
+        if "transpose(" not in op:
+            return "forward pass" if op else "outside the loops (no op name)"
+        return "forward again (reverse pass)" if "rematted" in op else "transposed derivative"
 
     def kind(name):
-        base = name.split(".")[0]
-        return "moving data" if any(m in base for m in MOVES) else "arithmetic"
+        return "moving data" if any(m in name.split(".")[0] for m in MOVES) else "arithmetic"
 
-    per_phase, per_kind = collections.Counter(), collections.Counter()
+    per_kind = collections.Counter()
     for e in events:
         if e["name"] in computation:
-            per_phase[phase(e["name"])] += e["own"]
-            per_kind[(phase(e["name"]), kind(e["name"]))] += e["own"]
+            per_kind[(phase(op_name[e["name"]]), kind(e["name"]))] += e["own"]
+    per_phase = collections.Counter()
+    for (p, _), t in per_kind.items():
+        per_phase[p] += t
     total = sum(per_phase.values())
     ns = 1e3 / (2 * n)  # us of trace time over two calls -> ns per row
     print(f"value_and_grad of the {args.loss} loss through jax.vmap(exchange), {n} rows, jax {jax.__version__}")
@@ -119,8 +119,8 @@ def main():
         print(f"  {p:32s} {t * ns:6.0f} ns ({100 * t / total:4.1f}%): {parts}")
     print("bytes per row leaving each fenced stage (XLA conditional):")
     for count, size, o in conds:
-        where = ("reverse pass, forward again" if "rematted" in o
-                 else "reverse pass" if "transpose(" in o else "forward pass")
+        where = {"forward again (reverse pass)": "reverse pass, forward again",
+                 "transposed derivative": "reverse pass"}.get(phase(o), "forward pass")
         print(f"  {count:4d} arrays {size / CHUNK_ROWS:7.0f} B/row  {where}")
     print(f"(trace and HLO in {work})")
 
