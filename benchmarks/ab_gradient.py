@@ -30,11 +30,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_kernel as bk  # noqa: E402
 
 
-def set_attribute(spec):
+def _attribute(spec):
+    """(module, attribute name, value) of MODULE.ATTR=VALUE."""
     target, value = spec.split("=", 1)
     module, attr = target.rsplit(".", 1)
-    importlib.import_module(module)
-    setattr(sys.modules[module], attr, eval(value, {}))  # noqa: S307 (a benchmark's command line)
+    return importlib.import_module(module), attr, value
+
+
+def set_attribute(spec):
+    module, attr, value = _attribute(spec)
+    setattr(module, attr, eval(value, {}))  # noqa: S307 (a benchmark's command line)
 
 
 def main():
@@ -53,7 +58,13 @@ def main():
     status = jax.vmap(bk.input_status)(*first) if args.whole else None
     print(f"{'whole-batch exchange_with_status' if args.whole else 'jax.vmap(exchange)'}, {n} rows, jax {jax.__version__}, {jax.devices()[0].device_kind}; {args.repeats} rounds")
     calls = {}
+    originals = {}  # the attributes as they were: each loss's forward is traced with them
+    for spec in args.variants:
+        module, attr, _ = _attribute(spec)
+        originals.setdefault((module, attr), getattr(module, attr))
     for name in names:
+        for (module, attr), value in originals.items():
+            setattr(module, attr, value)
         loss = bk.batched_loss(losses[name], 0, chunked=not args.whole)
         fwd = jax.jit(lambda a, loss=loss: loss(a, status))
         jax.block_until_ready(fwd(first))
