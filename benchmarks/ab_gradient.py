@@ -56,7 +56,8 @@ def main():
     losses = {"delta-V": bk.delta_v, "residuals": bk.residuals}
     names = list(losses) if args.loss == "both" else [args.loss]
     status = jax.vmap(bk.input_status)(*first) if args.whole else None
-    print(f"{'whole-batch exchange_with_status' if args.whole else 'jax.vmap(exchange)'}, {n} rows, jax {jax.__version__}, {jax.devices()[0].device_kind}; {args.repeats} rounds")
+    path = "whole-batch exchange_with_status" if args.whole else "jax.vmap(exchange)"
+    print(f"{path}, {n} rows, jax {jax.__version__}, {jax.devices()[0].device_kind}; {args.repeats} rounds")
     calls = {}
     originals = {}  # the attributes as they were: each loss's forward is traced with them
     for spec in args.variants:
