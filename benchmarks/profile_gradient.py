@@ -1,7 +1,7 @@
 """Where the time of a chunked gradient goes: ``jax.value_and_grad`` of a batched loss through
 ``jax.vmap(exchange)``, profiled. Not a test.
 
-    .venv/bin/python benchmarks/profile_gradient.py [--rows 262144] [--loss residuals|delta-V]
+    .venv/bin/python benchmarks/profile_gradient.py [--rows 262144] [--loss residuals|delta-V] [--top N]
 
 Runs the gradient of one of bench_kernel.py's losses twice under ``jax.profiler`` (a Perfetto
 trace) with XLA's optimized program dumped beside it, and prints, per row and summed over both
@@ -36,6 +36,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rows", type=int, default=1 << 18)
     ap.add_argument("--loss", choices=("residuals", "delta-V"), default="residuals")
+    ap.add_argument("--top", type=int, default=0,
+                    help="also list the N heaviest groups of thunks (phase, kind of fusion, shape)")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="ks_profile_"))
     # XLA reads its flags when JAX starts its backend: set before jax is imported
@@ -59,7 +61,7 @@ def main():
             jax.block_until_ready(grad(first))
 
     hlo_file = max((work / "hlo").glob("*jit__lambda*.cpu_after_optimizations.txt"), key=lambda p: p.stat().st_size)
-    computation, op_name, conds = {}, {}, []
+    computation, op_name, conds, shapes = {}, {}, [], {}
     current = None
     for line in hlo_file.read_text().splitlines():
         head = re.match(r"^(?:ENTRY )?%?([\w.\-]+) .*\{$", line)
@@ -70,6 +72,7 @@ def main():
             continue
         name, shape, op = inst.groups()
         computation[name] = current
+        shapes[name] = shape
         found = re.search(r'op_name="([^"]*)"', line)
         op_name[name] = found.group(1) if found else ""
         if op == "conditional":
@@ -122,6 +125,17 @@ def main():
         where = {"forward again (reverse pass)": "reverse pass, forward again",
                  "transposed derivative": "reverse pass"}.get(phase(o), "forward pass")
         print(f"  {count:4d} arrays {size / CHUNK_ROWS:7.0f} B/row  {where}")
+    if args.top:
+        groups, counts = collections.Counter(), collections.Counter()
+        for e in events:
+            if e["name"] in computation:
+                key = (phase(op_name[e["name"]]), e["name"].split(".")[0], shapes[e["name"]][:48])
+                groups[key] += e["own"]
+        for e in {e["name"] for e in events if e["name"] in computation}:
+            counts[(phase(op_name[e]), e.split(".")[0], shapes[e][:48])] += 1
+        print(f"heaviest groups of thunks (phase, fusion kind, output shape; count): ns per row")
+        for key, t in groups.most_common(args.top):
+            print(f"  {t * ns:7.0f}  {key[0]:30s} {key[1]:32s} {key[2]:48s} x{counts[key]}")
     print(f"(trace and HLO in {work})")
 
 
