@@ -1,7 +1,7 @@
 """Where the time of a chunked gradient goes: ``jax.value_and_grad`` of a batched loss through
 ``jax.vmap(exchange)``, profiled. Not a test.
 
-    .venv/bin/python benchmarks/profile_gradient.py [--rows 262144] [--loss residuals|delta-V] [--top N]
+    .venv/bin/python benchmarks/profile_gradient.py [--rows 262144] [--loss residuals|delta-V] [--top N] [--forward]
 
 Runs the gradient of one of bench_kernel.py's losses twice under ``jax.profiler`` (a Perfetto
 trace) with XLA's optimized program dumped beside it, and prints, per row and summed over both
@@ -12,6 +12,8 @@ cores (thread time, so it adds up to more than the wall time):
   slices and updates, copies, pads, transposes; arithmetic: the rest);
 - the bytes per row that leave each fenced stage (an XLA conditional): in the reverse pass these
   are the residuals that the transposed stage reads back.
+``--forward``: profile ``jax.jit(jax.vmap(exchange))`` instead (batch-first, every result, as
+bench_kernel.py times it); all of its thunks are then in the forward pass or outside the loops.
 The profile itself slows the program down; read the shares, not the absolute times.
 """
 
@@ -38,6 +40,7 @@ def main():
     ap.add_argument("--loss", choices=("residuals", "delta-V"), default="residuals")
     ap.add_argument("--top", type=int, default=0,
                     help="also list the N heaviest groups of thunks (phase, kind of fusion, shape)")
+    ap.add_argument("--forward", action="store_true", help="profile jax.jit(jax.vmap(exchange)) instead")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="ks_profile_"))
     # XLA reads its flags when JAX starts its backend: set before jax is imported
@@ -53,8 +56,11 @@ def main():
     n = args.rows
     _, last = bk.random_batch(n)
     first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.array(jnp.moveaxis(x, -1, 0)), last))
-    loss = bk.batched_loss(bk.residuals if args.loss == "residuals" else bk.delta_v, 0, chunked=True)
-    grad = jax.jit(jax.value_and_grad(lambda a: loss(a, None)))
+    if args.forward:
+        grad = jax.jit(lambda a: jax.vmap(bk.exchange)(*a))
+    else:
+        loss = bk.batched_loss(bk.residuals if args.loss == "residuals" else bk.delta_v, 0, chunked=True)
+        grad = jax.jit(jax.value_and_grad(lambda a: loss(a, None)))
     jax.block_until_ready(grad(first))
     with jax.profiler.trace(str(work / "trace"), create_perfetto_trace=True):
         for _ in range(2):
@@ -115,7 +121,8 @@ def main():
         per_phase[p] += t
     total = sum(per_phase.values())
     ns = 1e3 / (2 * n)  # us of trace time over two calls -> ns per row
-    print(f"value_and_grad of the {args.loss} loss through jax.vmap(exchange), {n} rows, jax {jax.__version__}")
+    what = "jax.jit(jax.vmap(exchange))" if args.forward else f"value_and_grad of the {args.loss} loss through jax.vmap(exchange)"
+    print(f"{what}, {n} rows, jax {jax.__version__}")
     print(f"thread time per row (both cores), from the profile: {total * ns:.0f} ns")
     for p, t in per_phase.most_common():
         parts = ", ".join(f"{k} {per_kind[(p, k)] * ns:.0f}" for k in ("arithmetic", "moving data"))
