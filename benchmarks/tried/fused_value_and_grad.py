@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -69,17 +68,10 @@ def main():
             diff = max(float(jnp.max(jnp.abs(a - b) / (1 + jnp.abs(b)))) for a, b in zip(leaves, reference))
             print(f"{name:9s} {key[1]:20s} largest relative difference from main {diff:.1e}", flush=True)
         jax.block_until_ready(calls[(name, "forward")](first))
-    times = {k: [] for k in calls}
-    for _ in range(args.repeats):
-        for key, fn in calls.items():
-            start = time.perf_counter()
-            jax.block_until_ready(fn(first))
-            times[key].append(time.perf_counter() - start)
+    times = bk.rounds({k: (lambda fn=fn: jax.block_until_ready(fn(first))) for k, fn in calls.items()}, args.repeats)
     for (name, label), t in times.items():
-        base = times[(name, "forward")]
         print(f"{name:9s} {label:20s} {statistics.median(t) * 1e9 / n:7.0f} ns/row   / forward "
-              f"{statistics.median(b / a for a, b in zip(base, t)):.2f}")
-
+              f"{bk.ratio(times, (name, 'forward'), (name, label)):.2f}")
 
 if __name__ == "__main__":
     main()
