@@ -18,6 +18,8 @@ that a change in the machine's load moves both sides of a ratio alike):
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
   kernel's inputs and outputs together (one read and one write of each, as the kernel does);
+- the minor page faults per call (new memory touched), and jit(vmap(exchange)) / NumPy round by
+  round, with that call's CPU time per row and page faults (to tell what made a round slow);
 - the ratios kernel/NumPy and kernel/streaming; gradient / forward of two batched losses, each
   against its own forward (``jax.value_and_grad`` of ``sum(vmap(exchange))`` over every input), with
   the batch axis first (``jax.vmap``'s default) and last:
@@ -44,6 +46,7 @@ import importlib.util
 import io
 import os
 import platform
+import resource
 import statistics
 import sys
 import time
@@ -85,17 +88,31 @@ def first_call(fn):
     return time.perf_counter() - t
 
 
-def rounds(fns, repeats):
+def rounds(fns, repeats, usage=None):
     """Times of each fn() (blocking), measured in ``repeats`` rounds that run every fn once, in
     turn: a ratio of two of them is then taken round by round (``ratio``), so a change in the
-    machine's load during the run moves both sides of it alike."""
+    machine's load during the run moves both sides of it alike. ``usage``: a dict that gets, per
+    fn, the (CPU seconds, minor page faults) of this process during each call (``process_usage``)."""
     times = {name: [] for name in fns}
     for _ in range(repeats):
         for name, fn in fns.items():
+            u0 = process_usage()
             t = time.perf_counter()
             fn()
             times[name].append(time.perf_counter() - t)
+            if usage is not None:
+                usage.setdefault(name, []).append(tuple(b - a for a, b in zip(u0, process_usage())))
     return times
+
+
+def process_usage():
+    """(CPU seconds, user and system, of all threads; minor page faults) of this process so far.
+    A call whose CPU time grows with its wall time was slowed down while it ran (the machine is
+    shared: caches and memory bandwidth, not only cores). A minor fault is a new 4 KiB page touched for
+    the first time (a batch-sized result in new memory); whether a call gets new memory depends on
+    what the allocator kept from the calls before it."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime, r.ru_minflt
 
 
 def ratio(times, a, b):
@@ -280,7 +297,8 @@ def main():
     }
     for fn in fns.values():  # warm
         fn()
-    times = rounds(fns, reps)
+    usage = {}
+    times = rounds(fns, reps, usage)
     res = {k: n / statistics.median(v) for k, v in times.items()}
     t64 = statistics.median(times["kernel64"])
     tstream = statistics.median(times["stream"])
@@ -355,6 +373,13 @@ def main():
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
           f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
           f"jit(vmap(exchange))/streaming {q('kernel1', 'stream'):.2f}, batch-first {q('kernel1f', 'stream'):.2f})")
+    kf = lambda k: f"{statistics.median(u[1] for u in usage[k]):.0f}"  # noqa: E731
+    print(f"page faults per call (medians): exchange_batch {kf('kernel64')}, out= {kf('kernel64out')}, "
+          f"jit(vmap(exchange)) batch-first {kf('kernel1f')}, whole-batch {kf('whole')}, NumPy {kf('numpy')}, "
+          f"streaming {kf('stream')}; a result of this batch is {nbytes(out) / 4096:.0f} pages of 4 KiB")
+    by_round = ", ".join(f"{tn / tk:.2f} ({cpu * 1e9 / n:.0f} ns, {faults})" for tk, tn, (cpu, faults)
+                         in zip(times["kernel1f"], times["numpy"], usage["kernel1f"]))
+    print(f"jit(vmap(exchange)) batch-first / NumPy, round by round (its CPU time per row, page faults): {by_round}")
     for (name, layout), (tf, tg, gf, firstg, ok) in grads.items():
         label = f"gradient/forward, {name}, {layout}"
         versus = ""
