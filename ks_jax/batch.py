@@ -30,7 +30,7 @@ import numpy as np
 from .exchange import CHUNK_ROWS, prepare, results_stage, values_impulse_stage
 from .types import Contact, ExchangeResult, State, Vehicle
 
-DEFAULT_CHUNK = CHUNK_ROWS  # rows: the stages' arrays stay in a 2 MiB L2 cache (as in ``sweep``)
+DEFAULT_CHUNK = CHUNK_ROWS  # rows per chunk, as in ``sweep`` and ``exchange``'s vmap rule
 
 
 def _rows(tree, start, size):

@@ -365,7 +365,9 @@ def _float_jvp(fn, primals, tangents):
                  if _is_float(o)]
 
 
-CHUNK_ROWS = 1 << 14  # rows per chunk of a batched exchange on a CPU: its arrays stay in a 2 MiB L2 cache
+# rows per chunk of a batched exchange on a CPU: a stage reads and writes about 1.5 kB per row, 24 MiB per
+# chunk, within the benchmark machine's 32 MiB L3 (2048 to 65536 rows ran 0.70-1.03x as fast; benchmarks/RESULTS.md)
+CHUNK_ROWS = 1 << 14
 
 
 def _batched(smoothing, axis_size, in_batched, *args):
