@@ -9,8 +9,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
+import re
 import sys
 from importlib import resources
+from pathlib import Path
 
 import jax
 
@@ -86,22 +89,52 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# the command line's compile cache is kept under this many bytes (least recently used programs go first)
+CACHE_LIMIT = 512 * 2**20
+_CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime)")  # the files JAX writes there
+
+
 def _compilation_cache():
     """Keep compiled programs between runs (the first run of a command compiles for seconds;
-    later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it."""
-    import os
-    from pathlib import Path
-
+    later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it. The cache is
+    kept under CACHE_LIMIT (``prune_cache``): each grid shape of a sweep is a program of its own."""
     where = os.environ.get("KS_JAX_CACHE", "")
     if where.lower() in ("off", "0", "no"):
         return
     path = Path(where) if where else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ks-jax" / "jax"
     try:
         path.mkdir(parents=True, exist_ok=True)
+        prune_cache(path, CACHE_LIMIT)
     except OSError:
         return
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
+def prune_cache(path, limit):
+    """Delete the least recently used programs of the compile cache in ``path`` until the rest
+    take at most ``limit`` bytes; returns the number of files deleted. Only files named as JAX names
+    its entries are counted or touched, so a KS_JAX_CACHE that points at a directory holding
+    anything else loses nothing else. (JAX's own bound, ``jax_compilation_cache_max_size``, needs
+    the ``filelock`` package.)"""
+    entries = []
+    with os.scandir(path) as it:
+        for entry in it:
+            if _CACHE_ENTRY.fullmatch(entry.name) and entry.is_file(follow_symlinks=False):
+                st = entry.stat(follow_symlinks=False)
+                entries.append((max(st.st_atime, st.st_mtime), st.st_size, entry.path))
+    total = sum(size for _, size, _ in entries)
+    deleted = 0
+    for _, size, file in sorted(entries):
+        if total <= limit:
+            break
+        try:
+            os.remove(file)
+        except FileNotFoundError:  # another run deleted it first
+            pass
+        total -= size
+        deleted += 1
+    return deleted
 
 
 def _show_case_warnings():
@@ -135,8 +168,6 @@ def main(argv=None) -> int:
         print(f"ks-jax: error: {err}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # the reader went away (ks-jax demo | head): not an error
-        import os
-
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
 

@@ -6,9 +6,14 @@ Tests get everything through the ``kit`` fixture so that nothing imports conftes
 
 from __future__ import annotations
 
+import os
 import types
 
 import jax
+
+# ks_jax.cli.main keeps compiled programs in ~/.cache/ks-jax unless told otherwise; the tests that call
+# it write nothing there (tests/test_cli.py runs the command line with a cache of its own)
+os.environ["KS_JAX_CACHE"] = "off"
 
 jax.config.update("jax_enable_x64", True)
 

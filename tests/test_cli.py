@@ -4,6 +4,7 @@ import contextlib
 import copy
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,3 +249,51 @@ def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
     code, out, err = run_cli(capsys, "solve", str(path), "--json")
     assert code == 0 and json.loads(out)["cases"][0]["contact"]["status"] == "ok"
     assert "ks-jax: warning: case 'units check': vehicles[1].year: unknown field, ignored" in err
+
+
+def test_compile_cache_is_used_and_kept_apart(tmp_path):
+    """KS_JAX_CACHE=DIR: the first run stores its compiled programs there, a second run gives the
+    same report; nothing outside DIR is written, and KS_JAX_CACHE=off stores nothing."""
+    import os
+    import subprocess
+    import sys
+
+    from ks_jax.cli import _CACHE_ENTRY
+
+    case = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
+    cache, off_home = tmp_path / "cache", tmp_path / "home"
+
+    def run(where):
+        env = dict(os.environ, KS_JAX_CACHE=str(where), XDG_CACHE_HOME=str(off_home))
+        done = subprocess.run([sys.executable, "-m", "ks_jax.cli", "solve", str(case), "--json"],
+                              env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)
+
+    first = run(cache)
+    entries = [p.name for p in cache.iterdir()]
+    assert entries and all(_CACHE_ENTRY.fullmatch(name) for name in entries)
+    assert run(cache) == first
+    assert sorted(p.name for p in cache.iterdir()) == sorted(entries)
+    assert run("off") == first
+    assert not off_home.exists()
+
+
+def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
+    import os
+
+    from ks_jax.cli import prune_cache
+
+    names = [f"jit_solve_fn-{k:064x}-cache" for k in range(5)]
+    for age, name in enumerate(names):  # names[0] used last, names[4] first
+        (tmp_path / name).write_bytes(b"x" * 1000)
+        os.utime(tmp_path / name, (1e9 - 100 * age, 1e9 - 100 * age))
+    other = tmp_path / "notes-cache"  # not a name JAX gives an entry: never counted or deleted
+    other.write_bytes(b"y" * 10_000)
+    os.utime(other, (1.0, 1.0))
+
+    assert prune_cache(tmp_path, 5000) == 0
+    assert prune_cache(tmp_path, 2500) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names[:2] + ["notes-cache"])
+    assert prune_cache(tmp_path, 0) == 2
+    assert [p.name for p in tmp_path.iterdir()] == ["notes-cache"]
