@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# the command line's compile cache is kept under this many bytes (least recently used programs go first)
+# when a command starts, its compile cache is trimmed to this many bytes (least recently used programs first)
 CACHE_LIMIT = 512 * 2**20
 _CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime)")  # the files JAX writes there
 
@@ -97,7 +97,7 @@ _CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime)")  # the 
 def _compilation_cache():
     """Keep compiled programs between runs (the first run of a command compiles for seconds;
     later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it. The cache is
-    kept under CACHE_LIMIT (``prune_cache``): each grid shape of a sweep is a program of its own."""
+    trimmed to CACHE_LIMIT here (``prune_cache``): each grid shape of a sweep is a program of its own."""
     where = os.environ.get("KS_JAX_CACHE", "")
     if where.lower() in ("off", "0", "no"):
         return

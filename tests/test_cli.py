@@ -4,6 +4,9 @@ import contextlib
 import copy
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +15,7 @@ import pytest
 import ks_jax
 from ks_jax import units as U
 from ks_jax.case import CaseError, CaseWarning, case_from_dict, load_case
-from ks_jax.cli import main
+from ks_jax.cli import _CACHE_ENTRY, main, prune_cache
 
 # A case written in US units; its SI twin below is written by hand from the exact unit definitions.
 US_CASE = {
@@ -254,12 +257,6 @@ def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
 def test_compile_cache_is_used_and_kept_apart(tmp_path):
     """KS_JAX_CACHE=DIR: the first run stores its compiled programs there, a second run gives the
     same report; nothing outside DIR is written, and KS_JAX_CACHE=off stores nothing."""
-    import os
-    import subprocess
-    import sys
-
-    from ks_jax.cli import _CACHE_ENTRY
-
     case = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
     cache, off_home = tmp_path / "cache", tmp_path / "home"
 
@@ -280,10 +277,6 @@ def test_compile_cache_is_used_and_kept_apart(tmp_path):
 
 
 def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
-    import os
-
-    from ks_jax.cli import prune_cache
-
     names = [f"jit_solve_fn-{k:064x}-cache" for k in range(5)]
     for age, name in enumerate(names):  # names[0] used last, names[4] first
         (tmp_path / name).write_bytes(b"x" * 1000)
