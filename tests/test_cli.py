@@ -254,25 +254,53 @@ def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
     assert "ks-jax: warning: case 'units check': vehicles[1].year: unknown field, ignored" in err
 
 
+# runs the command line and reports on stderr how many programs it loaded from the persistent
+# compile cache and how many it wrote there (JAX's events "cache_hits" and "cache_misses"; the
+# latter is recorded only when an entry is written). Every program is stored, however quickly it
+# compiled, so that one compiling near the command line's 0.5 s threshold cannot make the counts differ.
+_COUNT_CACHE_HITS = """
+import collections, json, sys, jax
+from ks_jax import cli
+from ks_jax.cli import main
+setup = cli._compilation_cache
+def store_all():
+    setup()
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+cli._compilation_cache = store_all
+seen = collections.Counter()
+jax.monitoring.register_event_listener(lambda event, **_: seen.update([event.rsplit("/", 1)[-1]]))
+code = main(sys.argv[1:])
+print(json.dumps({"loaded": seen["cache_hits"], "written": seen["cache_misses"]}), file=sys.stderr)
+sys.exit(code)
+"""
+
+
 def test_compile_cache_is_used_and_kept_apart(tmp_path):
-    """KS_JAX_CACHE=DIR: the first run stores its compiled programs there, a second run gives the
-    same report; nothing outside DIR is written, and KS_JAX_CACHE=off stores nothing."""
+    """KS_JAX_CACHE=DIR: the first run stores its compiled programs there and a second run loads
+    them (JAX's own cache-hit events) and gives the same report; nothing outside DIR is written,
+    and KS_JAX_CACHE=off stores and loads nothing."""
     case = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
     cache, off_home = tmp_path / "cache", tmp_path / "home"
 
     def run(where):
         env = dict(os.environ, KS_JAX_CACHE=str(where), XDG_CACHE_HOME=str(off_home))
-        done = subprocess.run([sys.executable, "-m", "ks_jax.cli", "solve", str(case), "--json"],
+        done = subprocess.run([sys.executable, "-c", _COUNT_CACHE_HITS, "solve", str(case), "--json"],
                               env=env, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
-        return json.loads(done.stdout)
+        return json.loads(done.stdout), json.loads(done.stderr.strip().splitlines()[-1])
 
-    first = run(cache)
+    first, counts = run(cache)
+    written = counts["written"]
+    assert counts["loaded"] == 0 and written > 0
     entries = [p.name for p in cache.iterdir()]
     assert entries and all(_CACHE_ENTRY.fullmatch(name) for name in entries)
-    assert run(cache) == first
+    again, counts = run(cache)
+    assert again == first
+    assert counts == {"loaded": written, "written": 0}  # every program it stored, loaded
     assert sorted(p.name for p in cache.iterdir()) == sorted(entries)
-    assert run("off") == first
+    off, counts = run("off")
+    assert off == first
+    assert counts == {"loaded": 0, "written": 0}
     assert not off_home.exists()
 
 
