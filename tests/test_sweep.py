@@ -239,6 +239,7 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     for k in a:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
     np.testing.assert_array_equal(a["vehicles[1].delta_v[0]"], kept["vehicles[1].delta_v[0]"].ravel())
+    np.testing.assert_array_equal(a["vehicles[1].speed"], np.repeat(np.linspace(2, 30, 21), 13))
     np.testing.assert_array_equal(a["contact.restitution"], np.tile(np.linspace(0, 1.2, 13), 21))
     assert list(a["status_text"]) == [ks_jax.status_text(int(c)) for c in a["status"]]
     assert {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"} == set(a["status_text"])
