@@ -29,6 +29,11 @@ that a change in the machine's load moves both sides of a ratio alike):
   alike) and, batch-first, through ``exchange`` (forward and gradient in chunks, with the
   whole-batch gradient / the chunked one); the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
+- in fresh processes, after everything above: the time and peak memory of a sweep of 10^8 points
+  (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
+  skips it) and a 1000 x 1000 grid sharded over two forced host devices against one device
+  (``bench_sweep_sharded.py`` under ``XLA_FLAGS=--xla_force_host_platform_device_count=2``;
+  ``--sharded-n 0`` skips it);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
 Batch-last (every leaf (..., N)) makes each component of a vector one contiguous array, which is
@@ -253,6 +258,8 @@ def main():
     ap.add_argument("--rows", type=int, default=1 << 20)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--grid", type=int, default=1000, help="sweep grid side (default 1000: 10^6 points)")
+    ap.add_argument("--memory-n", type=int, default=10000, help="grid side of the peak-memory sweep (10^8 points)")
+    ap.add_argument("--sharded-n", type=int, default=1000, help="grid side of the sharded sweep")
     args = ap.parse_args()
     n, reps = args.rows, args.repeats
 
@@ -398,6 +405,26 @@ def main():
         print(f"pycrash impc_calcs: {pc * 1e6:.1f} us per call ({1 / pc:.3g} exchanges/s; kernel is "
               f"{res['kernel64'] * pc:.0f}x) -- {pc_note}")
     print(f"statuses in the random batch: {dict((int(k), int(v)) for k, v in enumerate(statuses) if v)}")
+    if args.memory_n:
+        for keep in ("float32", "none"):
+            print("sweep, peak memory (bench_sweep_memory.py): "
+                  + run_script("bench_sweep_memory.py", "--n", str(args.memory_n), "--keep", keep))
+    if args.sharded_n:
+        print("sweep, sharded (bench_sweep_sharded.py, XLA_FLAGS=--xla_force_host_platform_device_count=2): "
+              + run_script("bench_sweep_sharded.py", "--n", str(args.sharded_n),
+                           XLA_FLAGS="--xla_force_host_platform_device_count=2"))
+
+
+def run_script(name, *argv, **env):
+    """The last line a benchmark script beside this one prints, run in a process of its own (its
+    peak memory is then its own, and XLA_FLAGS apply to it alone)."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / name), *argv],
+                          env=dict(os.environ, **env), capture_output=True, text=True)
+    if done.returncode != 0:
+        return f"failed (exit {done.returncode}): {done.stderr.strip().splitlines()[-1:]}"
+    return done.stdout.strip().splitlines()[-1]
 
 
 if __name__ == "__main__":
