@@ -5,13 +5,13 @@ batched loss: the chunked programs (``exchange``'s vmap rules) against the whole
     .venv/bin/python benchmarks/bench_vmap_memory.py [--rows 1048576]
 
 For each program, in a fresh process: XLA's temporary and output bytes (``compiled.memory_analysis()``)
-and how much one call raised the process's peak resident memory (ru_maxrss). The losses are those of
-bench_kernel.py (the sum of the delta-V magnitudes; the squared residuals), gradients over every input.
+and how much one call raised the process's peak resident memory (VmHWM,
+``bench_sweep_memory.peak_rss_mib``). The losses are those of bench_kernel.py (the sum of the
+delta-V magnitudes; the squared residuals), gradients over every input.
 """
 
 import argparse
 import datetime
-import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +22,7 @@ import jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_kernel import batched_loss, delta_v, random_batch, residuals  # noqa: E402
+from bench_sweep_memory import peak_rss_mib  # noqa: E402
 
 from ks_jax.exchange import exchange, exchange_with_status, input_status  # noqa: E402
 
@@ -41,12 +42,12 @@ def measure(variant, n):
         fn = exchange if chunked else (lambda *a: exchange_with_status(*a, 0.0, input_status(*a)))
         jitted, args = jax.jit(jax.vmap(fn)), tuple(first)
     mem = jitted.lower(*args).compile().memory_analysis()
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    before = peak_rss_mib()
     jax.block_until_ready(jitted(*args))
-    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    after = peak_rss_mib()
     print(f"{variant:18} XLA temporaries {mem.temp_size_in_bytes / MIB:7.1f} MiB, results "
-          f"{mem.output_size_in_bytes / MIB:7.1f} MiB; peak RSS {before / 1024:7.0f} -> {after / 1024:7.0f} MiB "
-          f"(+{(after - before) / 1024:.0f})", flush=True)
+          f"{mem.output_size_in_bytes / MIB:7.1f} MiB; peak RSS {before:7.0f} -> {after:7.0f} MiB "
+          f"(+{after - before:.0f})", flush=True)
 
 
 def main():
@@ -60,7 +61,7 @@ def main():
     print(f"jax.jit(jax.vmap(exchange)) and gradient memory, {args.rows} rows, batch-first, float64; "
           f"{datetime.datetime.now().astimezone().isoformat(timespec='seconds')}; jax {jax.__version__}")
     variants = [f"{kind} {loss}".strip() for loss in ("", "delta-V", "residuals") for kind in ("chunked", "whole")]
-    for variant in variants:  # each in its own process: ru_maxrss is a high-water mark
+    for variant in variants:  # each in its own process: the peak is a high-water mark
         subprocess.run([sys.executable, __file__, "--rows", str(args.rows), "--variant", variant], check=True)
 
 
