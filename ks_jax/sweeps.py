@@ -425,7 +425,11 @@ def parse_over(text):
             raise CaseError(f"--over {path}: N = {parts[2]!r} must be a whole number") from None
         if n < 1:
             raise CaseError(f"--over {path}: N = {n} must be at least 1")
-        return path, np.linspace(q(parts[0]), q(parts[1]), n)
+        ends = q(parts[0]), q(parts[1])
+        for name, text, value in zip(("START", "STOP"), parts, ends):
+            if not math.isfinite(value):
+                raise CaseError(f"--over {path}: {name} = {text.strip()!r} must be a finite number")
+        return path, np.linspace(*ends, n)
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N or V1,V2,...")

@@ -170,6 +170,10 @@ def test_parse_over_units():
     np.testing.assert_allclose(rate, np.radians([10, 20]))
     with pytest.raises(CaseError, match="START:STOP:N"):
         parse_over("vehicles[0].yaw")
+    with pytest.raises(CaseError, match=r"vehicles\[1\].speed: START = 'nan' must be a finite number"):
+        parse_over("vehicles[1].speed=nan:60mph:5")  # linspace would make every point but the last NaN
+    with pytest.raises(CaseError, match="STOP = '-inf mph' must be a finite number"):
+        parse_over("vehicles[1].speed=10mph:-inf mph:5")
 
 
 def test_cli_writes_csv_and_npz(tmp_path, capsys):
