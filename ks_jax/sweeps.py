@@ -255,7 +255,10 @@ class _Progress:
 
 
 def _check_values(path, values):
-    arr = np.asarray(values, dtype=np.float64)
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise CaseError(f"sweep over '{path}': the values must be numbers (SI): {err}") from None
     if arr.ndim != 1 or arr.size == 0:
         raise CaseError(f"sweep over '{path}': give a non-empty 1-D list of values (SI), got shape {arr.shape}")
     return arr
@@ -312,7 +315,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     n_points = hi - lo
 
     devices = tuple(jax.devices() if devices is None else devices)
-    per_device = int(chunk_size or DEFAULT_CHUNK)
+    per_device = DEFAULT_CHUNK if chunk_size is None else int(chunk_size)
     if per_device <= 0:
         raise CaseError(f"chunk_size = {chunk_size}: must be positive")
     n_rows = per_device * len(devices)

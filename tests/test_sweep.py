@@ -158,6 +158,11 @@ def test_bad_paths_and_arguments(case):
         sweep(case, {"vehicles[1].speed": [1.0]}, mode="random")
     with pytest.raises(CaseError, match="non-empty"):
         sweep(case, {"vehicles[1].speed": []})
+    with pytest.raises(CaseError, match=r"'vehicles\[1\].speed': the values must be numbers \(SI\): could not convert"):
+        sweep(case, {"vehicles[1].speed": ["fast", 2.0]})
+    for size in (0, -5):  # 0 is not "the default"
+        with pytest.raises(CaseError, match=f"chunk_size = {size}: must be positive"):
+            sweep(case, {"vehicles[1].speed": [1.0]}, chunk_size=size)
 
 
 def test_parse_over_units():
