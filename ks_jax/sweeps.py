@@ -450,17 +450,13 @@ def _shape(sizes, mode):
     return counts[:1]
 
 
-def _grid_positions(axes, mode, lo, hi):
-    """path -> the index into that path's swept values of each of the flat indices lo .. hi - 1."""
-    idx = np.arange(lo, hi)
-    if mode == "zip":
-        return {p: idx for p in axes}
-    return dict(zip(axes, np.unravel_index(idx, tuple(len(v) for v in axes.values()))))
-
-
 def _grid_inputs(axes, mode, lo, hi):
     """path -> the swept input value (SI) at flat indices lo .. hi - 1 (``SweepResult.inputs``)."""
-    return {p: np.asarray(axes[p])[k] for p, k in _grid_positions(axes, mode, lo, hi).items()}
+    idx = np.arange(lo, hi)
+    if mode == "zip":
+        return {p: np.asarray(v)[idx] for p, v in axes.items()}
+    pos = np.unravel_index(idx, tuple(len(v) for v in axes.values()))
+    return {p: np.asarray(v)[k] for (p, v), k in zip(axes.items(), pos)}
 
 
 def _columns(axes, mode, lo, hi, outputs):
@@ -512,9 +508,12 @@ class ResultWriter:
         self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
         self._arrays, self._pending, self._written = {}, [], 0
-        # the text the csv module writes for each swept value (str of the Python float)
-        self._axis_text = {p: np.array([str(x) for x in np.asarray(v).tolist()], dtype=object)
-                           for p, v in self.axes.items()}
+        # the swept values as the columns show them: in a .csv of a grid, each value's text (what the
+        # csv module writes for the Python float), formatted once instead of once per row
+        self._column_axes = self.axes
+        if self.kind == ".csv" and mode != "zip":
+            self._column_axes = {p: np.array([str(x) for x in np.asarray(v).tolist()], dtype=object)
+                                 for p, v in self.axes.items()}
         self.seconds = self.chunk_seconds = 0.0  # spent writing: in all, and inside ``chunk``
 
     def chunk(self, lo, hi, chunk):
@@ -533,12 +532,9 @@ class ResultWriter:
         if self.kind == ".npz":
             self._npz_chunk(chunk)
         else:
-            cols = _columns(self.axes, self.mode, lo, hi, chunk)
+            cols = _columns(self._column_axes, self.mode, lo, hi, chunk)
             cols["status_text"] = _status_texts(cols["status"])
             if self.kind == ".csv":
-                if self.mode != "zip":  # a grid's inputs repeat: each value is formatted once
-                    for p, k in _grid_positions(self.axes, self.mode, lo, hi).items():
-                        cols[p] = self._axis_text[p][k]
                 self._csv_chunk(cols)
             else:
                 self._pending.append(cols)
