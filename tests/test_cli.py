@@ -261,7 +261,6 @@ def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
 _COUNT_CACHE_HITS = """
 import collections, json, sys, jax
 from ks_jax import cli
-from ks_jax.cli import main
 setup = cli._compilation_cache
 def store_all():
     setup()
@@ -269,7 +268,7 @@ def store_all():
 cli._compilation_cache = store_all
 seen = collections.Counter()
 jax.monitoring.register_event_listener(lambda event, **_: seen.update([event.rsplit("/", 1)[-1]]))
-code = main(sys.argv[1:])
+code = cli.main(sys.argv[1:])
 print(json.dumps({"loaded": seen["cache_hits"], "written": seen["cache_misses"]}), file=sys.stderr)
 sys.exit(code)
 """
