@@ -1,11 +1,12 @@
-"""Top view of a solved contact: footprints, overlap, centroid, plane, normal, impulse, friction cone.
+"""Pictures: the top view of a solved contact (footprints, overlap, centroid, plane, normal, impulse,
+friction cone) and the results of a sweep over its inputs (``sweep_view``, ``save_sweep_view``).
 
 matplotlib is imported only inside the functions (it is the ``plot`` extra). Everything drawn is
-computed here in NumPy from a ``ks_jax.solve.Solution`` (its case inputs and its results): the
-footprints move freely from the case state (MODEL.md section 5, as ``ks_jax.geometry`` does),
-so the picture needs no JAX call.
+computed here in NumPy from a ``ks_jax.solve.Solution`` (its case inputs and its results) or a
+``ks_jax.sweeps.SweepResult``: the footprints move freely from the case state (MODEL.md section 5,
+as ``ks_jax.geometry`` does), so no picture needs a JAX call.
 
-What is drawn (global frame, metres; a second axis in feet):
+What the top view draws (global frame, metres; a second axis in feet):
 - outlines at first contact t_i (dashed; automatic contact only) and at the exchange (solid),
   the front face thicker; the overlap polygon at the exchange (grey);
 - the impulse centroid P, the contact plane (red line through P, perpendicular to n), the normal
@@ -193,6 +194,144 @@ def save_top_view(solutions, path):
     for ax, sol in zip(axes.flat, solutions):
         top_view(sol, ax)
     for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return path
+
+
+# ---------------------------------------------------------------------------------------
+# sweeps: maps over one or two swept inputs, histograms of samples
+
+
+def _display(kind):
+    """(SI value of one display unit, the label's bracket) for a unit kind (``units.US_DISPLAY``)."""
+    scale, label = U.US_DISPLAY[kind]
+    return scale, f" [{label}]" if label else ""
+
+
+def _categories(output, values):
+    """(codes shown, their names) of a bool or status output."""
+    from .types import STATUS_TEXT, status_text
+
+    if output == "status":
+        codes = np.unique(values).tolist()
+        return codes, [STATUS_TEXT.get(c, status_text(c)) for c in codes]
+    names = ("stick", "slide") if output.endswith("sliding") else ("False", "True")
+    return [0, 1], list(names)
+
+
+def sweep_view(result, output=None, ax=None, contours=True):
+    """Draw one output of a sweep (``ks_jax.sweep``'s ``SweepResult``) in US units on ``ax`` (a new
+    figure if None); returns the axes.
+
+    - a grid over one input: the output against it (a line; gaps where a point has no result);
+    - a grid over two inputs: a colour map over the first (x) and the second (y), with labelled contour
+      lines (``contours``); points without a result are grey;
+    - zip samples (e.g. Monte Carlo draws): a histogram with the median and the 5th and 95th percentiles.
+    ``contact.sliding`` is drawn as stick / slide and ``"status"`` by its status texts. A sweep with more
+    values per axis than ``sweeps.PLOT_LIMITS`` is drawn from every k-th value (``SweepResult.thinned``;
+    the title says so). output: an output path of the sweep (default: its first).
+    """
+    import matplotlib.pyplot as plt
+
+    from .case import CaseError, input_kind, output_kind
+
+    paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
+    output = (paths[0] if paths else "status") if output is None else output
+    if output not in result.outputs:
+        raise CaseError(f"output '{output}' is not among this sweep's results: {', '.join(result.outputs)}")
+    if result.mode != "zip" and len(result.axes) > 2:
+        raise CaseError(f"a sweep over {len(result.axes)} inputs ({', '.join(result.axes)}) has no picture: "
+                        "draw a grid over one or two inputs (sweep the others one value at a time)")
+    if not result.strides:
+        result = result.thinned()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 5))
+    values, status = np.asarray(result[output]), np.asarray(result["status"])
+    categorical = output == "status" or values.dtype == bool
+    if categorical:
+        codes, names = _categories(output, values)
+        shown = np.ma.masked_array(np.searchsorted(codes, values.astype(int)).astype(float),
+                                   mask=(status >= 2) if output != "status" else np.zeros(values.shape, bool))
+        scale, unit = 1.0, ""
+    else:
+        scale, unit = _display(output_kind(output))
+        shown = np.ma.masked_invalid(values / scale)
+    missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
+    axes = [(p, *_display(input_kind(p)), np.asarray(v)) for p, v in result.axes.items()]
+    thinned = any(k > 1 for k in result.strides)
+    note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
+    if missing:
+        note.append(f"{missing} of {shown.size} points without a result (grey)")
+    finite = shown.compressed()
+    flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
+    if flat:  # one value everywhere (to rounding): say it, no contours of the rounding
+        note.append(f"{float(np.median(finite)):.6g}{unit.replace(' [', ' ').rstrip(']')} everywhere")
+
+    if result.mode == "zip":
+        data = shown.compressed()
+        if categorical:
+            counts = np.bincount(data.astype(int), minlength=len(codes))
+            ax.bar(range(len(codes)), counts, color="tab:blue")
+            ax.set_xticks(range(len(codes)), names)
+        elif data.size:
+            ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
+            for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
+                x = np.percentile(data, q)
+                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g}{unit}")
+            ax.legend(fontsize=8)
+        ax.set_xlabel(f"{output}{unit}" if not categorical else output)
+        ax.set_ylabel(f"samples (of {shown.size})")
+    elif len(axes) == 1:
+        (path, xs, xunit, x), = axes
+        ax.plot(x / xs, shown.astype(float).filled(np.nan), "-", marker="o" if x.size <= 60 else None,
+                color="tab:blue", ms=3, drawstyle="steps-mid" if categorical else "default")
+        ax.set_xlabel(f"{path}{xunit}")
+        if categorical:
+            ax.set_yticks(range(len(codes)), names)
+            ax.set_ylim(-0.5, len(codes) - 0.5)
+        ax.set_ylabel(output + unit)
+        ax.grid(alpha=0.3)
+    else:
+        (px, xs, xunit, x), (py, ys, yunit, y) = axes
+        X, Y = np.meshgrid(x / xs, y / ys, indexing="ij")  # the result's axes: (first path, second path)
+        if categorical:
+            from matplotlib.colors import ListedColormap
+
+            cmap = ListedColormap([plt.get_cmap("tab10")(i % 10) for i in range(len(codes))]).with_extremes(bad="0.8")
+            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap, vmin=-0.5, vmax=len(codes) - 0.5)
+            bar = ax.figure.colorbar(mesh, ax=ax, ticks=range(len(codes)))
+            bar.ax.set_yticklabels(names)
+            bar.set_label(output)
+        else:
+            cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
+            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap)
+            ax.figure.colorbar(mesh, ax=ax, label=output + unit)
+            if contours and min(X.shape) >= 2 and finite.size and not flat:
+                lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6)
+                ax.clabel(lines, fontsize=7, fmt=lambda v: f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
+        ax.set_xlabel(f"{px}{xunit}")
+        ax.set_ylabel(f"{py}{yunit}")
+    ax.set_title("\n".join([output + unit] + ([", ".join(note)] if note else [])), fontsize=9)
+    return ax
+
+
+def save_sweep_view(result, path, outputs=None):
+    """Write ``sweep_view`` of each of ``outputs`` (default: the sweep's outputs) side by side, three
+    per row, to ``path`` (PNG, PDF, SVG: by the file name). Returns the path."""
+    from matplotlib.figure import Figure
+
+    outputs = list(outputs or result.output_paths or [p for p in result.outputs if p != "status"] or ["status"])
+    if not result.strides:
+        result = result.thinned()
+    cols = min(len(outputs), 3)
+    rows = math.ceil(len(outputs) / cols)
+    fig = Figure(figsize=(6.2 * cols, 4.6 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax, output in zip(axes.flat, outputs):
+        sweep_view(result, output, ax)
+    for ax in list(axes.flat)[len(outputs):]:
         ax.set_visible(False)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

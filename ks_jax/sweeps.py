@@ -92,6 +92,8 @@ class SweepResult(Mapping):
     shape: the result shape. mode: "grid" or "zip". points: number of points solved.
     status_counts: status text -> number of points. seconds: wall time of the sweep.
     index_range: the flat indices solved (all of them unless ``index_range`` was given).
+    strides: () for every point solved; (k0, k1, ...) for a thinned copy that holds every k-th
+    value along each axis (``thinned``, ``SweepSample``: what a picture needs of a large sweep).
     """
 
     outputs: dict
@@ -103,6 +105,7 @@ class SweepResult(Mapping):
     seconds: float
     index_range: tuple = (0, 0)
     output_paths: tuple = field(default=())
+    strides: tuple = ()
 
     def __getitem__(self, key):
         return self.outputs[key]
@@ -121,11 +124,89 @@ class SweepResult(Mapping):
         """Flat columns (one row per point): the inputs, the outputs, the status code."""
         return _columns(self.axes, self.mode, *self.index_range, self.outputs)
 
+    def thinned(self, limit=None):
+        """This result with at most ``limit`` values along each axis (default: ``PLOT_LIMITS``,
+        by the number of axes): every k-th value, from the first, of the axes and of every output
+        (a view, no copy). Needs a kept result of a whole grid or of all the samples."""
+        _check_whole(self)
+        strides = tuple(plot_strides(self.shape, self.mode, limit))
+        cut = tuple(slice(None, None, k) for k in strides)
+        axes = {p: np.asarray(v)[cut[0 if self.mode == "zip" else i]] for i, (p, v) in enumerate(self.axes.items())}
+        outputs = {p: v[cut] for p, v in self.outputs.items()}
+        shape = outputs["status"].shape
+        return replace(self, outputs=outputs, axes=axes, shape=shape, points=math.prod(shape),
+                       index_range=(0, math.prod(shape)), strides=strides)
+
     def summary(self) -> str:
         counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
         rate = self.points / self.seconds if self.seconds > 0 else float("inf")
         return (f"{self.points} points ({self.mode}, shape {self.shape}) in {self.seconds:.3g} s "
                 f"({rate:.3g} points/s); status: {counts}")
+
+
+# at most this many values per axis of what a picture of a sweep shows (1 or 2 grid axes; zip: samples)
+PLOT_LIMITS = {1: 100_000, 2: 1000}
+PLOT_SAMPLES = 1_000_000
+
+
+def plot_strides(shape, mode, limit=None):
+    """Every k-th value along each axis of a result of ``shape`` keeps at most ``limit`` values per
+    axis (default: ``PLOT_LIMITS`` for a grid, ``PLOT_SAMPLES`` for zip samples)."""
+    if limit is None:
+        limit = PLOT_SAMPLES if mode == "zip" else PLOT_LIMITS.get(len(shape), 1000)
+    if int(limit) < 1:
+        raise CaseError(f"limit = {limit}: must be at least 1 value per axis")
+    return tuple(max(1, -(-int(n) // int(limit))) for n in shape)
+
+
+def _check_whole(result):
+    if not result.outputs:
+        raise CaseError("this sweep kept no results (keep=False): sweep again with keep=True, or collect a "
+                        "SweepSample in on_chunk")
+    whole = (result.mode == "zip" and result.index_range == (0, result.shape[0])) or (
+        result.shape == tuple(len(v) for v in result.axes.values()))
+    if not whole or result.strides:
+        raise CaseError(f"this result holds points {result.index_range[0]}..{result.index_range[1] - 1} of a sweep "
+                        f"or is thinned already (strides {result.strides}): thin a whole sweep")
+
+
+class SweepSample:
+    """Collects, as ``sweep`` streams its chunks (``on_chunk``), every k-th value along each axis
+    (``plot_strides``): a small kept result of a sweep of any size, for a picture. ``result(sweep_result)``
+    returns it as a ``SweepResult`` with ``strides`` set. Memory: the thinned points only."""
+
+    def __init__(self, axes, mode, shape, limit=None):
+        self.axes, self.mode, self.shape = dict(axes), mode, tuple(int(n) for n in shape)
+        self.strides = plot_strides(self.shape, mode, limit)
+        self.thin_shape = tuple(-(-n // k) for n, k in zip(self.shape, self.strides))
+        self.store = {}
+
+    def chunk(self, lo, hi, chunk):
+        inner = math.prod(self.shape[1:])
+        first, last, k = lo // inner, (hi - 1) // inner, self.strides[0]
+        if -(-first // k) * k > last:  # no kept value of the first axis in this chunk
+            return
+        idx = np.arange(lo, hi)
+        pos = np.unravel_index(idx, self.shape)
+        keep = np.ones(idx.shape, bool)
+        for p, k in zip(pos, self.strides):
+            keep &= p % k == 0
+        target = np.ravel_multi_index(tuple(p[keep] // k for p, k in zip(pos, self.strides)), self.thin_shape)
+        for name, v in chunk.items():
+            if name not in self.store:
+                self.store[name] = np.zeros(math.prod(self.thin_shape), v.dtype)
+            self.store[name][target] = v[keep]
+
+    def result(self, swept: SweepResult) -> SweepResult:
+        """The thinned result of ``swept`` (the ``keep=False`` result of the same sweep)."""
+        if swept.index_range != (0, math.prod(self.shape)):
+            raise CaseError(f"a SweepSample needs the whole sweep; it got points {swept.index_range}")
+        axes = {p: np.asarray(v)[::self.strides[0 if self.mode == "zip" else i]]
+                for i, (p, v) in enumerate(self.axes.items())}
+        outputs = {p: v.reshape(self.thin_shape) for p, v in self.store.items()}
+        n = math.prod(self.thin_shape)
+        return replace(swept, outputs=outputs, axes=axes, shape=self.thin_shape, points=n, index_range=(0, n),
+                       strides=self.strides)
 
 
 # ---------------------------------------------------------------------------------------
@@ -402,6 +483,8 @@ def add_arguments(parser):
     parser.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--plot", metavar="PNG", help="also draw the outputs over the swept inputs (US units): a map "
+                        "for two inputs, a line for one, histograms for --mode zip (matplotlib)")
 
 
 def parse_over(text):
@@ -664,12 +747,19 @@ def run(args) -> int:
         raise CaseError(case.error)
     over = dict(parse_over(t) for t in args.over)
     shape = _shape({p: len(v) for p, v in over.items()}, args.mode)  # sweep's rule, checked before a file exists
+    sample = _plot_sample(args.plot, over, args.mode, shape)  # checked before anything is solved
     writer = ResultWriter(args.out, over, args.mode, shape)  # written chunk by chunk: memory stays bounded
+
+    def on_chunk(lo, hi, chunk):
+        writer.chunk(lo, hi, chunk)
+        if sample is not None:
+            sample.chunk(lo, hi, chunk)
+
     t = time.perf_counter()
     try:
         result = sweep(case, over, outputs=args.output, mode=args.mode, chunk_size=args.chunk_size,
                        smoothing=args.smoothing, progress=False if args.no_progress else None,
-                       output_dtype=np.float32 if args.float32 else None, on_chunk=writer.chunk, keep=False)
+                       output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False)
         writer.close()
     except BaseException:
         writer.abort()
@@ -678,4 +768,26 @@ def run(args) -> int:
     print(f"ks-jax sweep: {case.name}")
     print(f"  {result.summary()}")
     print(f"  written to {args.out} in {writer.seconds:.3g} s ({time.perf_counter() - t:.3g} s in all)")
+    if sample is not None:
+        from .plot import save_sweep_view
+
+        save_sweep_view(sample.result(result), args.plot)
+        print(f"  drawn to {args.plot}")
     return 0
+
+
+def _plot_sample(path, over, mode, shape):
+    """A ``SweepSample`` for ``--plot PATH`` (None without it), after the checks a picture needs."""
+    if path is None:
+        return None
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise CaseError("--plot needs matplotlib: pip install 'ks-jax[plot]'") from None
+    if mode != "zip" and len(over) > 2:
+        raise CaseError(f"--plot draws a sweep over one or two inputs; this one has {len(over)} "
+                        f"({', '.join(over)}): leave --plot out, or sweep fewer inputs")
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".png", ".pdf", ".svg"):
+        raise CaseError(f"--plot {path}: unknown picture type '{Path(path).suffix}' (use .png, .pdf or .svg)")
+    return SweepSample(over, mode, shape)

@@ -64,6 +64,24 @@ SI_UNITS = {
 BARE_NUMBER_SCALE = {"angle": DEG, "angular_velocity": DEG_S}
 
 
+# How a quantity of each kind is shown to a reconstructionist (plots): (SI value of one display unit,
+# its label). "degrees": results that MODEL.md section 4 already reports in degrees.
+US_DISPLAY = {
+    "length": (FT, "ft"),
+    "mass": (LB, "lb"),
+    "force": (LBF, "lbf"),
+    "inertia": (SLUG * FT**2, "lbf ft s^2"),
+    "velocity": (MPH, "mph"),
+    "time": (1.0, "s"),
+    "angle": (DEG, "deg"),
+    "angular_velocity": (DEG_S, "deg/s"),
+    "dimensionless": (1.0, ""),
+    "impulse": (LBF_S, "lbf s"),
+    "energy": (FT_LBF, "ft lbf"),
+    "degrees": (1.0, "deg"),
+}
+
+
 class UnitError(ValueError):
     """A quantity string that cannot be read, or has the wrong dimension."""
 

@@ -1,0 +1,163 @@
+"""Pictures of sweeps (ks_jax.plot.sweep_view, ks-jax sweep --plot): what is drawn is the sweep's
+results in US units, thinned the way the result says, with the points that have no result marked."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+pytest.importorskip("matplotlib")
+
+from matplotlib.collections import QuadMesh  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+import ks_jax  # noqa: E402
+from ks_jax import plot  # noqa: E402
+from ks_jax.case import CaseError  # noqa: E402
+from ks_jax.cli import main  # noqa: E402
+from ks_jax.sweeps import SweepSample, sweep  # noqa: E402
+
+SEED1 = Path(ks_jax.__file__).parent / "cases" / "seed_001_lucid_kia.toml"
+MPH = 1609.344 / 3600  # m/s per mph, written out here (ks_jax.units is what is tested)
+DV1 = "vehicles[0].delta_v_magnitude"
+
+
+@pytest.fixture(scope="module")
+def case():
+    return ks_jax.load_case(SEED1)
+
+
+def draw(result, output=None):
+    ax = Figure().subplots()
+    plot.sweep_view(result, output, ax)
+    return ax
+
+
+def mesh_of(ax):
+    (mesh,) = [c for c in ax.collections if isinstance(c, QuadMesh)]
+    return mesh
+
+
+def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
+    speed = np.linspace(6, 60, 10) * MPH
+    eps = np.linspace(0, 1.5, 7)  # above 1 is refused per point (status "invalid: ... restitution")
+    r = sweep(case, {"vehicles[1].speed": speed, "contact.restitution": eps}, outputs=[DV1, "contact.energy_loss"])
+    ax = draw(r)
+    shown = mesh_of(ax).get_array()
+    want = r[DV1] / MPH
+    bad = eps > 1
+    assert shown.shape == want.shape == (10, 7)
+    np.testing.assert_allclose(shown[:, ~bad], want[:, ~bad], rtol=1e-12)
+    assert shown.mask[:, bad].all() and not shown.mask[:, ~bad].any()
+    assert (r["status"][:, bad] == 17).all()
+    assert f"{10 * bad.sum()} of 70 points without a result" in ax.get_title()
+    assert ax.get_xlabel() == "vehicles[1].speed [mph]" and ax.get_ylabel() == "contact.restitution"
+    assert ax.get_title().startswith(f"{DV1} [mph]")
+    assert ax.get_xlim()[0] < 6 < 60 < ax.get_xlim()[1]
+    # the energy in ft lbf: 1 ft lbf = 0.3048 m x 4.4482216152605 N
+    shown = mesh_of(draw(r, "contact.energy_loss")).get_array()
+    np.testing.assert_allclose(shown[:, ~bad], r["contact.energy_loss"][:, ~bad] / (0.3048 * 4.4482216152605), rtol=1e-12)
+    # an inline rear impact: the Lucid is struck from behind (PDOF 180 deg) wherever it is struck; a
+    # single value is said, not drawn as contours of its rounding
+    pdof = sweep(case, {"vehicles[1].speed": speed, "contact.restitution": eps[:3]}, outputs=["vehicles[0].pdof"])
+    ax = draw(pdof)
+    assert "180 deg everywhere" in ax.get_title() and not [c for c in ax.collections if c is not mesh_of(ax)]
+
+
+def test_line_for_one_input_and_histogram_for_samples(case):
+    speed = np.linspace(10, 40, 16) * MPH
+    r = sweep(case, {"vehicles[1].speed": speed}, outputs=[DV1])
+    ax = draw(r)
+    (line,) = ax.get_lines()
+    np.testing.assert_allclose(line.get_xdata(), np.linspace(10, 40, 16), rtol=1e-12)
+    np.testing.assert_allclose(line.get_ydata(), r[DV1] / MPH, rtol=1e-12)
+
+    eps = np.random.default_rng(3).uniform(0.0, 0.3, 400)
+    z = sweep(case, {"contact.restitution": eps}, outputs=[DV1], mode="zip")
+    ax = draw(z)
+    assert sum(p.get_height() for p in ax.patches) == 400
+    median = [ln for ln in ax.get_lines() if ln.get_label().startswith("median")][0]
+    assert median.get_xdata()[0] == pytest.approx(np.median(z[DV1]) / MPH, rel=1e-12)
+
+
+def test_sliding_is_drawn_as_stick_or_slide(case):
+    r = sweep(case, {"contact.friction": np.linspace(0, 1, 6), "vehicles[1].course": np.radians([0, 20, 40, 60])},
+              outputs=["contact.sliding"])
+    assert r["contact.sliding"].any() and not r["contact.sliding"].all()
+    ax = draw(r, "contact.sliding")
+    np.testing.assert_array_equal(mesh_of(ax).get_array(), r["contact.sliding"].astype(float))
+    labels = [t.get_text() for t in ax.figure.axes[-1].get_yticklabels()]
+    assert labels == ["stick", "slide"]
+    assert ax.get_ylabel() == "vehicles[1].course [deg]"
+
+
+def test_thinned_sweep_and_streamed_sample_agree(case):
+    """2500 x 3 points: every 3rd speed is drawn (at most 1000 per axis), the same whether the sweep was
+    kept and thinned or streamed through a SweepSample in chunks that do not line up with the lattice."""
+    over = {"vehicles[1].speed": np.linspace(5, 30, 2500), "contact.restitution": [0.0, 0.1, 0.2]}
+    kept = sweep(case, over, outputs=[DV1])
+    thin = kept.thinned()
+    assert thin.strides == (3, 1) and thin.shape == (834, 3)
+    np.testing.assert_array_equal(thin[DV1], kept[DV1][::3])
+    np.testing.assert_array_equal(thin.axes["vehicles[1].speed"], over["vehicles[1].speed"][::3])
+
+    sample = SweepSample(over, "grid", (2500, 3))
+    streamed = sweep(case, over, outputs=[DV1], keep=False, chunk_size=1000, on_chunk=sample.chunk)
+    got = sample.result(streamed)
+    assert got.strides == (3, 1)
+    for k in (DV1, "status"):
+        np.testing.assert_array_equal(got[k], thin[k])
+    assert "shown: 1 in 3 x 1 points" in draw(got).get_title()
+
+
+@pytest.mark.parametrize("mode, shape, limit, strides", [("grid", (50, 7), 10, (5, 1)), ("grid", (23, 31), 4, (6, 8)),
+                                                         ("grid", (101,), 10, (11,)), ("zip", (97,), 10, (10,))])
+def test_sample_keeps_the_lattice_whatever_the_chunks(mode, shape, limit, strides):
+    """Chunks of random sizes (many of them holding no kept point) give the slices of the whole array."""
+    full = np.arange(np.prod(shape), dtype=float).reshape(shape) * 0.5
+    axes = {f"contact.point[{k}]": np.arange(n, dtype=float) for k, n in enumerate(shape)}
+    sample = SweepSample(axes, mode, shape, limit)
+    assert sample.strides == strides
+    rng, lo, flat = np.random.default_rng(0), 0, full.ravel()
+    while lo < flat.size:
+        hi = min(flat.size, lo + int(rng.integers(1, 20)))
+        sample.chunk(lo, hi, {"x": flat[lo:hi], "status": np.zeros(hi - lo, np.int8)})
+        lo = hi
+    want = full[tuple(slice(None, None, k) for k in strides)]
+    np.testing.assert_array_equal(sample.store["x"].reshape(sample.thin_shape), want)
+
+
+def test_what_cannot_be_drawn_is_refused(case):
+    r = sweep(case, {"contact.restitution": [0.1, 0.2], "contact.friction": [0.3, 0.5], "vehicles[1].speed": [8.0, 9.0]},
+              outputs=[DV1])
+    with pytest.raises(CaseError, match="over 3 inputs"):
+        draw(r)
+    r = sweep(case, {"contact.restitution": [0.1, 0.2]}, outputs=[DV1])
+    with pytest.raises(CaseError, match="'vehicles\\[1\\].pdof' is not among"):
+        draw(r, "vehicles[1].pdof")
+    part = sweep(case, {"contact.restitution": [0.1, 0.2, 0.3]}, outputs=[DV1], index_range=(1, 3))
+    with pytest.raises(CaseError, match="points 1..2"):
+        draw(part)
+
+
+def test_cli_draws_the_sweep_and_refuses_before_solving(tmp_path, capsys):
+    out, png = tmp_path / "g.npz", tmp_path / "g.png"
+    args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:60mph:6", "--over", "contact.restitution=0:0.3:4",
+            "--output", DV1, "--output", "contact.sliding", "--out", str(out), "--plot", str(png)]
+    assert main(args) == 0
+    assert f"drawn to {png}" in capsys.readouterr().out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.exists()
+
+    three = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:60mph:3", "--over", "contact.restitution=0:0.3:2",
+             "--over", "contact.friction=0.2,0.4", "--out", str(tmp_path / "h.csv"), "--plot", str(tmp_path / "h.png")]
+    bad_type = args[:-1] + [str(tmp_path / "g.bmp")]
+    for argv, words in ((three, "one or two inputs; this one has 3"), (bad_type, "unknown picture type '.bmp'")):
+        assert main(argv) == 2
+        assert words in capsys.readouterr().err
+    assert not (tmp_path / "h.csv").exists() and not (tmp_path / "h.png").exists()
