@@ -17,7 +17,8 @@ that a change in the machine's load moves both sides of a ratio alike):
   ``exchange_with_status`` after ``input_status``, batch-first);
 - a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
 - the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
-  kernel's inputs and outputs together (one read and one write of each, as the kernel does);
+  kernel's inputs and outputs together (one read and one write of each, as the kernel does), into
+  new arrays and, donated, over its own inputs (no new memory: against ``out=``);
 - the minor page faults per call (new memory touched), and jit(vmap(exchange)) / NumPy round by
   round, with that call's CPU time per row and page faults (to tell what made a round slow);
 - the ratios kernel/NumPy and kernel/streaming; gradient / forward of two batched losses, each
@@ -291,6 +292,15 @@ def main():
     flat = [jnp.asarray(x).astype(jnp.float64) for x in jax.tree_util.tree_leaves((first, out))]
     copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
     stream_bytes = sum(x.size * 8 for x in flat)
+    # the same, each result written over its input (donated): no new memory, as exchange_batch(out=).
+    # 1 and 0 are arguments here: as constants XLA would make the program the identity, and a donated
+    # identity moves no bytes at all
+    copy_in_place = jax.jit(lambda xs, a, b: [x * a + b for x in xs], donate_argnums=0)
+    held = [[jnp.array(x) for x in flat]]
+    one_zero = jnp.float64(1.0), jnp.float64(0.0)
+
+    def stream_in_place():
+        held[0] = jax.block_until_ready(copy_in_place(held[0], *one_zero))
     fns = {
         "kernel64": lambda: exchange_batch(*first),
         "kernel32": lambda: exchange_batch(*first32),
@@ -301,6 +311,7 @@ def main():
         "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
         "numpy": lambda: numpy_ks.exchange(*nps),
         "stream": lambda: jax.block_until_ready(copy(flat)),
+        "stream_in_place": stream_in_place,
     }
     for fn in fns.values():  # warm
         fn()
@@ -380,10 +391,15 @@ def main():
           f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
           f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
           f"jit(vmap(exchange))/streaming {q('kernel1', 'stream'):.2f}, batch-first {q('kernel1f', 'stream'):.2f})")
+    print(f"{'same, in place (donated: no new memory)':{w}} {res['stream_in_place']:14.4g}  "
+          f"{q('kernel64out', 'stream_in_place'):8.2f}  (kernel out= / this: both without new memory; "
+          f"kernel/this {q('kernel64', 'stream_in_place'):.2f}; jit(vmap(exchange)) batch-first/this "
+          f"{q('kernel1f', 'stream_in_place'):.2f})")
     kf = lambda k: f"{statistics.median(u[1] for u in usage[k]):.0f}"  # noqa: E731
     print(f"page faults per call (medians): exchange_batch {kf('kernel64')}, out= {kf('kernel64out')}, "
           f"jit(vmap(exchange)) batch-first {kf('kernel1f')}, whole-batch {kf('whole')}, NumPy {kf('numpy')}, "
-          f"streaming {kf('stream')}; a result of this batch is {nbytes(out) / 4096:.0f} pages of 4 KiB")
+          f"streaming {kf('stream')}, in place {kf('stream_in_place')}; a result of this batch is "
+          f"{nbytes(out) / 4096:.0f} pages of 4 KiB")
     by_round = ", ".join(f"{tn / tk:.2f} ({cpu * 1e9 / n:.0f} ns, {faults})" for tk, tn, (cpu, faults)
                          in zip(times["kernel1f"], times["numpy"], usage["kernel1f"]))
     print(f"jit(vmap(exchange)) batch-first / NumPy, round by round (its CPU time per row, page faults): {by_round}")
