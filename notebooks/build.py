@@ -343,6 +343,18 @@ print(f"largest delta-V of the Lucid: {np.nanmax(rb['vehicles[0].delta_v_magnitu
 Each point is a full three-dimensional KS exchange with all the section-4 results; only the two requested
 outputs (and a status byte per point) come back to the host. For sweeps much larger than memory, pass
 `on_chunk=` and `keep=False` (docs/sweeps.md).
+
+For a first look without writing the plotting by hand, `ks_jax.plot.sweep_view` draws any output of a sweep in
+US units: a map over two swept inputs (as here), a line over one, a histogram of `mode="zip"` samples.
+From the shell, `ks-jax sweep ... --plot grid.png` draws the same pictures beside the results file.
+"""),
+        ("code", """
+from ks_jax import plot
+
+fig, axes = plt.subplots(1, 2, figsize=(13, 4.6))
+for ax, path in zip(axes, outs):
+    plot.sweep_view(rb, path, ax)
+fig.tight_layout()
 """),
     )
 
