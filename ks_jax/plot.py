@@ -237,6 +237,9 @@ def sweep_view(result, output=None, ax=None, contours=True):
 
     from .case import CaseError, input_kind, output_kind
 
+    if not result.outputs:
+        raise CaseError("this sweep kept no results (keep=False): sweep again with keep=True, or collect a "
+                        "ks_jax.sweeps.SweepSample in on_chunk and draw its result")
     paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
     output = (paths[0] if paths else "status") if output is None else output
     if output not in result.outputs:

@@ -141,6 +141,8 @@ def test_what_cannot_be_drawn_is_refused(case):
     r = sweep(case, {"contact.restitution": [0.1, 0.2]}, outputs=[DV1])
     with pytest.raises(CaseError, match="'vehicles\\[1\\].pdof' is not among"):
         draw(r, "vehicles[1].pdof")
+    with pytest.raises(CaseError, match="kept no results"):
+        draw(sweep(case, {"contact.restitution": [0.1, 0.2]}, outputs=[DV1], keep=False))
     part = sweep(case, {"contact.restitution": [0.1, 0.2, 0.3]}, outputs=[DV1], index_range=(1, 3))
     with pytest.raises(CaseError, match="points 1..2"):
         draw(part)
