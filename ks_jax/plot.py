@@ -270,7 +270,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
     finite = shown.compressed()
     flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
     if flat:  # one value everywhere (to rounding): say it, no contours of the rounding
-        note.append(f"{float(np.median(finite)):.6g}{unit.replace(' [', ' ').rstrip(']')} everywhere")
+        note.append(f"{float(np.median(finite)):.6g} {unit.strip(' []')} everywhere".replace("  ", " "))
 
     if result.mode == "zip":
         data = shown.compressed()
@@ -282,7 +282,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
             ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
             for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
                 x = np.percentile(data, q)
-                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g}{unit}")
+                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g} {unit.strip(' []')}".rstrip())
             ax.legend(fontsize=8)
         ax.set_xlabel(f"{output}{unit}" if not categorical else output)
         ax.set_ylabel(f"samples (of {shown.size})")

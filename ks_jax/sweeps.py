@@ -57,6 +57,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -475,8 +476,12 @@ def add_arguments(parser):
                              "unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
     parser.add_argument("--output", action="append", metavar="PATH",
                         help="an output path of MODEL.md section 4 (repeat; default: the main results)")
-    parser.add_argument("--mode", choices=("grid", "zip"), default="grid",
-                        help="grid: cartesian product (default); zip: the k-th values of every path together")
+    parser.add_argument("--mode", choices=("grid", "zip"), default=None,
+                        help="grid: cartesian product (default); zip: the k-th values of every path together "
+                             "(the default with random values)")
+    parser.add_argument("--samples", type=int, default=None, metavar="N",
+                        help="number of random values of each PATH=uniform:LO:HI or PATH=normal:MEAN:SD (Monte Carlo)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random values (default 0)")
     parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
     parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
     parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
@@ -487,12 +492,29 @@ def add_arguments(parser):
                         "for two inputs, a line for one, histograms for --mode zip (matplotlib)")
 
 
+class Draws(NamedTuple):
+    """Random values of one input (``--over PATH=uniform:LO:HI`` or ``normal:MEAN:SD``), SI."""
+
+    path: str
+    law: str
+    a: float
+    b: float
+
+    def draw(self, n, rng):
+        """n values from ``rng`` (a ``numpy.random.Generator``)."""
+        if self.law == "uniform":
+            return rng.uniform(self.a, self.b, n)
+        return rng.normal(self.a, self.b, n)
+
+
 def parse_over(text):
-    """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values)."""
+    """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values); 'PATH=uniform:LO:HI' or
+    'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``."""
     from .units import UnitError, parse_quantity
 
     if "=" not in text:
-        raise CaseError(f"--over {text!r}: expected PATH=START:STOP:N or PATH=V1,V2,...")
+        raise CaseError(f"--over {text!r}: expected PATH=START:STOP:N, PATH=V1,V2,..., PATH=uniform:LO:HI "
+                        "or PATH=normal:MEAN:SD")
     path, spec = (s.strip() for s in text.split("=", 1))
     _input_leaf(path)
     kind = input_kind(path)
@@ -504,6 +526,20 @@ def parse_over(text):
             raise CaseError(f"--over {path}: {v.strip()!r}: {err}") from None
 
     parts = spec.split(":")
+    law = parts[0].strip().lower()
+    if law in ("uniform", "normal"):
+        names = ("LO", "HI") if law == "uniform" else ("MEAN", "SD")
+        if len(parts) != 3:
+            raise CaseError(f"--over {path}={spec}: expected {law}:{':'.join(names)}")
+        a, b = q(parts[1]), q(parts[2])
+        for name, text_, value in zip(names, parts[1:], (a, b)):
+            if not math.isfinite(value):
+                raise CaseError(f"--over {path}: {name} = {text_.strip()!r} must be a finite number")
+        if law == "uniform" and a > b:
+            raise CaseError(f"--over {path}={spec}: LO must not exceed HI")
+        if law == "normal" and b < 0:
+            raise CaseError(f"--over {path}={spec}: SD must be >= 0")
+        return path, Draws(path, law, a, b)
     if len(parts) == 3:
         try:
             n = int(parts[2])
@@ -518,7 +554,24 @@ def parse_over(text):
         return path, np.linspace(*ends, n)
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])
-    raise CaseError(f"--over {path}={spec}: expected START:STOP:N or V1,V2,...")
+    raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")
+
+
+def draw_over(specs, mode, samples, seed):
+    """({path: SI values}, mode) from ``parse_over``'s (path, values or Draws): the draws made with
+    ``numpy.random.default_rng(seed)``, ``samples`` each, in the order given (zip mode). Values given as
+    numbers stay as they are."""
+    draws = [p for p, v in specs if isinstance(v, Draws)]
+    if not draws:
+        if samples is not None:
+            raise CaseError("--samples N is for random values: give --over PATH=uniform:LO:HI or PATH=normal:MEAN:SD")
+        return dict(specs), mode or "grid"
+    if samples is None or samples < 1:
+        raise CaseError(f"--over {draws[0]}=...: random values need --samples N (N >= 1), got {samples}")
+    if mode == "grid":
+        raise CaseError(f"--over {draws[0]}=...: random values are samples, swept together (--mode zip), not a grid")
+    rng = np.random.default_rng(seed)
+    return {p: v.draw(samples, rng) if isinstance(v, Draws) else v for p, v in specs}, "zip"
 
 
 def _shape(sizes, mode):
@@ -745,10 +798,10 @@ def run(args) -> int:
         case = cases[args.case]
     if not case.valid:
         raise CaseError(case.error)
-    over = dict(parse_over(t) for t in args.over)
-    shape = _shape({p: len(v) for p, v in over.items()}, args.mode)  # sweep's rule, checked before a file exists
-    sample = _plot_sample(args.plot, over, args.mode, shape)  # checked before anything is solved
-    writer = ResultWriter(args.out, over, args.mode, shape)  # written chunk by chunk: memory stays bounded
+    over, mode = draw_over([parse_over(t) for t in args.over], args.mode, args.samples, args.seed)
+    shape = _shape({p: len(v) for p, v in over.items()}, mode)  # sweep's rule, checked before a file exists
+    sample = _plot_sample(args.plot, over, mode, shape)  # checked before anything is solved
+    writer = ResultWriter(args.out, over, mode, shape)  # written chunk by chunk: memory stays bounded
 
     def on_chunk(lo, hi, chunk):
         writer.chunk(lo, hi, chunk)
@@ -757,7 +810,7 @@ def run(args) -> int:
 
     t = time.perf_counter()
     try:
-        result = sweep(case, over, outputs=args.output, mode=args.mode, chunk_size=args.chunk_size,
+        result = sweep(case, over, outputs=args.output, mode=mode, chunk_size=args.chunk_size,
                        smoothing=args.smoothing, progress=False if args.no_progress else None,
                        output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False)
         writer.close()
@@ -767,6 +820,8 @@ def run(args) -> int:
     result = replace(result, seconds=max(result.seconds - writer.chunk_seconds, 0.0))  # solving alone
     print(f"ks-jax sweep: {case.name}")
     print(f"  {result.summary()}")
+    if args.samples is not None:
+        print(f"  random values: {args.samples} per path, seed {args.seed}")
     print(f"  written to {args.out} in {writer.seconds:.3g} s ({time.perf_counter() - t:.3g} s in all)")
     if sample is not None:
         from .plot import save_sweep_view

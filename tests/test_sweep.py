@@ -181,6 +181,53 @@ def test_parse_over_units():
         parse_over("vehicles[1].speed=10mph:-inf mph:5")
 
 
+def test_parse_over_random_values():
+    from ks_jax.sweeps import Draws, draw_over
+
+    mph = 1609.344 / 3600
+    assert parse_over("vehicles[1].speed=normal:20mph:2mph") == ("vehicles[1].speed",
+                                                                  Draws("vehicles[1].speed", "normal", 20 * mph, 2 * mph))
+    _, d = parse_over("vehicles[0].yaw=uniform:-5:5")  # bare angles are degrees, as everywhere
+    assert (d.law, d.a, d.b) == ("uniform", np.radians(-5), np.radians(5))
+    for spec, words in (("normal:0.1:-0.02", "SD must be >= 0"), ("uniform:0.3:0.1", "LO must not exceed HI"),
+                        ("uniform:0:nan", "HI = 'nan' must be a finite number"), ("normal:1", "expected normal:MEAN:SD")):
+        with pytest.raises(CaseError, match=words):
+            parse_over(f"contact.restitution={spec}")
+    specs = [parse_over("contact.restitution=uniform:0:0.3"), parse_over("contact.friction=0.4,0.5,0.6")]
+    with pytest.raises(CaseError, match="need --samples N"):
+        draw_over(specs, None, None, 0)
+    with pytest.raises(CaseError, match="not a grid"):
+        draw_over(specs, "grid", 3, 0)
+    with pytest.raises(CaseError, match="--samples N is for random values"):
+        draw_over(specs[1:], None, 3, 0)
+    over, mode = draw_over(specs, None, 3, 11)
+    assert mode == "zip" and list(over) == ["contact.restitution", "contact.friction"]
+    np.testing.assert_array_equal(over["contact.restitution"], np.random.default_rng(11).uniform(0, 0.3, 3))
+    np.testing.assert_array_equal(over["contact.friction"], [0.4, 0.5, 0.6])
+
+
+def test_cli_monte_carlo_sweep(tmp_path, capsys, case):
+    """Random inputs from the command line: the draws are numpy's default_rng(seed) in the order of the
+    --over options, they are stored as the axes of the file, and the results are the sweep of those
+    samples; the normal draws' mean is 20 mph within five standard errors."""
+    out = tmp_path / "mc.npz"
+    argv = ["sweep", str(SEED0), "--over", "vehicles[1].speed=normal:20mph:2mph", "--over",
+            "contact.restitution=uniform:0.05:0.15", "--samples", "2000", "--seed", "7",
+            "--output", "vehicles[0].delta_v_magnitude", "--out", str(out)]
+    assert main(argv) == 0
+    assert "2000 points (zip" in capsys.readouterr().out
+    mph = 1609.344 / 3600
+    rng = np.random.default_rng(7)
+    speed, eps = rng.normal(20 * mph, 2 * mph, 2000), rng.uniform(0.05, 0.15, 2000)
+    data = np.load(out)
+    np.testing.assert_array_equal(data["axis:vehicles[1].speed"], speed)
+    np.testing.assert_array_equal(data["axis:contact.restitution"], eps)
+    assert abs(speed.mean() / mph - 20) < 5 * 2 / np.sqrt(2000)
+    kept = sweep(case, {"vehicles[1].speed": speed, "contact.restitution": eps}, mode="zip",
+                 outputs=["vehicles[0].delta_v_magnitude"])
+    np.testing.assert_array_equal(data["vehicles[0].delta_v_magnitude"], kept["vehicles[0].delta_v_magnitude"])
+
+
 def test_cli_writes_csv_and_npz(tmp_path, capsys):
     csv_path, npz_path = tmp_path / "r.csv", tmp_path / "r.npz"
     args = [str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5", "--over", "contact.restitution=0:1.5:4",
