@@ -471,8 +471,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 def add_arguments(parser):
     parser.add_argument("file", help="a case file (JSON or TOML) holding one case")
     parser.add_argument("--over", action="append", required=True, metavar="PATH=START:STOP:N",
-                        help="an input path and its values: START:STOP:N (N evenly spaced values) or "
-                             "V1,V2,... ; bare numbers are SI except angles (deg) and rates (deg/s); "
+                        help="an input path and its values: START:STOP:N (N evenly spaced values), "
+                             "V1,V2,..., or random values uniform:LO:HI or normal:MEAN:SD (with --samples); bare numbers are SI except angles (deg) and rates (deg/s); "
                              "unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
     parser.add_argument("--output", action="append", metavar="PATH",
                         help="an output path of MODEL.md section 4 (repeat; default: the main results)")
