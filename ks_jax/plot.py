@@ -204,10 +204,9 @@ def save_top_view(solutions, path):
 # sweeps: maps over one or two swept inputs, histograms of samples
 
 
-def _display(kind):
-    """(SI value of one display unit, the label's bracket) for a unit kind (``units.US_DISPLAY``)."""
-    scale, label = U.US_DISPLAY[kind]
-    return scale, f" [{label}]" if label else ""
+def _bracket(label):
+    """' [mph]' for an axis or a title; nothing for a dimensionless quantity."""
+    return f" [{label}]" if label else ""
 
 
 def _categories(output, values):
@@ -236,10 +235,9 @@ def sweep_view(result, output=None, ax=None, contours=True):
     import matplotlib.pyplot as plt
 
     from .case import CaseError, input_kind, output_kind
+    from .sweeps import check_kept
 
-    if not result.outputs:
-        raise CaseError("this sweep kept no results (keep=False): sweep again with keep=True, or collect a "
-                        "ks_jax.sweeps.SweepSample in on_chunk and draw its result")
+    check_kept(result)
     paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
     output = (paths[0] if paths else "status") if output is None else output
     if output not in result.outputs:
@@ -259,10 +257,10 @@ def sweep_view(result, output=None, ax=None, contours=True):
                                    mask=(status >= 2) if output != "status" else np.zeros(values.shape, bool))
         scale, unit = 1.0, ""
     else:
-        scale, unit = _display(output_kind(output))
+        scale, unit = U.US_DISPLAY[output_kind(output)]
         shown = np.ma.masked_invalid(values / scale)
     missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
-    axes = [(p, *_display(input_kind(p)), np.asarray(v)) for p, v in result.axes.items()]
+    axes = [(p, *U.US_DISPLAY[input_kind(p)], np.asarray(v)) for p, v in result.axes.items()]
     thinned = any(k > 1 for k in result.strides)
     note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
     if missing:
@@ -270,7 +268,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
     finite = shown.compressed()
     flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
     if flat:  # one value everywhere (to rounding): say it, no contours of the rounding
-        note.append(f"{float(np.median(finite)):.6g} {unit.strip(' []')} everywhere".replace("  ", " "))
+        note.append(" ".join(filter(None, (f"{float(np.median(finite)):.6g}", unit, "everywhere"))))
 
     if result.mode == "zip":
         data = shown.compressed()
@@ -282,19 +280,19 @@ def sweep_view(result, output=None, ax=None, contours=True):
             ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
             for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
                 x = np.percentile(data, q)
-                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g} {unit.strip(' []')}".rstrip())
+                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g} {unit}".rstrip())
             ax.legend(fontsize=8)
-        ax.set_xlabel(f"{output}{unit}" if not categorical else output)
+        ax.set_xlabel(output + _bracket(unit))
         ax.set_ylabel(f"samples (of {shown.size})")
     elif len(axes) == 1:
         (path, xs, xunit, x), = axes
         ax.plot(x / xs, shown.astype(float).filled(np.nan), "-", marker="o" if x.size <= 60 else None,
                 color="tab:blue", ms=3, drawstyle="steps-mid" if categorical else "default")
-        ax.set_xlabel(f"{path}{xunit}")
+        ax.set_xlabel(path + _bracket(xunit))
         if categorical:
             ax.set_yticks(range(len(codes)), names)
             ax.set_ylim(-0.5, len(codes) - 0.5)
-        ax.set_ylabel(output + unit)
+        ax.set_ylabel(output + _bracket(unit))
         ax.grid(alpha=0.3)
     else:
         (px, xs, xunit, x), (py, ys, yunit, y) = axes
@@ -310,13 +308,13 @@ def sweep_view(result, output=None, ax=None, contours=True):
         else:
             cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
             mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap)
-            ax.figure.colorbar(mesh, ax=ax, label=output + unit)
+            ax.figure.colorbar(mesh, ax=ax, label=output + _bracket(unit))
             if contours and min(X.shape) >= 2 and finite.size and not flat:
                 lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6)
                 ax.clabel(lines, fontsize=7, fmt=lambda v: f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
-        ax.set_xlabel(f"{px}{xunit}")
-        ax.set_ylabel(f"{py}{yunit}")
-    ax.set_title("\n".join([output + unit] + ([", ".join(note)] if note else [])), fontsize=9)
+        ax.set_xlabel(px + _bracket(xunit))
+        ax.set_ylabel(py + _bracket(yunit))
+    ax.set_title("\n".join([output + _bracket(unit)] + ([", ".join(note)] if note else [])), fontsize=9)
     return ax
 
 
@@ -327,7 +325,7 @@ def save_sweep_view(result, path, outputs=None):
 
     outputs = list(outputs or result.output_paths or [p for p in result.outputs if p != "status"] or ["status"])
     if not result.strides:
-        result = result.thinned()
+        result = result.thinned()  # once for every panel
     cols = min(len(outputs), 3)
     rows = math.ceil(len(outputs) / cols)
     fig = Figure(figsize=(6.2 * cols, 4.6 * rows))

@@ -130,13 +130,9 @@ class SweepResult(Mapping):
         by the number of axes): every k-th value, from the first, of the axes and of every output
         (a view, no copy). Needs a kept result of a whole grid or of all the samples."""
         _check_whole(self)
-        strides = tuple(plot_strides(self.shape, self.mode, limit))
+        strides = plot_strides(self.shape, self.mode, limit)
         cut = tuple(slice(None, None, k) for k in strides)
-        axes = {p: np.asarray(v)[cut[0 if self.mode == "zip" else i]] for i, (p, v) in enumerate(self.axes.items())}
-        outputs = {p: v[cut] for p, v in self.outputs.items()}
-        shape = outputs["status"].shape
-        return replace(self, outputs=outputs, axes=axes, shape=shape, points=math.prod(shape),
-                       index_range=(0, math.prod(shape)), strides=strides)
+        return _thinned(self, {p: v[cut] for p, v in self.outputs.items()}, strides)
 
     def summary(self) -> str:
         counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
@@ -160,15 +156,30 @@ def plot_strides(shape, mode, limit=None):
     return tuple(max(1, -(-int(n) // int(limit))) for n in shape)
 
 
-def _check_whole(result):
+def check_kept(result):
+    """Raise unless ``result`` kept its results (a picture or ``thinned`` needs them)."""
     if not result.outputs:
         raise CaseError("this sweep kept no results (keep=False): sweep again with keep=True, or collect a "
-                        "SweepSample in on_chunk")
+                        "ks_jax.sweeps.SweepSample in on_chunk and draw its result")
+
+
+def _check_whole(result):
+    check_kept(result)
     whole = (result.mode == "zip" and result.index_range == (0, result.shape[0])) or (
         result.shape == tuple(len(v) for v in result.axes.values()))
     if not whole or result.strides:
         raise CaseError(f"this result holds points {result.index_range[0]}..{result.index_range[1] - 1} of a sweep "
                         f"or is thinned already (strides {result.strides}): thin a whole sweep")
+
+
+def _thinned(result, outputs, strides):
+    """``result`` holding ``outputs`` (every k-th value of a whole sweep's, k = ``strides``) and its axes
+    cut the same way."""
+    axes = {p: np.asarray(v)[::strides[0 if result.mode == "zip" else i]]
+            for i, (p, v) in enumerate(result.axes.items())}
+    shape = outputs["status"].shape
+    n = math.prod(shape)
+    return replace(result, outputs=outputs, axes=axes, shape=shape, points=n, index_range=(0, n), strides=strides)
 
 
 class SweepSample:
@@ -202,12 +213,8 @@ class SweepSample:
         """The thinned result of ``swept`` (the ``keep=False`` result of the same sweep)."""
         if swept.index_range != (0, math.prod(self.shape)):
             raise CaseError(f"a SweepSample needs the whole sweep; it got points {swept.index_range}")
-        axes = {p: np.asarray(v)[::self.strides[0 if self.mode == "zip" else i]]
-                for i, (p, v) in enumerate(self.axes.items())}
         outputs = {p: v.reshape(self.thin_shape) for p, v in self.store.items()}
-        n = math.prod(self.thin_shape)
-        return replace(swept, outputs=outputs, axes=axes, shape=self.thin_shape, points=n, index_range=(0, n),
-                       strides=self.strides)
+        return _thinned(replace(swept, axes=self.axes), outputs, self.strides)
 
 
 # ---------------------------------------------------------------------------------------
@@ -472,7 +479,8 @@ def add_arguments(parser):
     parser.add_argument("file", help="a case file (JSON or TOML) holding one case")
     parser.add_argument("--over", action="append", required=True, metavar="PATH=START:STOP:N",
                         help="an input path and its values: START:STOP:N (N evenly spaced values), "
-                             "V1,V2,..., or random values uniform:LO:HI or normal:MEAN:SD (with --samples); bare numbers are SI except angles (deg) and rates (deg/s); "
+                             "V1,V2,..., or random values uniform:LO:HI or normal:MEAN:SD (with --samples); "
+                             "bare numbers are SI except angles (deg) and rates (deg/s); "
                              "unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
     parser.add_argument("--output", action="append", metavar="PATH",
                         help="an output path of MODEL.md section 4 (repeat; default: the main results)")
