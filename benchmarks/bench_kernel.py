@@ -34,7 +34,9 @@ that a change in the machine's load moves both sides of a ratio alike):
   (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
   skips it) and a 1000 x 1000 grid sharded over two forced host devices against one device
   (``bench_sweep_sharded.py`` under ``XLA_FLAGS=--xla_force_host_platform_device_count=2``;
-  ``--sharded-n 0`` skips it);
+  ``--sharded-n 0`` skips it), and issue #5's naive baseline, ``jit(vmap)`` with batched 3x3 LAPACK
+  solves, beside NumPy, both streaming references and the library, with its gradient / forward
+  (``bench_naive.py``; ``--naive-rows 0`` skips it);
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
   (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
 Batch-last (every leaf (..., N)) makes each component of a vector one contiguous array, which is
@@ -261,6 +263,7 @@ def main():
     ap.add_argument("--grid", type=int, default=1000, help="sweep grid side (default 1000: 10^6 points)")
     ap.add_argument("--memory-n", type=int, default=10000, help="grid side of the peak-memory sweep (10^8 points)")
     ap.add_argument("--sharded-n", type=int, default=1000, help="grid side of the sharded sweep")
+    ap.add_argument("--naive-rows", type=int, default=1 << 20, help="rows of the naive baseline (bench_naive.py)")
     args = ap.parse_args()
     n, reps = args.rows, args.repeats
 
@@ -429,6 +432,9 @@ def main():
         print("sweep, sharded (bench_sweep_sharded.py, XLA_FLAGS=--xla_force_host_platform_device_count=2): "
               + run_script("bench_sweep_sharded.py", "--n", str(args.sharded_n),
                            XLA_FLAGS="--xla_force_host_platform_device_count=2"))
+    if args.naive_rows:
+        print("naive baseline (bench_naive.py): "
+              + run_script("bench_naive.py", "--rows", str(args.naive_rows), "--repeats", str(reps)))
 
 
 def run_script(name, *argv, **env):
