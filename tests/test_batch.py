@@ -7,6 +7,7 @@ The two compute the impulse in two forms (``impulse_stage(for_gradients=False)``
 from __future__ import annotations
 
 import copy
+import re
 import importlib
 
 import jax
@@ -224,6 +225,37 @@ def test_gradient_in_chunks_with_a_shared_vehicle_and_bad_rows(kit, random_cases
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
     for bad in (63, 100):
         assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves(grads[1:]))
+
+
+def _library_calls(lowered):
+    """The targets of the custom calls (LAPACK and other library routines) in a lowered program."""
+    if not isinstance(lowered, str):
+        lowered = lowered.as_text()
+    return set(re.findall(r"custom_call @(\w+)", lowered))
+
+
+def test_batched_programs_call_no_library_routines(kit, random_cases, small_chunks):
+    """The batch, its gradient and the sweep's stages are closed-form XLA loops: no per-row LAPACK
+    call (issue #5), which would also be unsafe here: two batched LAPACK calls running at once never
+    returned on the 2-core benchmark machine (benchmarks/RESULTS.md). The check itself sees the
+    LAPACK calls of a batched 3x3 solve."""
+    args = kit.inputs(random_cases["full"][:150])  # three chunks of 64 rows
+
+    def loss(args):
+        r = jax.vmap(ks_jax.exchange)(*args)
+        return jnp.sum(jnp.where(r.contact.status == 0, r.vehicles[0].pdof + r.vehicles[1].ees, 0.0))
+
+    assert _library_calls(jax.jit(jax.vmap(ks_jax.exchange)).lower(*args)) == set()
+    gradient = jax.jit(jax.value_and_grad(loss)).lower(args).as_text()
+    assert "stablehlo.while" in gradient  # the chunked gradient's loops over chunks
+    assert _library_calls(gradient) == set()
+    prep, imp, res = importlib.import_module("ks_jax.batch")._stages(64, 0.0)
+    rows, prepared = jax.eval_shape(prep, args, 0)
+    impulse = jax.eval_shape(imp, rows, prepared)
+    for stage, stage_args in ((prep, (args, 0)), (imp, (rows, prepared)), (res, (rows, prepared, impulse))):
+        assert _library_calls(stage.lower(*stage_args)) == set()
+    solve = jax.jit(jax.vmap(jnp.linalg.solve)).lower(jnp.eye(3)[None].repeat(8, 0), jnp.ones((8, 3)))
+    assert _library_calls(solve)
 
 
 def test_second_derivatives_in_chunks(kit, random_cases, small_chunks, monkeypatch):
