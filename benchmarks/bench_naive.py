@@ -8,13 +8,15 @@ jnp.linalg.inv and jnp.linalg.solve per row, batched by jax.jit(jax.vmap)) in ro
 references as bench_kernel.py: the NumPy implementation (numpy_ks.py), the two streaming references over
 the bytes of the library's inputs and results (into new arrays, and in place), and the library's own
 ``jax.jit(jax.vmap(ks_jax.exchange))``, batch-first. Then gradient / forward of bench_kernel.py's two
-batched losses through the baseline and, in the same rounds, through ``jax.vmap(ks_jax.exchange)``. It prints the figures, and last a one-line summary
-(bench_kernel.py runs this script in a process of its own and prints that line).
+batched losses through the baseline and, in the same rounds, through ``jax.vmap(ks_jax.exchange)``.
+It prints the figures, and last a one-line summary (bench_kernel.py runs this script in a process of its
+own and prints that line).
 
-It runs with ``jax_cpu_enable_async_dispatch`` off. With JAX 0.10.2's default asynchronous dispatch on
-the CPU, a program holding two batched ``jnp.linalg.inv`` of 8192 or more 3x3 matrices never returned
-on the 2-core benchmark machine (all threads asleep); with it off, the same program ran in 27 ms
-(benchmarks/RESULTS.md). Every call here is waited for anyway. The library itself makes no LAPACK call.
+The baseline inverts both vehicles' inertias in one ``jnp.linalg.inv`` call (and takes both determinants
+in one ``jnp.linalg.det``): XLA runs independent calls at the same time, and a program holding two
+independent batched ``jnp.linalg.inv`` of 8192 or more 3x3 matrices did not return, with all its
+threads asleep, on the 2-core benchmark machine with JAX 0.10.2 (benchmarks/RESULTS.md). The library
+itself makes no LAPACK call (tests/test_batch.py checks it).
 """
 
 from __future__ import annotations
@@ -29,7 +31,6 @@ import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-jax.config.update("jax_cpu_enable_async_dispatch", False)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_kernel as bk  # noqa: E402
@@ -141,18 +142,22 @@ def main():
           f"agrees with NumPy to {agree:.1e}, statuses equal: {same_status}")
     print(f"ks_jax jit(vmap(exchange)): /NumPy {q('kernel', 'numpy'):.2f}, /streaming {q('kernel', 'stream'):.3f}, "
           f"/streaming in place {q('kernel', 'stream_in_place'):.3f}, /naive {q('kernel', 'naive'):.2f}")
-    grads = {}
+    grads, lib_grads, faster_grads = {}, {}, {}
     for name in firsts:
         tf, tg = (statistics.median(gt[("naive", name, k)]) for k in ("forward", "gradient"))
         grads[name] = bk.ratio(gt, ("naive", name, "forward"), ("naive", name, "gradient"))
         lib = bk.ratio(gt, ("ks_jax", name, "forward"), ("ks_jax", name, "gradient"))
         faster = bk.ratio(gt, ("ks_jax", name, "gradient"), ("naive", name, "gradient"))
+        lib_grads[name], faster_grads[name] = lib, faster
+        lf, lg = (statistics.median(gt[("ks_jax", name, k)]) for k in ("forward", "gradient"))
         print(f"naive gradient/forward, {name}: {grads[name]:.2f} (gradient {n / tg:.4g}/s, forward "
-              f"{n / tf:.4g}/s; first call {firsts[name]:.2f} s); through ks_jax.exchange {lib:.2f}, its "
-              f"gradient {faster:.2f}x the naive gradient's rate")
+              f"{n / tf:.4g}/s; first call {firsts[name]:.2f} s); through ks_jax.exchange {lib:.2f} (gradient "
+              f"{n / lg:.4g}/s, forward {n / lf:.4g}/s), its gradient {faster:.2f}x the naive gradient's rate")
     print(f"naive jit(vmap): {q('naive', 'numpy'):.2f}x NumPy, {q('naive', 'stream'):.2f} of streaming into new "
           f"arrays, {q('naive', 'stream_in_place'):.2f} in place; ks_jax jit(vmap(exchange)) {q('kernel', 'naive'):.2f}x "
-          f"it; naive gradient/forward {grads['delta-V']:.2f} (delta-V), {grads['residuals']:.2f} (residuals)")
+          f"it; naive gradient/forward {grads['delta-V']:.2f} (delta-V), {grads['residuals']:.2f} (residuals); "
+          f"through ks_jax.exchange {lib_grads['delta-V']:.2f} and {lib_grads['residuals']:.2f}, its gradients "
+          f"{faster_grads['delta-V']:.2f}x and {faster_grads['residuals']:.2f}x the naive ones' rate")
 
 
 if __name__ == "__main__":
