@@ -191,6 +191,27 @@ def nbytes(tree):
     return sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(tree))
 
 
+def streaming_references(inputs, outputs):
+    """The two streaming references over the kernel's input and output arrays, as float64: (stream,
+    stream_in_place, bytes). ``stream`` computes x * 1.0 + 0 of every array into new ones;
+    ``stream_in_place`` writes each result over its input (donated), with no new memory, as
+    ``exchange_batch(out=)``. Its 1 and 0 are arguments: as constants XLA would make the program the
+    identity, and a donated identity moves no bytes at all."""
+    flat = [jnp.asarray(x).astype(jnp.float64) for x in jax.tree_util.tree_leaves((inputs, outputs))]
+    copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
+    copy_in_place = jax.jit(lambda xs, a, b: [x * a + b for x in xs], donate_argnums=0)
+    held = [[jnp.array(x) for x in flat]]
+    one_zero = jnp.float64(1.0), jnp.float64(0.0)
+
+    def stream():
+        return jax.block_until_ready(copy(flat))
+
+    def stream_in_place():
+        held[0] = jax.block_until_ready(copy_in_place(held[0], *one_zero))
+
+    return stream, stream_in_place, sum(x.size * 8 for x in flat)
+
+
 def pycrash_rate(repeats):
     """Seconds per call of pycrash.impc.impc_calcs, or a reason why not."""
     extra = os.environ.get("PYCRASH_PATH")
@@ -291,19 +312,7 @@ def main():
     first_whole = first_call(lambda: jax.block_until_ready(whole(first)))
     out = exchange_batch(*first)
     io_bytes = nbytes(first) + nbytes(out)
-    # streaming the same bytes: x * 1.0 + 0 over the kernel's input and output arrays
-    flat = [jnp.asarray(x).astype(jnp.float64) for x in jax.tree_util.tree_leaves((first, out))]
-    copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
-    stream_bytes = sum(x.size * 8 for x in flat)
-    # the same, each result written over its input (donated): no new memory, as exchange_batch(out=).
-    # 1 and 0 are arguments here: as constants XLA would make the program the identity, and a donated
-    # identity moves no bytes at all
-    copy_in_place = jax.jit(lambda xs, a, b: [x * a + b for x in xs], donate_argnums=0)
-    held = [[jnp.array(x) for x in flat]]
-    one_zero = jnp.float64(1.0), jnp.float64(0.0)
-
-    def stream_in_place():
-        held[0] = jax.block_until_ready(copy_in_place(held[0], *one_zero))
+    stream, stream_in_place, stream_bytes = streaming_references(first, out)
     fns = {
         "kernel64": lambda: exchange_batch(*first),
         "kernel32": lambda: exchange_batch(*first32),
@@ -313,7 +322,7 @@ def main():
         "whole": lambda: jax.block_until_ready(whole(first)),
         "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
         "numpy": lambda: numpy_ks.exchange(*nps),
-        "stream": lambda: jax.block_until_ready(copy(flat)),
+        "stream": stream,
         "stream_in_place": stream_in_place,
     }
     for fn in fns.values():  # warm
