@@ -134,7 +134,7 @@ def main():
           f"agrees with NumPy to {agree:.1e}, statuses equal: {same_status}")
     print(f"ks_jax jit(vmap(exchange)): /NumPy {q('kernel', 'numpy'):.2f}, /streaming {q('kernel', 'stream'):.3f}, "
           f"/streaming in place {q('kernel', 'stream_in_place'):.3f}, /naive {q('kernel', 'naive'):.2f}")
-    grads, lib_grads, faster_grads = {}, {}, {}
+    grads, lib_grads, faster_grads, lib_ns = {}, {}, {}, {}
     for name in firsts:
         tf, tg = (statistics.median(gt[("naive", name, k)]) for k in ("forward", "gradient"))
         grads[name] = bk.ratio(gt, ("naive", name, "forward"), ("naive", name, "gradient"))
@@ -142,13 +142,15 @@ def main():
         faster = bk.ratio(gt, ("ks_jax", name, "gradient"), ("naive", name, "gradient"))
         lib_grads[name], faster_grads[name] = lib, faster
         lf, lg = (statistics.median(gt[("ks_jax", name, k)]) for k in ("forward", "gradient"))
+        lib_ns[name] = f"{lg * 1e9 / n:.0f}/{lf * 1e9 / n:.0f}"
         print(f"naive gradient/forward, {name}: {grads[name]:.2f} (gradient {n / tg:.4g}/s, forward "
               f"{n / tf:.4g}/s; first call {firsts[name]:.2f} s); through ks_jax.exchange {lib:.2f} (gradient "
               f"{n / lg:.4g}/s, forward {n / lf:.4g}/s), its gradient {faster:.2f}x the naive gradient's rate")
     print(f"naive jit(vmap): {q('naive', 'numpy'):.2f}x NumPy, {q('naive', 'stream'):.2f} of streaming into new "
           f"arrays, {q('naive', 'stream_in_place'):.2f} in place; ks_jax jit(vmap(exchange)) {q('kernel', 'naive'):.2f}x "
           f"it; naive gradient/forward {grads['delta-V']:.2f} (delta-V), {grads['residuals']:.2f} (residuals); "
-          f"through ks_jax.exchange {lib_grads['delta-V']:.2f} and {lib_grads['residuals']:.2f}, its gradients "
+          f"through ks_jax.exchange {lib_grads['delta-V']:.2f} and {lib_grads['residuals']:.2f} (medians, gradient/"
+          f"forward ns per row: {lib_ns['delta-V']} and {lib_ns['residuals']}), its gradients "
           f"{faster_grads['delta-V']:.2f}x and {faster_grads['residuals']:.2f}x the naive ones' rate")
 
 
