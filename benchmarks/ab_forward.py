@@ -17,7 +17,6 @@ import sys
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
@@ -37,7 +36,7 @@ def main():
     args = ap.parse_args()
     n = args.rows
     nps, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.asarray(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     vmapped = jax.jit(jax.vmap(ks_jax.exchange))
     out = jax.block_until_ready(vmapped(*first))
     if args.save:

@@ -52,7 +52,7 @@ def main():
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.array(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     losses = {"delta-V": bk.delta_v, "residuals": bk.residuals}
     names = list(losses) if args.loss == "both" else [args.loss]
     status = jax.vmap(bk.input_status)(*first) if args.whole else None

@@ -164,6 +164,12 @@ def random_batch(n, seed=0):
     return nps, last
 
 
+def batch_first(last):
+    """``random_batch``'s batch-last pytrees with the batch axis first, as users hold a batch (JAX
+    arrays, computed before this returns)."""
+    return jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last))
+
+
 def kernel_chunk():
     """What ``ks_jax.sweep`` computes per chunk, on batch-last inputs already cut into chunks
     (the sweep builds each chunk's inputs inside its first call): three jitted calls,
@@ -297,7 +303,7 @@ def main():
     print(f"  rows     {n} per batch, {reps} interleaved rounds (medians)\n")
 
     nps, last = random_batch(n)
-    first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)  # batch-first, as users hold it
+    first = batch_first(last)
     one, one_first, whole = kernel_one_call(), kernel_one_call(0), kernel_one_call(0, whole=True)
 
     # --- first calls (compile + run), then everything in interleaved rounds

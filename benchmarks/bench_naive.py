@@ -74,7 +74,7 @@ def main():
     print(f"naive baseline, {n} rows, {reps} rounds, jax {jax.__version__}, {bk.cpu_model()}")
 
     nps, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.asarray(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     dicts = jax.block_until_ready(jax.tree_util.tree_map(jnp.asarray, nps))
     naive = jax.jit(jax.vmap(naive_ks.exchange))
     kernel = jax.jit(jax.vmap(ks_jax.exchange))

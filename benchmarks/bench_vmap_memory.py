@@ -17,11 +17,10 @@ import sys
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_kernel import batched_loss, delta_v, random_batch, residuals  # noqa: E402
+from bench_kernel import batch_first, batched_loss, delta_v, random_batch, residuals  # noqa: E402
 from bench_sweep_memory import peak_rss_mib  # noqa: E402
 
 from ks_jax.exchange import exchange, exchange_with_status, input_status  # noqa: E402
@@ -31,7 +30,7 @@ MIB = 2.0**20
 
 def measure(variant, n):
     _, last = random_batch(n)
-    first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)
+    first = batch_first(last)
     del last
     chunked = variant.startswith("chunked")
     if " " in variant:  # "chunked delta-V", "whole residuals": value_and_grad of that loss

@@ -47,7 +47,6 @@ def main():
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_dump_to={work / 'hlo'} --xla_dump_hlo_as_text"
 
     import jax
-    import jax.numpy as jnp
     jax.config.update("jax_enable_x64", True)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_kernel as bk
@@ -55,7 +54,7 @@ def main():
 
     n = args.rows
     _, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.array(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     if args.forward:
         grad = jax.jit(lambda a: jax.vmap(bk.exchange)(*a))
     else:
@@ -140,7 +139,7 @@ def main():
                 groups[key] += e["own"]
         for e in {e["name"] for e in events if e["name"] in computation}:
             counts[(phase(op_name[e]), e.split(".")[0], shapes[e][:48])] += 1
-        print(f"heaviest groups of thunks (phase, fusion kind, output shape; count): ns per row")
+        print("heaviest groups of thunks (phase, fusion kind, output shape; count): ns per row")
         for key, t in groups.most_common(args.top):
             print(f"  {t * ns:7.0f}  {key[0]:30s} {key[1]:32s} {key[2]:48s} x{counts[key]}")
     print(f"(trace and HLO in {work})")

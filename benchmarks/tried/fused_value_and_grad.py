@@ -50,7 +50,7 @@ def main():
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.array(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     print(f"{n} rows, jax {jax.__version__}, {jax.devices()[0].device_kind}; {args.repeats} rounds")
     calls = {}
     for name, row_loss in (("residuals", bk.residuals), ("delta-V", bk.delta_v)):

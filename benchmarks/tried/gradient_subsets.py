@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -67,35 +66,26 @@ def main():
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
-    first = jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.array(jnp.moveaxis(x, -1, 0)), last))
+    first = bk.batch_first(last)
     print(f"jax.vmap(exchange), {n} rows, jax {jax.__version__}, {bk.cpu_model()}; {args.repeats} rounds")
     calls = {}
     for name, row_loss in (("delta-V", bk.delta_v), ("residuals", bk.residuals)):
         loss = bk.batched_loss(row_loss, 0, chunked=True)
         fwd = jax.jit(lambda a, loss=loss: loss(a, None))
         jax.block_until_ready(fwd(first))
-        calls[(name, "forward")] = (fwd, (first,))
+        calls[(name, "forward")] = lambda fwd=fwd: jax.block_until_ready(fwd(first))
         for which in SUBSETS:
             part, rest = split(first, which)
             grad = jax.jit(jax.value_and_grad(lambda p, r, loss=loss, which=which: loss(merge(p, r, which), None)))
-            start = time.perf_counter()
-            _, g = jax.block_until_ready(grad(part, rest))
-            finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
-            print(f"{name:9s} {SUBSETS[which]}: first call {time.perf_counter() - start:.1f} s, finite {finite}",
-                  flush=True)
-            calls[(name, which)] = (grad, (part, rest))
-    times = {k: [] for k in calls}
-    for _ in range(args.repeats):
-        for k, (fn, a) in calls.items():
-            start = time.perf_counter()
-            jax.block_until_ready(fn(*a))
-            times[k].append(time.perf_counter() - start)
+            seconds = bk.first_call(lambda grad=grad, part=part, rest=rest: jax.block_until_ready(grad(part, rest)))
+            finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(grad(part, rest)[1]))
+            print(f"{name:9s} {SUBSETS[which]}: first call {seconds:.1f} s, finite {finite}", flush=True)
+            calls[(name, which)] = lambda grad=grad, part=part, rest=rest: jax.block_until_ready(grad(part, rest))
+    times = bk.rounds(calls, args.repeats)
     for (name, which), t in times.items():
-        base = times[(name, "forward")]
         label = "forward" if which == "forward" else SUBSETS[which]
         print(f"{name:9s} {label:30s} {statistics.median(t) * 1e9 / n:7.0f} ns/row   / forward "
-              f"{statistics.median(b / a for a, b in zip(base, t)):.2f}")
-
+              f"{bk.ratio(times, (name, 'forward'), (name, which)):.2f}")
 
 if __name__ == "__main__":
     main()

@@ -49,7 +49,7 @@ def main():
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
-    first = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last)
+    first = bk.batch_first(last)
     floats = tuple(first[:5])
     status = jax.jit(jax.vmap(EX.input_status))(*first)
     fns, values = {}, {}
