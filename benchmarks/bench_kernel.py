@@ -28,7 +28,9 @@ that a change in the machine's load moves both sides of a ratio alike):
   reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
   after impact, through ``exchange_with_status`` (one whole-batch program, forward and gradient
   alike) and, batch-first, through ``exchange`` (forward and gradient in chunks, with the
-  whole-batch gradient / the chunked one); the first-call (compile) times;
+  whole-batch gradient / the chunked one, and the chunked gradient / ``jit(vmap(exchange))``
+  computing every result, timed in the same rounds: a loss's forward computes only what the loss
+  reads, the delta-V one little more than the impulse); the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - in fresh processes, after everything above: the time and peak memory of a sweep of 10^8 points
   (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
@@ -371,6 +373,8 @@ def main():
             del g
             gfns[key + ("forward",)] = lambda fwd=fwd, floats=floats, st=st: jax.block_until_ready(fwd(floats, st))
             gfns[key + ("gradient",)] = lambda grad=grad, floats=floats, st=st: jax.block_until_ready(grad(floats, st))
+    # the kernel's own forward (every result), in the same rounds: what the gradients cost against it
+    gfns[("every result",)] = fns["kernel1f"]
     gt = rounds(gfns, reps)
     grads = {key: (statistics.median(gt[key + ("forward",)]), statistics.median(gt[key + ("gradient",)]),
                    ratio(gt, key + ("forward",), key + ("gradient",)), firsts[key], finite[key]) for key in firsts}
@@ -426,7 +430,9 @@ def main():
         versus = ""
         if layout == "exchange, batch-first":  # its gradient in chunks against the whole-batch gradient
             versus = (f"; whole-batch gradient (batch-first) / this gradient "
-                      f"{ratio(gt, (name, layout, 'gradient'), (name, 'batch-first', 'gradient')):.2f}")
+                      f"{ratio(gt, (name, layout, 'gradient'), (name, 'batch-first', 'gradient')):.2f}; this "
+                      f"gradient / jit(vmap(exchange)) batch-first, every result "
+                      f"{ratio(gt, ('every result',), (name, layout, 'gradient')):.2f}")
         print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
               f"first call {firstg:.2f} s{versus})")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
