@@ -87,5 +87,6 @@ def main():
         print(f"{name:9s} {label:30s} {statistics.median(t) * 1e9 / n:7.0f} ns/row   / forward "
               f"{bk.ratio(times, (name, 'forward'), (name, which)):.2f}")
 
+
 if __name__ == "__main__":
     main()
