@@ -1,13 +1,13 @@
 """ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
 
 See MODEL.md (the contract) for frames, equations and result names. Public surface:
-``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``load_case``, ``solve``, ``sweep``, ``units``;
+``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``sum_over_rows``, ``load_case``, ``solve``, ``sweep``, ``units``;
 ``ks_jax.plot`` (matplotlib) loads on first use.
 """
 
 from . import units
 from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case, load_cases, set_input
-from .batch import exchange_batch
+from .batch import exchange_batch, sum_over_rows
 from .exchange import exchange
 from .solve import Solution, solve, solve_inputs
 from .sweeps import SweepResult, sweep
@@ -46,6 +46,7 @@ __all__ = [
     "exchange_batch",
     "normal_from_angles",
     "status_text",
+    "sum_over_rows",
     "units",
 ]
 __version__ = "0.1.0"

@@ -289,3 +289,77 @@ def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
         floats = [x for x in _leaves(result) if np.asarray(x).dtype.kind == "f"]
         assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
         kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.rtol_float32, cases)
+
+
+# --------------------------------------------------------------------------- sum_over_rows
+def _evidence_row_loss(v1, s1, v2, s2, c, target):
+    r = ks_jax.exchange(v1, s1, v2, s2, c)
+    ok = r.contact.status == 0
+    delta_v = jnp.where(ok, r.vehicles[0].delta_v_magnitude, target)  # NaN in a bad row: no NaN times the target
+    return jnp.where(ok, (delta_v - target) ** 2 + r.vehicles[1].speed_after ** 2 + 1e-4 * r.contact.energy_loss, 0.0)
+
+
+def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
+    """Chunks of 64 rows over 150 (the last chunk padded), a vehicle and an evidence target shared by
+    every row, rows with invalid inputs: the value is the plain sum, the gradients are the per-row
+    gradients (summed over the rows for the shared inputs), zero and finite in the bad rows, and a
+    central difference agrees."""
+    cases = _with_bad_rows(random_cases["full"][:150])
+    v1, s1, v2, s2, c = kit.inputs(cases)
+    shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+    axes = (0, 0, None, 0, 0, None)
+    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64)
+    target = jnp.asarray(4.0)
+
+    value, grads = kit.cheap_jit(jax.value_and_grad(loss, argnums=(1, 2, 4, 5)))(v1, s1, shared, s2, c, target)
+    assert "cond[" in str(jax.make_jaxpr(jax.grad(loss, argnums=1))(v1, s1, shared, s2, c, target))
+    plain = jnp.sum(jax.vmap(_evidence_row_loss, in_axes=axes)(v1, s1, shared, s2, c, target))
+    np.testing.assert_allclose(float(value), float(plain), rtol=1e-13)
+    np.testing.assert_allclose(float(kit.cheap_jit(loss)(v1, s1, shared, s2, c, target)), float(plain), rtol=1e-13)
+    per_row = kit.cheap_jit(jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes))(
+        v1, s1, shared, s2, c, target)
+    reference = (per_row[0], jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[1]), per_row[2],
+                 np.sum(np.asarray(per_row[3])))
+    for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-10)
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
+    for bad in (63, 100):
+        assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves((grads[0], grads[2])))
+    h = 1e-6
+    fd = (loss(v1, s1, shared, s2, c, target + h) - loss(v1, s1, shared, s2, c, target - h)) / (2 * h)
+    np.testing.assert_allclose(float(grads[3]), float(fd), rtol=1e-6)
+
+
+def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
+    """Forward mode (the gradient dotted with the tangent) against central differences, and the
+    Hessian of the chunked sum against that of the plain sum."""
+    v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
+    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None), chunk=32)
+
+    def scaled(p, fn):
+        return fn(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2, c._replace(friction=c.friction * p[1]), 3.0)
+
+    def plain(*args):
+        return jnp.sum(jax.vmap(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None))(*args))
+
+    p = jnp.array([1.0, 0.9])
+    _, along = kit.cheap_jit(lambda p: jax.jvp(lambda q: scaled(q, loss), (p,), (jnp.array([1.0, 0.0]),)))(p)
+    h = 1e-6
+    fd = (scaled(p + jnp.array([h, 0.0]), plain) - scaled(p - jnp.array([h, 0.0]), plain)) / (2 * h)
+    np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
+    chunked = kit.cheap_jit(jax.hessian(lambda q: scaled(q, loss)))(p)
+    whole = kit.cheap_jit(jax.hessian(lambda q: scaled(q, plain)))(p)
+    np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-10)
+    assert abs(float(whole[0, 1])) > 1.0  # the two parameters interact
+
+
+def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:10])
+    with pytest.raises(ValueError, match=r"chunk = 0: chunk must be a positive number of rows"):
+        ks_jax.sum_over_rows(_evidence_row_loss, chunk=0)
+    with pytest.raises(ValueError, match=r"in_axes\[5\] = 1: each entry must be 0 \(batched\) or None"):
+        ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, 1))(*args, 3.0)
+    with pytest.raises(ValueError, match=r"in_axes = \(0, None\) has 2 entries for 6 arguments"):
+        ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, None))(*args, 3.0)
+    with pytest.raises(TypeError, match=r"fn returns shape \(3,\) per row; it must return a scalar"):
+        ks_jax.sum_over_rows(lambda *a: ks_jax.exchange(*a).vehicles[0].delta_v)(*args)
