@@ -30,7 +30,9 @@ that a change in the machine's load moves both sides of a ratio alike):
   alike) and, batch-first, through ``exchange`` (forward and gradient in chunks, with the
   whole-batch gradient / the chunked one, and the chunked gradient / ``jit(vmap(exchange))``
   computing every result, timed in the same rounds: a loss's forward computes only what the loss
-  reads, the delta-V one little more than the impulse); the first-call (compile) times;
+  reads, the delta-V one little more than the impulse), and, batch-first, the same losses built by
+  ``ks_jax.sum_over_rows`` (the same forward; the gradient each chunk's value and gradient in one
+  program), with the gradient through ``exchange`` / this one; the first-call (compile) times;
 - a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
 - in fresh processes, after everything above: the time and peak memory of a sweep of 10^8 points
   (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
@@ -256,11 +258,19 @@ def pycrash_rate(repeats):
     return statistics.median(runs), "pycrash.impc.impc_calcs (planar, scalar Python, prints redirected)"
 
 
-def batched_loss(row_loss, axis, chunked=False):
+def batched_loss(row_loss, axis, chunked=False, summed=False):
     """sum over valid rows of ``row_loss`` of the batch's results, as a function of (inputs, status):
     through ``exchange`` (``chunked``: its own status; on one CPU device its values and derivatives
     run in chunks), or through ``exchange_with_status`` (one whole-batch program, forward and
-    gradient alike)."""
+    gradient alike); ``summed``: built by ``ks_jax.sum_over_rows`` (batch-first; the forward is
+    that of ``chunked``, the gradient each chunk's value and gradient in one program)."""
+    if summed:
+        def row(*a):
+            r = exchange(*a)
+            return jnp.where(r.contact.status == 0, row_loss(r), 0.0)
+        total = ks_jax.sum_over_rows(row)
+        return lambda args, status: total(*args)
+
     def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
         if chunked:
             r = jax.vmap(exchange, in_axes=axis, out_axes=axis)(*args)
@@ -359,12 +369,13 @@ def main():
     # in_axes=0, how exchange_batch takes its inputs) and batch-last
     gfns, firsts, finite = {}, {}, {}
     for layout, data, axis, chunked in (("batch-first", first, 0, False), ("batch-last", last, -1, False),
-                                        ("exchange, batch-first", first, 0, True)):
+                                        ("exchange, batch-first", first, 0, True),
+                                        ("sum_over_rows, batch-first", first, 0, "summed")):
         floats = tuple(data[:5])
         st = jax.jit(jax.vmap(input_status, in_axes=axis, out_axes=axis))(*data)
         for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
             key = (name, layout)
-            loss = batched_loss(row_loss, axis, chunked)
+            loss = batched_loss(row_loss, axis, bool(chunked), summed=chunked == "summed")
             fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
             first_call(lambda: jax.block_until_ready(fwd(floats, st)))
             firsts[key] = first_call(lambda: jax.block_until_ready(grad(floats, st)))
@@ -433,6 +444,10 @@ def main():
                       f"{ratio(gt, (name, layout, 'gradient'), (name, 'batch-first', 'gradient')):.2f}; this "
                       f"gradient / jit(vmap(exchange)) batch-first, every result "
                       f"{ratio(gt, ('every result',), (name, layout, 'gradient')):.2f}")
+        if layout == "sum_over_rows, batch-first":  # the same loss, its gradient chunk by chunk
+            via = (name, "exchange, batch-first")
+            versus = (f"; the gradient through exchange / this gradient {ratio(gt, (name, layout, 'gradient'), via + ('gradient',)):.2f}"
+                      f"; this gradient / the forward through exchange {ratio(gt, via + ('forward',), (name, layout, 'gradient')):.2f}")
         print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
               f"first call {firstg:.2f} s{versus})")
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "

@@ -1,6 +1,7 @@
 """Memory of ``jax.jit(jax.vmap(ks_jax.exchange))`` over one batch, and of ``jax.value_and_grad`` of a
 batched loss: the chunked programs (``exchange``'s vmap rules) against the whole-batch programs
-(``exchange_with_status`` after ``input_status``). Not a test.
+(``exchange_with_status`` after ``input_status``), and the gradient of the same losses built by
+``ks_jax.sum_over_rows`` ("summed"). Not a test.
 
     .venv/bin/python benchmarks/bench_vmap_memory.py [--rows 1048576]
 
@@ -34,7 +35,8 @@ def measure(variant, n):
     del last
     chunked = variant.startswith("chunked")
     if " " in variant:  # "chunked delta-V", "whole residuals": value_and_grad of that loss
-        loss = batched_loss({"delta-V": delta_v, "residuals": residuals}[variant.split()[1]], 0, chunked)
+        loss = batched_loss({"delta-V": delta_v, "residuals": residuals}[variant.split()[1]], 0, chunked,
+                            summed=variant.startswith("summed"))
         status = jax.jit(jax.vmap(input_status))(*first)
         jitted, args = jax.jit(jax.value_and_grad(loss)), (tuple(first), status)
     else:
@@ -60,6 +62,7 @@ def main():
     print(f"jax.jit(jax.vmap(exchange)) and gradient memory, {args.rows} rows, batch-first, float64; "
           f"{datetime.datetime.now().astimezone().isoformat(timespec='seconds')}; jax {jax.__version__}")
     variants = [f"{kind} {loss}".strip() for loss in ("", "delta-V", "residuals") for kind in ("chunked", "whole")]
+    variants += ["summed delta-V", "summed residuals"]
     for variant in variants:  # each in its own process: the peak is a high-water mark
         subprocess.run([sys.executable, __file__, "--rows", str(args.rows), "--variant", variant], check=True)
 
