@@ -17,6 +17,9 @@ It is for values. To differentiate, vmap ``exchange``, whose own vmap rule runs 
 stages in a loop over chunks inside one program (``ks_jax.exchange``'s module docstring);
 ``exchange_batch`` differs in giving NumPy results (or writing into earlier ones, ``out=``) and in
 keeping no batch-sized XLA buffers.
+
+``sum_over_rows`` builds a batched loss that is a sum over rows, whose gradient takes each chunk's
+value and gradient in one program (its docstring).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from .exchange import CHUNK_ROWS, _fenced, prepare, results_stage, values_impulse_stage
+from .exchange import CHUNK_ROWS, _fenced, as_chunks, prepare, results_stage, values_impulse_stage
 from .types import Contact, ExchangeResult, State, Vehicle
 
 DEFAULT_CHUNK = CHUNK_ROWS  # rows per chunk, as in ``sweep`` and ``exchange``'s vmap rule
@@ -126,7 +129,6 @@ def _checked_out(target, result, n, inputs):
     return leaves
 
 
-
 def sum_over_rows(fn, in_axes=0, chunk: int = DEFAULT_CHUNK):
     """``lambda *args: jnp.sum(jax.vmap(fn, in_axes)(*args))``, whose derivatives are computed chunk by chunk.
 
@@ -138,7 +140,7 @@ def sum_over_rows(fn, in_axes=0, chunk: int = DEFAULT_CHUNK):
     again, then the transposed stages, storing the stages' intermediate values between them. Here
     each chunk of ``chunk`` rows gets its value and gradient in one program (``jax.value_and_grad``
     of the chunk's sum, its intermediate values staying in the cache), and reverse mode only scales
-    that gradient: 1.6-1.7x faster at 2^20 rows on the benchmark machine (benchmarks/RESULTS.md).
+    that gradient: 1.5-1.8x faster at 2^20 rows on the benchmark machine (benchmarks/RESULTS.md).
 
     in_axes: 0 (every argument batched along its leading axis), or one entry per positional
     argument, 0 or None (None: the same for every row, as an evidence target or a shared parameter
@@ -216,15 +218,10 @@ def _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk):
     def chunked(diff, fixed):
         count = -(-n // chunk)
 
-        def cut(x):  # (count, chunk, ...); the last chunk padded with copies of the last row
-            if count * chunk > n:
-                x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (count * chunk - n,) + x.shape[1:])])
-            return x.reshape((count, chunk) + x.shape[1:])
-
         d_batched = [b for b, w in zip(batched, wrt) if w]
         f_batched = [b for b, w in zip(batched, wrt) if not w]
-        d_rows = [cut(x) for x, b in zip(diff, d_batched) if b]
-        f_rows = [cut(x) for x, b in zip(fixed, f_batched) if b]
+        d_rows = [as_chunks(x, count, chunk) for x, b in zip(diff, d_batched) if b]
+        f_rows = [as_chunks(x, count, chunk) for x, b in zip(fixed, f_batched) if b]
         d_shared = [x for x, b in zip(diff, d_batched) if not b]
         f_shared = [x for x, b in zip(fixed, f_batched) if not b]
         keep = (jnp.arange(count * chunk) < n).reshape(count, chunk)

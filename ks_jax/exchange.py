@@ -475,12 +475,6 @@ def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
     leaves, treedef = jax.tree_util.tree_flatten((primals, tangents))
     batched = jax.tree_util.tree_leaves(in_batched)
 
-    def chunked(x):  # (count, size, ...)
-        pad = count * size - n
-        if pad:
-            x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
-        return x.reshape((count, size) + x.shape[1:])
-
     def body(i, rows_of_batched):
         fenced = functools.partial(_fenced, i >= 0)  # true, but not to XLA
         it = iter(rows_of_batched)
@@ -509,8 +503,17 @@ def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
 
         return i + 1, fenced(results_, rows, d_rows, stage, d_stage)
 
-    _, out = jax.lax.scan(jax.checkpoint(body), jnp.int32(0), [chunked(x) for x, b in zip(leaves, batched) if b])
+    _, out = jax.lax.scan(jax.checkpoint(body), jnp.int32(0), [as_chunks(x, count, size) for x, b in zip(leaves, batched) if b])
     return jax.tree_util.tree_map(lambda y: y.reshape((count * size,) + y.shape[2:])[:n], out)
+
+
+def as_chunks(x, count, size):
+    """The rows of ``x`` as (count, size, ...): ``count`` chunks of ``size`` rows, the last one padded
+    with copies of the last row."""
+    pad = count * size - x.shape[0]
+    if pad:
+        x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
+    return x.reshape((count, size) + x.shape[1:])
 
 
 def prepare(vehicle1, state1, vehicle2, state2, contact):
