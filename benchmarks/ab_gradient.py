@@ -2,15 +2,17 @@
 selected by module attributes read when a function is traced. Not a test.
 
     .venv/bin/python benchmarks/ab_gradient.py [--rows N] [--repeats R] [--loss delta-V|residuals|both] \
-        [--whole] MODULE.ATTR=VALUE [MODULE.ATTR=VALUE ...]
+        [--whole | --summed] MODULE.ATTR=VALUE [MODULE.ATTR=VALUE ...]
 
 Each argument is one variant: the attribute is set, then ``jax.value_and_grad`` of bench_kernel.py's
 batched loss (batch-first) is traced and compiled; ``--whole``: through ``exchange_with_status``, one
 whole-batch program, instead of ``exchange``. The forward (``jax.jit`` of the loss, traced with the
 attributes as they were at start) and every variant are then timed in rounds, one call each per round;
 the script prints the median time per row and the median over rounds of gradient / forward, and the
-largest relative difference of each variant's gradient from the first's. For variants that exist only
-as a patch (benchmarks/RESULTS.md says which), apply the patch first.
+largest relative difference of each variant's gradient from the first's. ``--summed`` adds, per loss,
+the gradient of the same loss built by ``ks_jax.sum_over_rows`` (divided by the same forward: the
+built loss's forward is the same computation through ``jax.vmap(exchange)``). For variants that exist
+only as a patch (benchmarks/RESULTS.md says which), apply the patch first.
 """
 
 from __future__ import annotations
@@ -48,8 +50,12 @@ def main():
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--loss", choices=("delta-V", "residuals", "both"), default="both")
     ap.add_argument("--whole", action="store_true", help="the whole-batch program (exchange_with_status)")
+    ap.add_argument("--summed", action="store_true",
+                    help="also the gradient of the same loss built by ks_jax.sum_over_rows (after the variants)")
     ap.add_argument("variants", nargs="+", metavar="MODULE.ATTR=VALUE")
     args = ap.parse_args()
+    if args.summed and args.whole:
+        ap.error("--summed compares with the path through jax.vmap(exchange); leave out --whole")
     n = args.rows
     _, last = bk.random_batch(n)
     first = bk.batch_first(last)
@@ -84,6 +90,17 @@ def main():
             print(f"{name:9s} {spec}: first call {compiled:.1f} s, largest relative difference from the first "
                   f"variant {diff:.1e}, finite {finite}", flush=True)
             calls[(name, spec)] = grad
+        if args.summed:  # the same loss, its gradient each chunk's value and gradient in one program
+            summed = bk.batched_loss(losses[name], 0, summed=True)
+            grad = jax.jit(jax.value_and_grad(lambda a, summed=summed: summed(a, None)))
+            start = time.perf_counter()
+            _, g = jax.block_until_ready(grad(first))
+            compiled = time.perf_counter() - start
+            diff = max(float(jnp.max(jnp.abs(a - b) / (1 + jnp.abs(b))))
+                       for a, b in zip(jax.tree_util.tree_leaves(g), reference))
+            print(f"{name:9s} sum_over_rows: first call {compiled:.1f} s, largest relative difference from the "
+                  f"first variant {diff:.1e}", flush=True)
+            calls[(name, "sum_over_rows")] = grad
     times = {k: [] for k in calls}
     for _ in range(args.repeats):
         for k, fn in calls.items():
