@@ -1,7 +1,7 @@
 """Gradient / forward when the batched loss is differentiated with respect to some inputs only (a
 measurement; the library is unchanged).
 
-    .venv/bin/python benchmarks/tried/gradient_subsets.py [--rows 1048576] [--repeats 5]
+    .venv/bin/python benchmarks/tried/gradient_subsets.py [--rows 1048576] [--repeats 5] [--summed]
 
 bench_kernel.py differentiates its two losses with respect to every input of every row, masses,
 inertias and box dimensions included. A reconstruction fits a few inputs per collision (speeds,
@@ -13,7 +13,9 @@ rounds, the forward of each loss through ``jax.vmap(exchange)`` (batch-first) an
 - the two states and the contact (no vehicle data);
 - the unknowns of a reconstruction: both velocities, yaws and angular velocities, the contact point,
   the normal, restitution and friction.
-It prints the median time per row and the median over rounds of gradient / forward.
+It prints the median time per row and the median over rounds of gradient / forward. ``--summed``: the
+gradients of the same losses built by ``ks_jax.sum_over_rows`` (divided by the same forward, through
+``jax.vmap(exchange)``: the built loss's forward is that computation).
 """
 
 from __future__ import annotations
@@ -63,20 +65,24 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rows", type=int, default=1 << 20)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--summed", action="store_true", help="gradients of the losses built by ks_jax.sum_over_rows")
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
     first = bk.batch_first(last)
-    print(f"jax.vmap(exchange), {n} rows, jax {jax.__version__}, {bk.cpu_model()}; {args.repeats} rounds")
+    path = "ks_jax.sum_over_rows" if args.summed else "jax.vmap(exchange)"
+    print(f"gradients through {path}, {n} rows, jax {jax.__version__}, {bk.cpu_model()}; {args.repeats} rounds")
     calls = {}
     for name, row_loss in (("delta-V", bk.delta_v), ("residuals", bk.residuals)):
         loss = bk.batched_loss(row_loss, 0, chunked=True)
         fwd = jax.jit(lambda a, loss=loss: loss(a, None))
         jax.block_until_ready(fwd(first))
         calls[(name, "forward")] = lambda fwd=fwd: jax.block_until_ready(fwd(first))
+        differentiated = bk.batched_loss(row_loss, 0, summed=True) if args.summed else loss
         for which in SUBSETS:
             part, rest = split(first, which)
-            grad = jax.jit(jax.value_and_grad(lambda p, r, loss=loss, which=which: loss(merge(p, r, which), None)))
+            grad = jax.jit(jax.value_and_grad(
+                lambda p, r, loss=differentiated, which=which: loss(merge(p, r, which), None)))
             seconds = bk.first_call(lambda grad=grad, part=part, rest=rest: jax.block_until_ready(grad(part, rest)))
             finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(grad(part, rest)[1]))
             print(f"{name:9s} {SUBSETS[which]}: first call {seconds:.1f} s, finite {finite}", flush=True)
