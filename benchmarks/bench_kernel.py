@@ -493,11 +493,12 @@ def print_targets(q, grads, memory, sharded, firsts):
         print(f"  gradient / forward <= 3, {name + ':':10} "
               + (f"built by sum_over_rows {verdict(built[2], 3, at_most=True)}; " if built else "")
               + (f"written over jax.vmap(exchange) {verdict(plain[2], 3, at_most=True)}" if plain else ""))
+    def compiles(layout):  # first calls of the two losses' gradients
+        return ", ".join(f"{grads[(name, layout)][3]:.2f}" for name in ("delta-V", "residuals") if (name, layout) in grads)
+
     print(f"  first calls (compile + run):   exchange_batch {firsts[0]:.2f} s, jit(vmap(exchange)) {firsts[1]:.2f} s; "
-          + "; ".join(f"gradients {label} " + ", ".join(f"{grads[(name, layout)][3]:.2f}" for name in ("delta-V", "residuals")
-                                                          if (name, layout) in grads) + " s"
-                      for label, layout in (("by sum_over_rows", "sum_over_rows, batch-first"),
-                                            ("over jax.vmap(exchange)", "exchange, batch-first"))))
+          f"gradients by sum_over_rows {compiles('sum_over_rows, batch-first')} s, "
+          f"over jax.vmap(exchange) {compiles('exchange, batch-first')} s")
     for line in memory:
         found = re.search(r"([0-9.e+]+) points, keep=(\w+): ([0-9.]+) s .*peak RSS ([0-9]+) MiB", line)
         if found:
