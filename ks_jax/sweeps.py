@@ -612,6 +612,15 @@ def _columns(axes, mode, lo, hi, outputs):
     return cols
 
 
+def _arrow_csv():
+    """pyarrow's csv module, or None without pyarrow (``ResultWriter`` then writes with ``csv``)."""
+    try:
+        import pyarrow.csv
+    except ImportError:
+        return None
+    return pyarrow.csv
+
+
 def _status_texts(codes):
     """The status text of each code (an object array sharing one string per distinct code)."""
     distinct, which = np.unique(codes, return_inverse=True)
@@ -623,7 +632,11 @@ class ResultWriter:
     pass ``writer.chunk`` as ``on_chunk`` (with ``keep=False``), then call ``close()`` (or ``abort()``
     on an error). Memory stays at a few chunks whatever the number of points (``ks-jax sweep``).
 
-    .csv: one row per point: the swept inputs (SI), the outputs, ``status``, ``status_text``.
+    .csv: one row per point: the swept inputs (SI), the outputs, ``status``, ``status_text``. Where
+    pyarrow is installed its CSV writer formats the numbers (shortest text that reads back as the same
+    float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"), writes booleans true / false and
+    quotes every text; without pyarrow the ``csv`` module writes it (1.0, 1e-05, True / False, texts
+    quoted only where they must be), several times slower: Python's float formatting is the cost.
     .parquet: the same columns (pyarrow), in row groups of about 2^18 points.
     .npz: one array per output in the result's shape, ``axis:<path>`` for the axes, the status codes
     and texts. Each array is appended to a temporary .npy file beside ``out``, chunk by chunk; ``close``
@@ -652,10 +665,11 @@ class ResultWriter:
         self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
         self._arrays, self._pending, self._written = {}, [], 0
-        # the swept values as the columns show them: in a .csv of a grid, each value's text (what the
-        # csv module writes for the Python float), formatted once instead of once per row
+        self._arrow_csv = _arrow_csv() if self.kind == ".csv" else None
+        # the swept values as the columns show them: in a .csv of a grid written by the csv module,
+        # each value's text (what it writes for the Python float), formatted once instead of once per row
         self._column_axes = self.axes
-        if self.kind == ".csv" and mode != "zip":
+        if self.kind == ".csv" and self._arrow_csv is None and mode != "zip":
             self._column_axes = {p: np.array([str(x) for x in np.asarray(v).tolist()], dtype=object)
                                  for p, v in self.axes.items()}
         self.seconds = self.chunk_seconds = 0.0  # spent writing: in all, and inside ``chunk``
@@ -689,11 +703,22 @@ class ResultWriter:
     def _csv_chunk(self, cols):
         import csv
 
+        if self._arrow_csv is not None:
+            return self._arrow_csv_chunk(cols)
         if self._file is None:
             self._file = self._partial.open("w", newline="")
             self._csv = csv.writer(self._file)
             self._csv.writerow(list(cols))
         self._csv.writerows(zip(*(c.tolist() for c in cols.values())))
+
+    def _arrow_csv_chunk(self, cols):
+        import pyarrow as pa
+
+        table = pa.table(cols)
+        if self._file is None:
+            options = self._arrow_csv.WriteOptions(quoting_style="needed")
+            self._file = self._arrow_csv.CSVWriter(str(self._partial), table.schema, write_options=options)
+        self._file.write_table(table)
 
     def _flush_parquet(self):
         import pyarrow as pa

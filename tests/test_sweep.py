@@ -235,14 +235,14 @@ def test_cli_writes_csv_and_npz(tmp_path, capsys):
     assert main(["sweep", *args, "--out", str(csv_path)]) == 0
     out = capsys.readouterr().out
     assert "20 points" in out and "ok: 15" in out and "invalid: contact.restitution" in out
-    lines = csv_path.read_text().splitlines()
-    assert lines[0].split(",") == ["vehicles[1].speed", "contact.restitution", "contact.impulse_magnitude",
+    lines = list(csv.reader(csv_path.read_text().splitlines()))
+    assert lines[0] == ["vehicles[1].speed", "contact.restitution", "contact.impulse_magnitude",
                                    "vehicles[0].delta_v_magnitude", "status", "status_text"]
     assert len(lines) == 21
     assert main(["sweep", *args, "--out", str(npz_path)]) == 0
     data = np.load(npz_path)
     assert data["contact.impulse_magnitude"].shape == (5, 4)
-    row = lines[1 + 4 * 2 + 1].split(",")  # speed index 2, restitution index 1
+    row = lines[1 + 4 * 2 + 1]  # speed index 2, restitution index 1
     np.testing.assert_allclose(float(row[2]), data["contact.impulse_magnitude"][2, 1], rtol=1e-15)
     np.testing.assert_allclose(data["axis:vehicles[1].speed"], np.linspace(10, 30, 5) * ks_jax.units.MPH)
 
@@ -256,8 +256,8 @@ def read_table(path):
         names, *rows = list(csv.reader(f))
 
     def column(values):
-        if values[0] in ("True", "False"):
-            return np.array([v == "True" for v in values])
+        if values[0].lower() in ("true", "false"):  # the csv module writes True, pyarrow true
+            return np.array([v.lower() == "true" for v in values])
         try:
             return np.array(values, dtype=float)
         except ValueError:
@@ -299,6 +299,38 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     np.testing.assert_array_equal(a["contact.restitution"], np.tile(np.linspace(0, 1.2, 13), 21))
     assert list(a["status_text"]) == [ks_jax.status_text(int(c)) for c in a["status"]]
     assert {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"} == set(a["status_text"])
+
+
+def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
+    """A .csv is written by pyarrow where it is installed, else by the csv module: the two files
+    differ in text (1 against 1.0, true against True, quoting) but read back to the sweep's values,
+    bit for bit, NaN of invalid rows included, in a grid and in zipped samples."""
+    pytest.importorskip("pyarrow")
+    import ks_jax.sweeps as sweeps_module
+
+    outs = ["contact.impulse_magnitude", "contact.sliding", "vehicles[0].pdof"]
+    case = ks_jax.load_case(SEED0)
+    rng = np.random.default_rng(3)
+    grid = sweep(case, {"contact.normal": np.linspace(0, 1.2, 9), "contact.friction": np.linspace(0.1, 0.6, 7)},
+                 outputs=outs)
+    zipped = sweep(case, {"vehicles[1].speed": rng.uniform(1, 40, 50), "contact.restitution": rng.uniform(0, 1.3, 50)},
+                   outputs=outs, mode="zip")
+    assert grid["contact.sliding"].any() and not grid["contact.sliding"].all()
+    assert np.isnan(zipped["contact.impulse_magnitude"]).any()  # restitution > 1: invalid rows
+    for name, result in (("grid", grid), ("zip", zipped)):
+        write_results(result, tmp_path / f"{name}_arrow.csv")
+        with monkeypatch.context() as m:
+            m.setattr(sweeps_module, "_arrow_csv", lambda: None)
+            write_results(result, tmp_path / f"{name}_csv.csv")
+        a, b = read_table(tmp_path / f"{name}_arrow.csv"), read_table(tmp_path / f"{name}_csv.csv")
+        assert (tmp_path / f"{name}_arrow.csv").read_text() != (tmp_path / f"{name}_csv.csv").read_text()
+        assert list(a) == list(b) == [*result.inputs(), *outs, "status", "status_text"]
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=f"{name}: {k}")
+        for p in outs:
+            np.testing.assert_array_equal(a[p], np.ravel(result[p]), err_msg=f"{name}: {p}")
+        for p, v in result.inputs().items():
+            np.testing.assert_array_equal(a[p], np.ravel(v), err_msg=f"{name}: {p}")
 
 
 def test_writer_errors_keep_other_files(tmp_path, capsys):
