@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.case import Case, CaseError, as_arrays
+from ks_jax.case import Case, CaseError
 from ks_jax.types import status_text
 
 from .problem import (

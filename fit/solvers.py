@@ -134,7 +134,6 @@ def levenberg_marquardt(fun, z0, data, max_iter: int = 100, z_min=None, z_max=No
 def _optax_rows(one_row, fun, z0, data, max_iter, z_min, z_max):
     """Run an unbatched optax loop per row (vmapped), then linearise once at the end."""
     gtol, _, ctol = tolerances(z0.dtype)
-    n = z0.shape[1]
     z_min = jnp.full(z0.shape, -jnp.inf, z0.dtype) if z_min is None else jnp.broadcast_to(z_min, z0.shape)
     z_max = jnp.full(z0.shape, jnp.inf, z0.dtype) if z_max is None else jnp.broadcast_to(z_max, z0.shape)
 

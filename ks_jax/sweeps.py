@@ -540,9 +540,9 @@ def parse_over(text):
         if len(parts) != 3:
             raise CaseError(f"--over {path}={spec}: expected {law}:{':'.join(names)}")
         a, b = q(parts[1]), q(parts[2])
-        for name, text_, value in zip(names, parts[1:], (a, b)):
+        for name, part, value in zip(names, parts[1:], (a, b)):
             if not math.isfinite(value):
-                raise CaseError(f"--over {path}: {name} = {text_.strip()!r} must be a finite number")
+                raise CaseError(f"--over {path}: {name} = {part.strip()!r} must be a finite number")
         if law == "uniform" and a > b:
             raise CaseError(f"--over {path}={spec}: LO must not exceed HI")
         if law == "normal" and b < 0:
@@ -556,9 +556,9 @@ def parse_over(text):
         if n < 1:
             raise CaseError(f"--over {path}: N = {n} must be at least 1")
         ends = q(parts[0]), q(parts[1])
-        for name, text, value in zip(("START", "STOP"), parts, ends):
+        for name, part, value in zip(("START", "STOP"), parts, ends):
             if not math.isfinite(value):
-                raise CaseError(f"--over {path}: {name} = {text.strip()!r} must be a finite number")
+                raise CaseError(f"--over {path}: {name} = {part.strip()!r} must be a finite number")
         return path, np.linspace(*ends, n)
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])

@@ -7,7 +7,6 @@ import copy
 import math
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
