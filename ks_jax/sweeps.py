@@ -634,7 +634,8 @@ class ResultWriter:
 
     .csv: one row per point: the swept inputs (SI), the outputs, ``status``, ``status_text``. Where
     pyarrow is installed its CSV writer formats the numbers (shortest text that reads back as the same
-    float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"), writes booleans true / false and
+    float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"; float32 results as float32, so
+    "0.1" where the csv module writes 0.10000000149011612), writes booleans true / false and
     quotes every text; without pyarrow the ``csv`` module writes it (1.0, 1e-05, True / False, texts
     quoted only where they must be), several times slower: Python's float formatting is the cost.
     .parquet: the same columns (pyarrow), in row groups of about 2^18 points.

@@ -304,7 +304,9 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
 def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
     """A .csv is written by pyarrow where it is installed, else by the csv module: the two files
     differ in text (1 against 1.0, true against True, quoting) but read back to the sweep's values,
-    bit for bit, NaN of invalid rows included, in a grid and in zipped samples."""
+    bit for bit, NaN of invalid rows included, in a grid and in zipped samples; float32 results read
+    back as float32 (pyarrow writes their shortest text, 0.1 for float32(0.1), the csv module the
+    float64 value's)."""
     pytest.importorskip("pyarrow")
     import ks_jax.sweeps as sweeps_module
 
@@ -315,9 +317,11 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
                  outputs=outs)
     zipped = sweep(case, {"vehicles[1].speed": rng.uniform(1, 40, 50), "contact.restitution": rng.uniform(0, 1.3, 50)},
                    outputs=outs, mode="zip")
+    narrow = sweep(case, {"vehicles[1].speed": np.linspace(2, 30, 11)}, outputs=outs, output_dtype=np.float32)
     assert grid["contact.sliding"].any() and not grid["contact.sliding"].all()
     assert np.isnan(zipped["contact.impulse_magnitude"]).any()  # restitution > 1: invalid rows
-    for name, result in (("grid", grid), ("zip", zipped)):
+    assert narrow["contact.impulse_magnitude"].dtype == np.float32
+    for name, result in (("grid", grid), ("zip", zipped), ("float32", narrow)):
         write_results(result, tmp_path / f"{name}_arrow.csv")
         with monkeypatch.context() as m:
             m.setattr(sweeps_module, "_arrow_csv", lambda: None)
@@ -325,6 +329,8 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
         a, b = read_table(tmp_path / f"{name}_arrow.csv"), read_table(tmp_path / f"{name}_csv.csv")
         assert (tmp_path / f"{name}_arrow.csv").read_text() != (tmp_path / f"{name}_csv.csv").read_text()
         assert list(a) == list(b) == [*result.inputs(), *outs, "status", "status_text"]
+        for p in outs:  # as the sweep stored them (float32 read as float32)
+            a[p], b[p] = (x[p].astype(result[p].dtype) for x in (a, b))
         for k in a:
             np.testing.assert_array_equal(a[k], b[k], err_msg=f"{name}: {k}")
         for p in outs:
