@@ -63,8 +63,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, set_input
-from .case import to_pytrees
+from . import units as U
+from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, output_kind
+from .case import set_input, to_pytrees
 from .exchange import CHUNK_ROWS
 from .types import STATUS_TEXT, status_text
 
@@ -495,6 +496,9 @@ def add_arguments(parser):
     parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
     parser.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")
+    parser.add_argument("--units", choices=("si", "us"), default="si",
+                        help="units of the file: si (default) or us (mph, ft, lbf s, ft lbf, deg, deg/s, lb; "
+                             "each column's unit in its name, e.g. 'vehicles[1].speed [mph]')")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--plot", metavar="PNG", help="also draw the outputs over the swept inputs (US units): a map "
                         "for two inputs, a line for one, histograms for --mode zip (matplotlib)")
@@ -612,6 +616,18 @@ def _columns(axes, mode, lo, hi, outputs):
     return cols
 
 
+def _in_units(path, values, kind, units):
+    """(name, values) of a column: as given in "si"; in "us", the values in the unit of
+    ``units.US_DISPLAY[kind]`` (floats only, their dtype kept) and the unit in the name."""
+    values = np.asarray(values)
+    if units == "si":
+        return path, values
+    scale, unit = U.US_DISPLAY[kind]
+    if scale != 1.0 and np.issubdtype(values.dtype, np.floating):
+        values = (values / scale).astype(values.dtype)
+    return (f"{path} [{unit}]" if unit else path), values
+
+
 def _arrow_csv():
     """pyarrow's csv module, or None without pyarrow (``ResultWriter`` then writes with ``csv``)."""
     try:
@@ -644,13 +660,18 @@ class ResultWriter:
     stores them in ``out`` (uncompressed, as ``np.savez``), so the disk briefly holds them twice.
     The file is written as ``.<name>.partial`` beside ``out`` and renamed to ``out`` by ``close``: a
     sweep that fails leaves an earlier ``out`` as it was.
+    ``units="us"``: every swept input and output in the units of ``units.US_DISPLAY`` (mph, ft, lbf s,
+    ft lbf, deg, deg/s, lb), its unit in its name ("vehicles[1].speed [mph]", in every format);
+    dimensionless ones, booleans and the status as they are. Default "si": SI, names as paths.
     """
 
     ROW_GROUP = 1 << 18
 
-    def __init__(self, out, axes, mode, shape, first=0):
+    def __init__(self, out, axes, mode, shape, first=0, units="si"):
         """axes: path -> the swept values (SI); shape: the result's shape; first: the flat index of
-        its first point (a sweep's ``index_range[0]``)."""
+        its first point (a sweep's ``index_range[0]``); units: "si" or "us" (the file's units)."""
+        if units not in ("si", "us"):
+            raise CaseError(f"units = {units!r}: the units of a results file must be 'si' or 'us'")
         self.out = Path(out)
         self.kind = self.out.suffix.lower()
         if self.kind not in (".csv", ".npz", ".parquet"):
@@ -661,7 +682,9 @@ class ResultWriter:
             except ImportError:
                 raise CaseError("parquet output needs pyarrow: pip install 'ks-jax[parquet]' "
                                 "(or write .csv / .npz)") from None
-        self.axes, self.mode, self.shape, self.first = dict(axes), mode, tuple(shape), int(first)
+        self.units, self.mode, self.shape, self.first = units, mode, tuple(shape), int(first)
+        # the swept values (and below, the outputs) as the file holds them, by the names it gives them
+        self.axes = dict(_in_units(p, v, input_kind(p), units) for p, v in axes.items())
         self.points = math.prod(self.shape)
         self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
@@ -688,6 +711,9 @@ class ResultWriter:
     def _chunk(self, lo, hi, chunk):
         if lo - self.first != self._written:
             raise CaseError(f"{self.out}: points {lo}..{hi - 1} arrived after {self._written} of {self.points}")
+        if self.units != "si":
+            chunk = dict((p, v) if p == "status" else _in_units(p, v, output_kind(p), self.units)
+                         for p, v in chunk.items())
         if self.kind == ".npz":
             self._npz_chunk(chunk)
         else:
@@ -802,11 +828,11 @@ class ResultWriter:
         self._partial.unlink(missing_ok=True)
 
 
-def write_results(result: SweepResult, out):
+def write_results(result: SweepResult, out, units="si"):
     """Write a kept sweep (``SweepResult``) to .csv (one row per point), .npz (arrays) or .parquet
-    (pyarrow), in the format of ``ks-jax sweep`` (``ResultWriter``)."""
+    (pyarrow), in the format of ``ks-jax sweep`` (``ResultWriter``); units: "si" or "us"."""
     lo, hi = result.index_range
-    writer = ResultWriter(out, result.axes, result.mode, result.shape, first=lo)
+    writer = ResultWriter(out, result.axes, result.mode, result.shape, first=lo, units=units)
     flat = {p: np.ravel(v) for p, v in result.outputs.items()}
     try:
         for a in range(0, hi - lo, DEFAULT_CHUNK):
@@ -835,7 +861,7 @@ def run(args) -> int:
     over, mode = draw_over([parse_over(t) for t in args.over], args.mode, args.samples, args.seed)
     shape = _shape({p: len(v) for p, v in over.items()}, mode)  # sweep's rule, checked before a file exists
     sample = _plot_sample(args.plot, over, mode, shape)  # checked before anything is solved
-    writer = ResultWriter(args.out, over, mode, shape)  # written chunk by chunk: memory stays bounded
+    writer = ResultWriter(args.out, over, mode, shape, units=args.units)  # chunk by chunk: memory stays bounded
 
     def on_chunk(lo, hi, chunk):
         writer.chunk(lo, hi, chunk)

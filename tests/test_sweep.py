@@ -339,6 +339,44 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
             np.testing.assert_array_equal(a[p], np.ravel(v), err_msg=f"{name}: {p}")
 
 
+def test_files_in_us_units(tmp_path, capsys):
+    """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
+    column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
+    1 lbf = 4.4482216152605 N, 1 ft = 0.3048 m); dimensionless columns, booleans, times in s and the
+    status unchanged, in .csv and .npz."""
+    mph, lbf, ft = 0.44704, 4.4482216152605, 0.3048
+    outs = {"contact.energy_loss": ("ft lbf", lbf * ft), "contact.impulse_magnitude": ("lbf s", lbf),
+            "vehicles[0].delta_v_magnitude": ("mph", mph), "vehicles[0].pdof": ("deg", 1.0),
+            "vehicles[1].yaw_rate_after": ("deg/s", np.pi / 180), "contact.time": ("s", 1.0),
+            "contact.sliding": (None, None)}
+    args = [str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:3", "--over", "contact.normal=0:40:3",
+            "--over", "contact.restitution=0.1,1.2", *sum((["--output", o] for o in outs), []), "--no-progress"]
+    for units, suffix in (("si", ".csv"), ("us", ".csv"), ("si", ".npz"), ("us", ".npz")):
+        assert main(["sweep", *args, "--units", units, "--out", str(tmp_path / f"{units}{suffix}")]) == 0
+    capsys.readouterr()
+    si, us = read_table(tmp_path / "si.csv"), read_table(tmp_path / "us.csv")
+    si_npz, us_npz = np.load(tmp_path / "si.npz"), np.load(tmp_path / "us.npz")
+    assert list(us)[:3] == ["vehicles[1].speed [mph]", "contact.normal [deg]", "contact.restitution"]
+    np.testing.assert_allclose(us["vehicles[1].speed [mph]"], np.repeat([10.0, 20.0, 30.0], 6), rtol=1e-14)
+    np.testing.assert_allclose(us["contact.normal [deg]"], np.tile(np.repeat([0.0, 20.0, 40.0], 2), 3), atol=1e-12)
+    np.testing.assert_allclose(us_npz["axis:vehicles[1].speed [mph]"], [10.0, 20.0, 30.0], rtol=1e-14)
+    for p, (unit, scale) in outs.items():
+        name = p if unit is None else f"{p} [{unit}]"
+        if unit is None:
+            np.testing.assert_array_equal(us[name], si[p])
+            np.testing.assert_array_equal(us_npz[name], si_npz[p])
+            continue
+        assert np.isnan(si[p]).sum() == 9 and np.isnan(us[name]).sum() == 9  # restitution 1.2: invalid rows
+        np.testing.assert_allclose(us[name], si[p] / scale, rtol=1e-13, atol=1e-12, err_msg=p)
+        np.testing.assert_allclose(us_npz[name], si_npz[p] / scale, rtol=1e-13, atol=1e-12, err_msg=p)
+    for k in ("status", "status_text"):
+        np.testing.assert_array_equal(us[k], si[k])
+    kept = sweep(ks_jax.load_case(SEED1), {"vehicles[1].speed": np.array([5.0])})
+    with pytest.raises(CaseError, match="units = 'imperial': the units of a results file must be 'si' or 'us'"):
+        write_results(kept, tmp_path / "x.csv", units="imperial")
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_writer_errors_keep_other_files(tmp_path, capsys):
     """A sweep that fails leaves no file of its own and an earlier file as it was, even after some
     chunks were written; a writer refuses chunks out of order and an incomplete file."""
