@@ -648,7 +648,7 @@ class ResultWriter:
     pass ``writer.chunk`` as ``on_chunk`` (with ``keep=False``), then call ``close()`` (or ``abort()``
     on an error). Memory stays at a few chunks whatever the number of points (``ks-jax sweep``).
 
-    .csv: one row per point: the swept inputs (SI), the outputs, ``status``, ``status_text``. Where
+    .csv: one row per point: the swept inputs, the outputs, ``status``, ``status_text``. Where
     pyarrow is installed its CSV writer formats the numbers (shortest text that reads back as the same
     float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"; float32 results as float32, so
     "0.1" where the csv module writes 0.10000000149011612), writes booleans true / false and
