@@ -628,6 +628,9 @@ def _in_units(path, values, kind, units):
     return (f"{path} [{unit}]" if unit else path), values
 
 
+CSV_HINT_POINTS = 100_000  # from this many points, ``ks-jax sweep`` without pyarrow suggests it for a .csv
+
+
 def _arrow_csv():
     """pyarrow's csv module, or None without pyarrow (``ResultWriter`` then writes with ``csv``)."""
     try:
@@ -883,6 +886,9 @@ def run(args) -> int:
     if args.samples is not None:
         print(f"  random values: {args.samples} per path, seed {args.seed}")
     print(f"  written to {args.out} in {writer.seconds:.3g} s ({time.perf_counter() - t:.3g} s in all)")
+    if writer.kind == ".csv" and writer._arrow_csv is None and writer.points >= CSV_HINT_POINTS:
+        print("  (a large .csv is written several times faster with pyarrow installed: "
+              "pip install 'ks-jax[parquet]'; or write .npz / .parquet)")
     if sample is not None:
         from .plot import save_sweep_view
 

@@ -339,6 +339,29 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
             np.testing.assert_array_equal(a[p], np.ravel(v), err_msg=f"{name}: {p}")
 
 
+def test_large_csv_without_pyarrow_suggests_it(tmp_path, capsys, monkeypatch):
+    """Without pyarrow a large .csv is written by the csv module, and the command says how to write it
+    faster; the file holds every point either way."""
+    pytest.importorskip("pyarrow")
+    import ks_jax.sweeps as sweeps_module
+
+    hint = "written several times faster with pyarrow installed"
+    monkeypatch.setattr(sweeps_module, "CSV_HINT_POINTS", 40)
+    args = ["sweep", str(SEED0), "--over", "vehicles[1].speed=2:30:8", "--over", "contact.friction=0:1:5",
+            "--output", "contact.impulse_magnitude", "--no-progress"]
+    assert main([*args, "--out", str(tmp_path / "a.csv")]) == 0
+    assert hint not in capsys.readouterr().out  # pyarrow wrote it
+    monkeypatch.setattr(sweeps_module, "_arrow_csv", lambda: None)
+    assert main([*args, "--out", str(tmp_path / "b.csv")]) == 0
+    assert hint in capsys.readouterr().out
+    monkeypatch.setattr(sweeps_module, "CSV_HINT_POINTS", 41)
+    assert main([*args, "--out", str(tmp_path / "c.csv")]) == 0
+    assert hint not in capsys.readouterr().out  # fewer points than the threshold
+    assert len(read_table(tmp_path / "b.csv")["status"]) == 40
+    np.testing.assert_array_equal(read_table(tmp_path / "a.csv")["contact.impulse_magnitude"],
+                                  read_table(tmp_path / "b.csv")["contact.impulse_magnitude"])
+
+
 def test_files_in_us_units(tmp_path, capsys):
     """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
     column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
