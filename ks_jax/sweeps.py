@@ -122,9 +122,14 @@ class SweepResult(Mapping):
         """path -> the input value (SI) at every point, flat (in the order of the outputs)."""
         return _grid_inputs(self.axes, self.mode, *self.index_range)
 
-    def table(self):
-        """Flat columns (one row per point): the inputs, the outputs, the status code."""
-        return _columns(self.axes, self.mode, *self.index_range, self.outputs)
+    def table(self, units="si"):
+        """Flat columns (one row per point): the inputs, the outputs, the status code, as a .csv of
+        ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame).
+        units: "si", or "us" (mph, ft, lbf s, ft lbf, deg, deg/s, lb; the unit in each name)."""
+        if units not in ("si", "us"):
+            raise ValueError(f"units = {units!r}: units must be 'si' or 'us'")
+        return _columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
+                        _outputs_in_units(self.outputs, units))
 
     def thinned(self, limit=None):
         """This result with at most ``limit`` values along each axis (default: ``PLOT_LIMITS``,
@@ -628,6 +633,16 @@ def _in_units(path, values, kind, units):
     return (f"{path} [{unit}]" if unit else path), values
 
 
+def _axes_in_units(axes, units):
+    """{name: values} of the swept inputs ``axes`` (path -> values) by ``_in_units``."""
+    return dict(_in_units(p, v, input_kind(p), units) for p, v in axes.items())
+
+
+def _outputs_in_units(outputs, units):
+    """{name: values} of ``outputs`` (path -> values, "status" among them) by ``_in_units``."""
+    return dict((p, v) if p == "status" else _in_units(p, v, output_kind(p), units) for p, v in outputs.items())
+
+
 CSV_HINT_POINTS = 100_000  # from this many points, ``ks-jax sweep`` without pyarrow suggests it for a .csv
 
 
@@ -687,7 +702,7 @@ class ResultWriter:
                                 "(or write .csv / .npz)") from None
         self.units, self.mode, self.shape, self.first = units, mode, tuple(shape), int(first)
         # the swept values (and below, the outputs) as the file holds them, by the names it gives them
-        self.axes = dict(_in_units(p, v, input_kind(p), units) for p, v in axes.items())
+        self.axes = _axes_in_units(axes, units)
         self.points = math.prod(self.shape)
         self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
@@ -715,8 +730,7 @@ class ResultWriter:
         if lo - self.first != self._written:
             raise CaseError(f"{self.out}: points {lo}..{hi - 1} arrived after {self._written} of {self.points}")
         if self.units != "si":
-            chunk = dict((p, v) if p == "status" else _in_units(p, v, output_kind(p), self.units)
-                         for p, v in chunk.items())
+            chunk = _outputs_in_units(chunk, self.units)
         if self.kind == ".npz":
             self._npz_chunk(chunk)
         else:

@@ -366,7 +366,7 @@ def test_files_in_us_units(tmp_path, capsys):
     """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
     column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
     1 lbf = 4.4482216152605 N, 1 ft = 0.3048 m); dimensionless columns, booleans, times in s and the
-    status unchanged, in .csv and .npz."""
+    status unchanged, in .csv and .npz, and in ``SweepResult.table``."""
     mph, lbf, ft = 0.44704, 4.4482216152605, 0.3048
     outs = {"contact.energy_loss": ("ft lbf", lbf * ft), "contact.impulse_magnitude": ("lbf s", lbf),
             "vehicles[0].delta_v_magnitude": ("mph", mph), "vehicles[0].pdof": ("deg", 1.0),
@@ -394,10 +394,20 @@ def test_files_in_us_units(tmp_path, capsys):
         np.testing.assert_allclose(us_npz[name], si_npz[p] / scale, rtol=1e-13, atol=1e-12, err_msg=p)
     for k in ("status", "status_text"):
         np.testing.assert_array_equal(us[k], si[k])
-    kept = sweep(ks_jax.load_case(SEED1), {"vehicles[1].speed": np.array([5.0])})
+    # the same columns from a kept sweep, in memory (SweepResult.table)
+    kept = sweep(ks_jax.load_case(SEED1), {"vehicles[1].speed": np.array([10, 20, 30]) * mph,
+                                           "contact.normal": np.radians([0, 20, 40]),
+                                           "contact.restitution": np.array([0.1, 1.2])}, outputs=list(outs))
+    table_si, table_us = kept.table(), kept.table(units="us")
+    assert set(table_us) == set(us) - {"status_text"} and set(table_si) == set(si) - {"status_text"}
+    for table, file in ((table_us, us), (table_si, si)):
+        for k in table:
+            np.testing.assert_allclose(table[k], file[k], rtol=1e-13, atol=1e-12, err_msg=k)
     with pytest.raises(CaseError, match="units = 'imperial': the units of a results file must be 'si' or 'us'"):
         write_results(kept, tmp_path / "x.csv", units="imperial")
     assert not (tmp_path / "x.csv").exists()
+    with pytest.raises(ValueError, match="units = 'metric': units must be 'si' or 'us'"):
+        kept.table(units="metric")
 
 
 def test_writer_errors_keep_other_files(tmp_path, capsys):
