@@ -126,8 +126,7 @@ class SweepResult(Mapping):
         """Flat columns (one row per point): the inputs, the outputs, the status code, as a .csv of
         ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame).
         units: "si", or "us" (mph, ft, lbf s, ft lbf, deg, deg/s, lb; the unit in each name)."""
-        if units not in ("si", "us"):
-            raise ValueError(f"units = {units!r}: units must be 'si' or 'us'")
+        _check_units(units, "units")
         return _columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
                         _outputs_in_units(self.outputs, units))
 
@@ -621,6 +620,11 @@ def _columns(axes, mode, lo, hi, outputs):
     return cols
 
 
+def _check_units(units, what):
+    if units not in ("si", "us"):
+        raise CaseError(f"units = {units!r}: {what} must be 'si' or 'us'")
+
+
 def _in_units(path, values, kind, units):
     """(name, values) of a column: as given in "si"; in "us", the values in the unit of
     ``units.US_DISPLAY[kind]`` (floats only, their dtype kept) and the unit in the name."""
@@ -688,8 +692,7 @@ class ResultWriter:
     def __init__(self, out, axes, mode, shape, first=0, units="si"):
         """axes: path -> the swept values (SI); shape: the result's shape; first: the flat index of
         its first point (a sweep's ``index_range[0]``); units: "si" or "us" (the file's units)."""
-        if units not in ("si", "us"):
-            raise CaseError(f"units = {units!r}: the units of a results file must be 'si' or 'us'")
+        _check_units(units, "the units of a results file")
         self.out = Path(out)
         self.kind = self.out.suffix.lower()
         if self.kind not in (".csv", ".npz", ".parquet"):
