@@ -33,10 +33,14 @@ Choices where MODEL.md is silent
   middle of the touching features (the contact manifold along the axis of least penetration),
   which is the limit of the area centroid as penetration_time -> 0.
 - Normal: perpendicular to the line through the two points where the outlines cross,
-  horizontal, oriented like the axis of least penetration (from vehicle 2 into vehicle 1),
-  then tilted up by ``normal_pitch``: n = (cos p n_x, cos p n_y, sin p). Where the outlines do
-  not cross in exactly two well-separated points (collinear edges, containment, a degenerate
-  overlap) n is the axis of least penetration.
+  horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where CG 1 lies
+  relative to CG 2 (n . (x_1 - x_2) > 0; the axis of least penetration decides only if that
+  product is exactly 0), then tilted up by ``normal_pitch``: n = (cos p n_x, cos p n_y, sin p).
+  The axis of least penetration would not do for the sign: once a penetration is deeper than
+  the overlap is wide, that axis turns across the line, and its sign no longer says which way
+  vehicle 1 lies (an inline rear-end came out "separating"). Where the outlines do not cross in
+  exactly two well-separated points (collinear edges, containment, a degenerate overlap) n is
+  the axis of least penetration.
 - Never touching within the horizon: status "no_contact" and no NaN anywhere: zero impulse,
   zero delta-V, velocity_after = velocity, crush and EES 0, ``time`` = HORIZON, point the
   midpoint of the CGs and normal the horizontal direction from CG 2 to CG 1, both at t = 0.
@@ -339,7 +343,9 @@ def contact_geometry(vehicle1, state1, vehicle2, state2) -> Contact2D:
     chord_len = la.safe_norm(chord)
     crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(area_tol))
     n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
-    n_line = jnp.where(n_line @ n_sat < 0, -n_line, n_line)
+    toward1 = state1.position[:2] - state2.position[:2]  # CG 2 -> CG 1
+    side = jnp.where(n_line @ toward1 != 0, n_line @ toward1, n_line @ n_sat)
+    n_line = jnp.where(side < 0, -n_line, n_line)
     n2 = jnp.where(crossing_ok, n_line, n_sat)
 
     bottom = jnp.maximum(state1.position[2] - vehicle1.cg_height, state2.position[2] - vehicle2.cg_height)

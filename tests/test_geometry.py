@@ -150,6 +150,7 @@ CASES = {
     "seed0": SEED0,
     "seed1": SEED1,
     "pitched": (V1, st(10.0, 0.0, 0, 5.0), V2, st(0.0, 0.0, 0, 15.0), con(0.03), math.radians(10.0)),
+    "deep_rear": (V1, st(10.0, 0.0, 0, 5.0), V2, st(0.0, 0.0, 0, 15.0), con(0.3), 0.0),
 }
 
 
@@ -200,6 +201,19 @@ def test_aligned_rear_impact(res):
     np.testing.assert_allclose([v.crush for v in r.vehicles], [0.15, 0.15], atol=LEN_TOL)
     assert [float(v.pdof_clock) for v in r.vehicles] == [6.0, 12.0]
     assert_same_exchange(r, second_formulation(CASES["rear"], 0.52, [10.25, 0.0, 0.7], [1.0, 0.0, 0.0]))
+
+
+def test_penetration_deeper_than_the_overlap_is_wide(res):
+    """The rear impact above with 0.3 s of penetration: 3 m deep, 1.8 m wide, so the axis of least
+    penetration is lateral; the normal must still point from vehicle 2 into vehicle 1 (+x)."""
+    r = res["deep_rear"]
+    assert r.contact.status == OK
+    # at 0.79 s: rear of 1 at 10 + 3.95 - 2.5 = 11.45, front of 2 at 2.6 + 11.85 = 14.45
+    np.testing.assert_allclose(r.contact.point, [12.95, 0.0, 0.7], atol=LEN_TOL)
+    np.testing.assert_allclose(r.contact.normal, [1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose([v.crush for v in r.vehicles], [1.5, 1.5], atol=LEN_TOL)
+    assert [float(v.pdof_clock) for v in r.vehicles] == [6.0, 12.0]
+    assert_same_exchange(r, second_formulation(CASES["deep_rear"], 0.79, [12.95, 0.0, 0.7], [1.0, 0.0, 0.0]))
 
 
 def test_normal_pitch_tilts_the_automatic_normal(res):
