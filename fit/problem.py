@@ -36,6 +36,7 @@ from ks_jax.case import (
     CaseError,
     PathError,
     check_output_path,
+    course_ties,
     get_input,
     get_output,
     input_kind,
@@ -295,16 +296,9 @@ def parse_evidence(case: Case, spec) -> list[Evidence]:
 def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) -> Problem:
     if not case.valid:
         raise CaseError(case.error)
-    ties = []
-    for i, u in enumerate(unknowns):
-        group, vi, field, _ = parse_path(u.path)
-        if group == "vehicles" and field == "yaw":
-            raw = case.raw.get("vehicles", [{}, {}])[vi] if isinstance(case.raw, dict) else {}
-            if "course" not in raw and "velocity" not in raw and not any(x.path == f"vehicles[{vi}].course"
-                                                                         for x in unknowns):
-                ties.append((i, f"vehicles[{vi}].course"))
+    ties = course_ties(case, [u.path for u in unknowns])
     ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
-    return Problem(tuple(u.path for u in unknowns), tuple(ties), ev, bool(case.auto_point), bool(case.auto_normal))
+    return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal))
 
 
 # ---------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import linalg as la
 from . import units as U
-from .types import Contact, State, Vehicle, normal_from_angles
+from .types import INVALID_SPEED_1, INVALID_SPEED_2, OK, Contact, State, Vehicle, normal_from_angles
 
 
 class CaseError(ValueError):
@@ -471,6 +471,35 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
         vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))
         return inputs._replace(vehicles=vehicles)
     return inputs._replace(contact=holder)
+
+
+def speed_status(inputs: CaseInputs):
+    """() int32: INVALID_SPEED_1 (2) where vehicle 1's (2's) ``speed`` is negative, else OK.
+
+    A case file refuses a negative speed; a swept, sampled or fitted one can reach it, and
+    ``to_pytrees`` would turn it into travel backwards along the course. ``solve_inputs`` and the
+    sweeps give such a row this status and NaN results instead (traceable, per row)."""
+    s1, s2 = inputs.vehicles[0].speed, inputs.vehicles[1].speed
+    return jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(s2 < 0, INVALID_SPEED_2, OK)).astype(jnp.int32)
+
+
+def course_ties(case: "Case", paths) -> tuple:
+    """((k, "vehicles[i].course"), ...): the course that follows ``paths[k]`` = ``vehicles[i].yaw``
+    when the inputs at ``paths`` are varied (a sweep, a fit). MODEL.md section 2: a vehicle's course
+    defaults to its yaw, so where the case gives neither ``course`` nor ``velocity`` for vehicle i
+    and ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its travel too, as
+    re-solving the case file with another yaw would."""
+    paths = list(paths)
+    ties = []
+    for k, path in enumerate(paths):
+        group, vi, name, _ = parse_path(path)
+        if group != "vehicles" or name != "yaw":
+            continue
+        vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
+        raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) and isinstance(vehicles[vi], dict) else {}
+        if "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths:
+            ties.append((k, f"vehicles[{vi}].course"))
+    return tuple(ties)
 
 
 def check_output_path(path: str):

@@ -6,11 +6,13 @@ from dataclasses import dataclass
 from functools import partial
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .case import Case, CaseInputs, as_arrays, to_pytrees
+from .case import Case, CaseInputs, as_arrays, speed_status, to_pytrees
+from .derived import mask_invalid
 from .exchange import exchange
-from .types import ExchangeResult, status_text
+from .types import INVALID_NONFINITE, OK, ExchangeResult, status_text
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
@@ -19,14 +21,28 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
 
     ``auto_point``/``auto_normal`` (static) select automatic contact (MODEL.md section 5) for
     the centroid and/or the normal; otherwise the exchange is at the case state.
+    A negative ``speed`` (reachable by ``set_input``, a sweep or a fit, never by a case file) gives
+    status INVALID_SPEED_1/2 and NaN results (``case.speed_status``), unless the exchange found
+    another invalid input first.
     """
     v1, s1, v2, s2, contact = to_pytrees(inputs)
     if auto_point or auto_normal:
         from .geometry import automatic_exchange
 
-        return automatic_exchange(v1, s1, v2, s2, contact, inputs.contact.normal_pitch,
-                                  auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
-    return exchange(v1, s1, v2, s2, contact, smoothing)
+        result = automatic_exchange(v1, s1, v2, s2, contact, inputs.contact.normal_pitch,
+                                    auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
+    else:
+        result = exchange(v1, s1, v2, s2, contact, smoothing)
+    return with_speed_status(result, speed_status(inputs))
+
+
+def with_speed_status(result: ExchangeResult, code) -> ExchangeResult:
+    """``result`` with status ``code`` and NaN results where ``code`` (``case.speed_status``) is not
+    OK and the result's own status is not already invalid."""
+    status = result.contact.status
+    bad = (code != OK) & (status < INVALID_NONFINITE)
+    result = mask_invalid(result, ~bad)
+    return result._replace(contact=result.contact._replace(status=jnp.where(bad, code, status).astype(status.dtype)))
 
 
 @partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))

@@ -65,9 +65,9 @@ import numpy as np
 
 from . import units as U
 from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, output_kind
-from .case import set_input, to_pytrees
+from .case import course_ties, set_input, speed_status, to_pytrees
 from .exchange import CHUNK_ROWS
-from .types import STATUS_TEXT, status_text
+from .types import OK, STATUS_TEXT, status_text
 
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
@@ -226,10 +226,14 @@ class SweepSample:
 # the jitted chunk
 
 
-def _row_inputs(base, paths, values):
+def _row_inputs(base, paths, values, ties=()):
+    """``base`` with ``values`` at ``paths``, and at each tied path (``case.course_ties``) the value of
+    the path it follows."""
     inputs = base
     for p, v in zip(paths, values):
         inputs = set_input(inputs, p, v)
+    for k, p in ties:
+        inputs = set_input(inputs, p, values[k])
     return inputs
 
 
@@ -248,14 +252,15 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 
 @lru_cache(maxsize=32)
-def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
+def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
     """(status_fn, impulse_fn, solve_fn): jitted, sharded over ``devices`` along the row axis.
 
     Three calls per chunk for an explicit contact: the status and angle sines/cosines
     (``exchange.prepare``), the impulse (``exchange.impulse_stage``), then the results
     (``exchange.results_stage``). Each call's outputs are stored once per row; in one program
     XLA's CPU fusion would re-derive them inside every loop that reads them (2x slower here).
-    The first call also returns the chunk's swept values, which the other two read.
+    The first call also returns the chunk's swept values, which the other two read, and adds a
+    negative speed to the status (``case.speed_status``).
     """
     from .exchange import impulse_stage, prepare, results_stage
     from .solve import solve_inputs
@@ -273,20 +278,25 @@ def _compiled(paths, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoo
         vals = values(start, axes, total)
         if split:
             return vals, (jnp.zeros(n_rows, jnp.int32), None)
-        return vals, jax.vmap(lambda *v: prepare(*to_pytrees(_row_inputs(base, paths, v))))(*vals)
+        def one(*v):
+            inputs = _row_inputs(base, paths, v, ties)
+            status, trig = prepare(*to_pytrees(inputs))
+            return jnp.where(status == OK, speed_status(inputs), status), trig
+
+        return vals, jax.vmap(one)(*vals)
 
     def impulse_fn(base, vals, prepared):
         if split:
             return None
         status, trig = prepared
-        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v)), smoothing, st, tr,
+        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v, ties)), smoothing, st, tr,
                                                          for_gradients=False))(status, trig, *vals)
 
     def solve_fn(base, vals, prepared, stage):
         status, _ = prepared
 
         def one(st, stg, *v):
-            inputs = _row_inputs(base, paths, v)
+            inputs = _row_inputs(base, paths, v, ties)
             if split:
                 res = solve_inputs(inputs, auto_point, auto_normal, smoothing)
             else:
@@ -391,13 +401,21 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         raise CaseError("sweep needs at least one input path to vary: over={path: values}")
     paths = tuple(over)
     for p in paths:
-        _input_leaf(p)  # raises PathError (a CaseError) naming the path
+        _, _, name, _ = _input_leaf(p)  # raises PathError (a CaseError) naming the path
+        if name == "point" and case.auto_point or name == "normal" and case.auto_normal:
+            raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
+                            f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
+                            "to vary it")
     axes = {p: _check_values(p, over[p]) for p in paths}
     outputs = tuple(DEFAULT_OUTPUTS if outputs is None else outputs)
     for p in outputs:
         if p != "status":
             check_output_path(p)
     outputs = tuple(dict.fromkeys(p for p in outputs if p != "status"))
+    for p in outputs:
+        if p in axes:
+            raise CaseError(f"output '{p}' is also a swept input: its values are the input's column already "
+                            "(leave it out of the outputs)")
     if not 0.0 <= float(smoothing) < 1.0:
         raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     sizes = tuple(len(a) for a in axes.values())
@@ -418,8 +436,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     base = as_arrays(case.inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
-    status_jit, impulse_jit, solve_jit = _compiled(paths, outputs, mode, sizes, n_rows, case.auto_point, case.auto_normal,
-                                      float(smoothing), out_dtype, devices)
+    status_jit, impulse_jit, solve_jit = _compiled(paths, course_ties(case, paths), outputs, mode, sizes, n_rows,
+                                                   case.auto_point, case.auto_normal, float(smoothing), out_dtype,
+                                                   devices)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")

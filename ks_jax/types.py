@@ -209,6 +209,8 @@ INVALID_RESTITUTION = 17
 INVALID_FRICTION = 18
 INVALID_NORMAL = 19
 INVALID_PENETRATION_TIME = 20
+INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see ``case.speed_status``
+INVALID_SPEED_2 = 22
 
 STATUS_TEXT = {
     OK: "ok",
@@ -225,6 +227,8 @@ STATUS_TEXT = {
     INVALID_FRICTION: "invalid: contact.friction must be >= 0",
     INVALID_NORMAL: "invalid: contact.normal must be a non-zero vector",
     INVALID_PENETRATION_TIME: "invalid: contact.penetration_time must be >= 0",
+    INVALID_SPEED_1: "invalid: vehicles[0].speed must be >= 0 (reverse the course for backwards travel)",
+    INVALID_SPEED_2: "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)",
 }
 
 

@@ -38,8 +38,13 @@ def single(case, point, path):
     inputs = case.inputs
     for p, v in point.items():
         inputs = set_input(inputs, p, v)
-    res = ks_jax.solve_inputs(as_arrays(inputs), case.auto_point, case.auto_normal)
+        if p.endswith(".yaw"):  # the seed cases give no course: it follows the yaw (MODEL.md section 2)
+            inputs = set_input(inputs, p.replace(".yaw", ".course"), v)
+    res = _SOLVE(as_arrays(inputs), case.auto_point, case.auto_normal)
     return np.asarray(get_output(res, path)), int(res.contact.status)
+
+
+_SOLVE = jax.jit(ks_jax.solve_inputs, static_argnums=(1, 2))  # one compile per contact mode
 
 
 def assert_matches(result, case, points):
@@ -49,7 +54,7 @@ def assert_matches(result, case, points):
             want, status = single(case, point, path)
             got = result[path][index]
             assert result["status"][index] == status
-            if status != 0 and path != "contact.sliding":
+            if status >= 10 and path != "contact.sliding":  # invalid: NaN; separating: numbers
                 assert np.isnan(got), (path, index)
             else:
                 np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-9, err_msg=f"{path} at {point}")
@@ -127,6 +132,59 @@ def test_bad_rows_get_their_status_others_match(case):
     assert not r["contact.sliding"][bad].any()
     assert r.status_counts["invalid: contact.restitution must be in [-1, 1]"] == bad.sum()
     assert_matches(r, case, [(k, {"contact.restitution": eps[k]}) for k in range(len(eps))])
+
+
+def test_negative_speeds_get_their_status_others_match(case):
+    """A case file refuses a negative speed; a sampled one gets the status, NaN results, and the other
+    rows are solved. (An automatic-contact sweep solves its rows by ``solve_inputs``, checked last.)"""
+    speeds = np.array([-3.0, 0.0, 4.0, -0.5, 9.0])
+    r = sweep(case, {"vehicles[1].speed": speeds}, outputs=OUTPUTS, chunk_size=2)
+    bad = speeds < 0
+    assert np.all(r["status"][bad] == ks_jax.types.INVALID_SPEED_2)
+    assert np.all(np.isnan(r["contact.impulse_magnitude"][bad])) and not r["contact.sliding"][bad].any()
+    assert r.status_counts["invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)"] == 2
+    assert np.all(np.isfinite(r["contact.impulse_magnitude"][~bad]))
+    assert_matches(r, case, [(k, {"vehicles[1].speed": speeds[k]}) for k in np.flatnonzero(~bad)])
+    r = sweep(case, {"vehicles[0].speed": [-1.0], "vehicles[1].speed": [-1.0]})
+    assert r["status"][0, 0] == ks_jax.types.INVALID_SPEED_1  # the first vehicle's reason first
+    res = ks_jax.solve_inputs(as_arrays(set_input(case.inputs, "vehicles[1].speed", -1.0)))
+    assert int(res.contact.status) == ks_jax.types.INVALID_SPEED_2
+    assert all(np.isnan(x).all() for x in jax.tree_util.tree_leaves(res) if np.asarray(x).dtype.kind == "f")
+    inputs = set_input(case.inputs, "vehicles[0].mass", -5.0)
+    res = ks_jax.solve_inputs(as_arrays(set_input(inputs, "vehicles[1].speed", -1.0)))
+    assert int(res.contact.status) == ks_jax.types.INVALID_MASS_1  # an exchange input's reason first
+
+
+def test_yaw_turns_the_course_where_the_case_gives_none(case):
+    """Sweeping a yaw gives what solving the case file written with that yaw gives (its course
+    defaults to the yaw, MODEL.md section 2); with a course in the file, only the body turns."""
+    yaws = np.radians([0.0, 20.0, -35.0])
+    r = sweep(case, {"vehicles[1].yaw": yaws}, outputs=OUTPUTS)
+    raw = json.loads(SEED0.read_text())
+    for k, yaw in enumerate(yaws):
+        raw["vehicles"][1]["yaw"] = f"{float(np.degrees(yaw))!r} deg"
+        want = ks_jax.solve(ks_jax.case.case_from_dict(raw)).result
+        for path in OUTPUTS:
+            np.testing.assert_allclose(r[path][k], get_output(want, path), rtol=RTOL, atol=1e-9, err_msg=path)
+    assert len(set(np.round(r["vehicles[0].speed_after"], 9))) == 3
+    raw["vehicles"][1]["course"] = 0
+    fixed = ks_jax.case.case_from_dict(raw)
+    r = sweep(fixed, {"vehicles[1].yaw": yaws}, outputs=OUTPUTS)
+    for k, yaw in enumerate(yaws):
+        raw["vehicles"][1]["yaw"] = f"{float(np.degrees(yaw))!r} deg"
+        want = ks_jax.solve(ks_jax.case.case_from_dict(raw)).result
+        np.testing.assert_allclose(r["vehicles[0].speed_after"][k], want.vehicles[0].speed_after, rtol=RTOL)
+    r2 = sweep(case, {"vehicles[1].yaw": yaws, "vehicles[1].course": [0.0]}, outputs=OUTPUTS)  # course held
+    np.testing.assert_allclose(r2["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"], rtol=RTOL)
+
+
+def test_automatic_parts_and_swept_outputs_are_refused(case):
+    auto = ks_jax.load_case(CASES / "auto_seed_000.json")
+    for path in ("contact.point[0]", "contact.normal"):
+        with pytest.raises(CaseError, match=rf"sweep over '{path[:13]}.*automatic in this case"):
+            sweep(auto, {path: [0.0, 1.0]})
+    with pytest.raises(CaseError, match=r"output 'contact.point\[0\]' is also a swept input"):
+        sweep(case, {"contact.point[0]": [0.0, 1.0]}, outputs=["contact.point[0]"])
 
 
 def test_index_range_and_reducing_callback(case):
