@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 
 from ks_jax.case import CaseError, input_kind, load_cases
+from ks_jax.cli import smoothing_option
 
 from .uncertainty import fmt
 
@@ -24,7 +26,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
                         help="refit N copies of the evidence perturbed by its sigmas; report 5/50/95 percentiles")
     parser.add_argument("--seed", type=int, default=0, help="random seed for the starts and Monte Carlo")
-    parser.add_argument("--smoothing", type=float, default=1e-3,
+    parser.add_argument("--smoothing", type=smoothing_option, default=1e-3,
                         help="smooth friction cone tau (> 0 keeps the fit differentiable; default 1e-3)")
     parser.add_argument("--solver", choices=("lm", "lbfgs", "adam"), default="lm",
                         help="lm: Levenberg-Marquardt (default); lbfgs, adam: optax")
@@ -74,19 +76,29 @@ def run(args) -> int:
         raise CaseError(f"--starts {args.starts}: need at least one start")
     if args.monte_carlo < 0:
         raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
-    results = []
-    for case in cases:
-        if not case.valid:
-            raise CaseError(case.error)
-        for key in ("unknowns", "evidence"):
-            if key not in case.raw:
-                raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
-                                "'evidence', MODEL.md section 6)")
-        results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
-                                   smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0))
+    results, failed = [], {}
+    for k, case in enumerate(cases):
+        try:
+            if not case.valid:
+                raise CaseError(case.error)
+            for key in ("unknowns", "evidence"):
+                if key not in case.raw:
+                    raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
+                                    "'evidence', MODEL.md section 6)")
+            results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
+                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0))
+        except CaseError as err:  # in a file of several cases: reported, and the others are fitted
+            if len(cases) == 1:
+                raise
+            failed[k] = str(err) if str(err).startswith("invalid") else f"invalid: {err}"
+            results.append(None)
     if args.json:
-        dicts = [r.to_dict() for r in results]
+        dicts = [{"name": c.name, "status": failed[k]} if r is None else r.to_dict()
+                 for k, (c, r) in enumerate(zip(cases, results))]
         print(json.dumps(dicts[0] if len(dicts) == 1 else {"cases": dicts}, indent=1))
     else:
-        print("\n\n".join(text_report(r) for r in results))
-    return 0
+        print("\n\n".join(f"Reconstruction: {c.name}\n  not fitted: {failed[k]}" if r is None else text_report(r)
+                           for k, (c, r) in enumerate(zip(cases, results))))
+    for k, message in failed.items():
+        print(f"ks-jax: case '{cases[k].name}' not fitted: {message}", file=sys.stderr)
+    return 1 if failed else 0

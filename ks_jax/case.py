@@ -330,7 +330,11 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
 
 
 def _read(path: Path):
-    text = path.read_text()
+    try:
+        text = path.read_bytes().decode("utf-8-sig")  # -sig: a byte-order mark, as some editors write
+    except UnicodeDecodeError as err:
+        raise CaseError(f"{path}: not a UTF-8 text file (byte {err.start}: {err.reason}); case files are JSON "
+                        "or TOML text") from None
     try:
         if path.suffix.lower() == ".toml":
             return tomllib.loads(text)

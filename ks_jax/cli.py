@@ -1,7 +1,9 @@
 """`ks-jax`: solve case files, run the seed chapters' demo, fit and sweep.
 
 The command line computes in float64. A user error (bad file, bad field, bad unit) prints one
-message naming the case, the field, the value and the rule, and exits with status 2.
+message naming the case, the field, the value and the rule, and exits with status 2. In a file
+with several cases, a bad case is reported (on stderr and in the output) and the others are
+solved; the exit status is then 1, so that a script can tell.
 """
 
 from __future__ import annotations
@@ -27,29 +29,43 @@ EXTERNAL = {"fit": ("fit.cli", "reconstruct unknown inputs from evidence"),
 DEMO_CASES = ("seed_000_saturn_pontiac.json", "seed_001_lucid_kia.toml")
 
 
+def smoothing_option(text: str) -> float:
+    """``--smoothing``: a number in [0, 1) (argparse type: a bad value is a usage error, exit 2)."""
+    try:
+        tau = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= tau < 1.0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"{text}: smoothing must be in [0, 1)")
+    return tau
+
+
 def _cmd_solve(args) -> int:
     from .case import load_cases
     from .report import solution_dict, text_report
     from .solve import solve
 
+    if args.plot:
+        from .plot import check_picture_path
+
+        check_picture_path(args.plot)  # before solving: a bad name loses no work
     cases = load_cases(args.file)
     if len(cases) == 1 and not cases[0].valid:
         raise CaseError(cases[0].error)
     solutions = solve(cases, smoothing=args.smoothing)
-    if args.plot:
-        from .plot import save_top_view
-
-        save_top_view(solutions, args.plot)
     if args.json:
         print(json.dumps({"cases": [solution_dict(s) for s in solutions]}, indent=1))
     else:
         print("\n\n".join(text_report(s) for s in solutions))
-        if args.plot:
-            print(f"\ntop view written to {args.plot}")
+    if args.plot:
+        from .plot import save_top_view
+
+        save_top_view(solutions, args.plot)
+        print(f"\ntop view written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
     bad = [s for s in solutions if s.result is None]
     for s in bad:
         print(f"ks-jax: case '{s.case.name}' not solved: {s.status}", file=sys.stderr)
-    return 0
+    return 1 if bad else 0
 
 
 def _cmd_demo(args) -> int:
@@ -73,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("solve", help="solve the case(s) in a JSON or TOML file")
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="print MODEL.md section 4 as JSON (SI units)")
-    p.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1) (default 0: exact)")
+    p.add_argument("--smoothing", type=smoothing_option, default=0.0,
+                   help="smooth friction cone, tau in [0, 1) (default 0: exact)")
     p.add_argument("--plot", metavar="PNG", help="write a top view of the contact to this file")
     p.set_defaults(run=_cmd_solve)
     p = sub.add_parser("demo", help="solve the seed chapters' examples shipped with the package")

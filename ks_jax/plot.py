@@ -179,6 +179,25 @@ def top_view(solution, ax=None):
     return ax
 
 
+PICTURE_TYPES = (".png", ".pdf", ".svg")
+
+
+def check_picture_path(path, option="--plot"):
+    """Raise CaseError unless matplotlib is installed and ``path`` names a .png, .pdf or .svg file:
+    called before anything is solved, so that a bad picture name loses no work."""
+    from pathlib import Path
+
+    from .case import CaseError
+
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise CaseError(f"{option} needs matplotlib: pip install 'ks-jax[plot]'") from None
+    suffix = Path(path).suffix
+    if suffix.lower() not in PICTURE_TYPES:
+        raise CaseError(f"{option} {path}: unknown picture type '{suffix}' (use .png, .pdf or .svg)")
+
+
 def save_top_view(solutions, path):
     """Write the top views of one ``Solution`` or a list of them (one panel each) to ``path``
     (PNG, PDF, SVG: by the file name). Returns the path."""

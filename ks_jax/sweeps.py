@@ -517,7 +517,9 @@ def add_arguments(parser):
     parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
     parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
     parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
-    parser.add_argument("--smoothing", type=float, default=0.0, help="smooth friction cone, tau in [0, 1)")
+    from .cli import smoothing_option
+
+    parser.add_argument("--smoothing", type=smoothing_option, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")
     parser.add_argument("--units", choices=("si", "us"), default="si",
                         help="units of the file: si (default) or us (mph, ft, lbf s, ft lbf, deg, deg/s, lb; "
@@ -937,14 +939,10 @@ def _plot_sample(path, over, mode, shape):
     """A ``SweepSample`` for ``--plot PATH`` (None without it), after the checks a picture needs."""
     if path is None:
         return None
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise CaseError("--plot needs matplotlib: pip install 'ks-jax[plot]'") from None
+    from .plot import check_picture_path
+
+    check_picture_path(path)
     if mode != "zip" and len(over) > 2:
         raise CaseError(f"--plot draws a sweep over one or two inputs; this one has {len(over)} "
                         f"({', '.join(over)}): leave --plot out, or sweep fewer inputs")
-    suffix = Path(path).suffix.lower()
-    if suffix not in (".png", ".pdf", ".svg"):
-        raise CaseError(f"--plot {path}: unknown picture type '{Path(path).suffix}' (use .png, .pdf or .svg)")
     return SweepSample(over, mode, shape)

@@ -190,7 +190,7 @@ def test_bad_case_in_a_batch_is_reported_and_the_others_solved(tmp_path, capsys)
     path = tmp_path / "many.json"
     path.write_text(json.dumps({"cases": [good, bad, other]}))
     code, out, err = run_cli(capsys, "solve", str(path), "--json")
-    assert code == 0
+    assert code == 1  # solved what could be, and says (exit status) that a case was not
     res = json.loads(out)["cases"]
     assert [r["contact"]["status"] for r in res][0] == "ok"
     assert res[1]["contact"]["status"].startswith("invalid: ") and "restitution" in res[1]["contact"]["status"]
@@ -213,6 +213,24 @@ def test_toml_case_and_unreadable_file(tmp_path, capsys):
     assert code == 2 and "cannot be read" in err
     code, _, err = run_cli(capsys, "solve", str(tmp_path / "missing.json"))
     assert code == 2 and "no such file" in err
+
+
+def test_bad_options_and_files_are_refused_before_solving(tmp_path, capsys):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(US_CASE))
+    for value in ("2", "-0.1", "nan", "x"):
+        with pytest.raises(SystemExit) as exc:  # argparse: usage error, exit status 2
+            main(["solve", str(path), "--smoothing", value])
+        assert exc.value.code == 2 and "smoothing" in capsys.readouterr().err
+    code, out, err = run_cli(capsys, "solve", str(path), "--plot", str(tmp_path / "top.xyz"))
+    assert code == 2 and out == "" and "unknown picture type '.xyz' (use .png, .pdf or .svg)" in err
+    binary = tmp_path / "latin1.json"
+    binary.write_bytes(b'{"name": "caf\xe9"}')
+    code, _, err = run_cli(capsys, "solve", str(binary))
+    assert code == 2 and "not a UTF-8 text file" in err
+    bom = tmp_path / "bom.json"  # as some editors write UTF-8: with a byte-order mark
+    bom.write_bytes(b"\xef\xbb\xbf" + json.dumps(US_CASE).encode())
+    assert run_cli(capsys, "solve", str(bom), "--json")[0] == 0
 
 
 def test_paths_refuse_unknown_names():

@@ -239,3 +239,13 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
     path.write_text(json.dumps(bad))
     assert main(["fit", str(path)]) == 2
     assert "vehicles[0].delta_v_magnitud" in capsys.readouterr().err
+    # several cases, one bad: the others are fitted, the bad one reported, exit status 1
+    good = json.loads(FIT_SEED.read_text())
+    bad["name"] = "bad one"
+    path.write_text(json.dumps({"cases": [good, bad]}))
+    assert main(["fit", str(path), "--json"]) == 1
+    out = capsys.readouterr()
+    cases = json.loads(out.out)["cases"]
+    assert cases[0]["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(d["estimate"]["vehicles[1].speed"] / U.MPH)
+    assert cases[1]["name"] == "bad one" and "vehicles[0].delta_v_magnitud" in cases[1]["status"]
+    assert "'bad one' not fitted" in out.err
