@@ -379,6 +379,11 @@ def _batched(smoothing, axis_size, in_batched, *args):
 def _batched_jvp(smoothing, axis_size, in_batched, primals, tangents):
     """The vmap rule of ``_vmappable``'s JVP (``_float_jvp`` of ``_exchange``)."""
     plain = functools.partial(_float_jvp, functools.partial(_exchange, smoothing=smoothing))
+    if not any(jax.tree_util.tree_leaves(in_batched[0])):
+        # only the tangents are batched (``jax.jacfwd`` of one exchange): the primal outputs are not
+        axes = tuple(jax.tree_util.tree_map(lambda b: 0 if b else None, b) for b in in_batched)
+        out, floats = jax.vmap(plain, in_axes=axes, out_axes=(None, 0))(primals, tangents)
+        return (out, floats), (jax.tree_util.tree_map(lambda _: False, out), [True] * len(floats))
     return _in_chunks_or_whole(plain, functools.partial(_jvp_in_chunks, smoothing), axis_size, in_batched,
                                (primals, tangents))
 

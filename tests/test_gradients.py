@@ -15,6 +15,7 @@ import jax
 import numpy as np
 import pytest
 
+import ks_jax
 import reference as ref
 
 TAU = 0.05  # the smoothing used for "smooth mode"
@@ -336,3 +337,28 @@ def test_smooth_converges_to_exact_at_rate_tau(smoothing_ratios, kind):
     assert ratios[0].max() > 0.05
 
 
+
+
+def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
+    """``jax.jacfwd`` of one unbatched exchange (only the tangents are batched, by jacfwd's vmap):
+    the Jacobian of every output listed in conftest ``OUTPUTS`` with respect to vehicle 2's
+    velocity and the contact point, against central differences of the values."""
+    case = random_cases["principal"][3]
+    v1, s1, v2, s2, c = kit.inputs(case)
+
+    def outputs(vel, point):
+        res = ks_jax.exchange(v1, s1, v2, s2._replace(velocity=vel), c._replace(point=point), smoothing=TAU)
+        return kit.output_vector(res)
+
+    jac_v, jac_p = jax.jit(jax.jacfwd(outputs, argnums=(0, 1)))(s2.velocity, c.point)
+    f = jax.jit(outputs)
+    for k, (x, jac) in enumerate(((s2.velocity, jac_v), (c.point, jac_p))):
+        for i in range(3):
+            h = H_REL * max(1.0, abs(float(x[i])))
+            args_p = [s2.velocity, c.point]
+            args_m = [s2.velocity, c.point]
+            args_p[k] = x.at[i].add(h)
+            args_m[k] = x.at[i].add(-h)
+            fd = (np.asarray(f(*args_p)) - np.asarray(f(*args_m))) / (2 * h)
+            np.testing.assert_allclose(jac[:, i], fd, rtol=1e-5, atol=1e-5 * (1 + np.max(np.abs(fd))),
+                                       err_msg=f"argument {k}, component {i}")
