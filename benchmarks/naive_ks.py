@@ -46,7 +46,9 @@ def status(v1, s1, v2, s2, c):
         sym = jnp.max(jnp.abs(m - m.T)) <= 1e-6 * jnp.max(jnp.abs(m))
         return sym & (m[0, 0] > 0) & (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0] > 0) & (det > 0)
 
-    box = lambda v: (v["length"] > 0) & (v["width"] > 0) & (v["height"] > 0)  # noqa: E731
+    box = lambda v: ((v["length"] > 0) & (v["width"] > 0) & (v["height"] > 0)  # noqa: E731
+                     & (v["cg_to_front"] >= 0) & (v["cg_to_front"] <= v["length"])
+                     & (v["cg_height"] >= 0) & (v["cg_height"] <= v["height"]))
     checks = [finite, v1["mass"] > 0, v2["mass"] > 0, inertia_ok(v1["inertia"], dets[0]), inertia_ok(v2["inertia"], dets[1]), box(v1),
               box(v2), (c["restitution"] >= -1) & (c["restitution"] <= 1), c["friction"] >= 0,
               jnp.dot(c["normal"], c["normal"]) > 0, c["penetration_time"] >= 0]

@@ -435,6 +435,8 @@ def _input_leaf(path):
         if name == "yaw_rate" and not idx:
             return group, vi, "angular_velocity", (2,)
         if name == "inertia" and len(idx) == 1:
+            if idx[0] > 2:
+                raise PathError(f"path '{path}': index out of range (0..2)")
             return group, vi, "inertia", (idx[0], idx[0])
         if name not in VehicleInputs._fields:
             hint = " (vary speed and course instead)" if name == "velocity" else ""
@@ -467,6 +469,13 @@ def get_input(inputs: CaseInputs, path: str):
 def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable)."""
     group, vi, name, idx = _input_leaf(path)
+    try:
+        dtype = None if value is None else jnp.result_type(value)
+    except TypeError:
+        dtype = None
+    if dtype is None or not jnp.issubdtype(dtype, jnp.number) or jnp.shape(value) != ():
+        raise CaseError(f"set_input '{path}' = {value!r}: the value must be one number, in SI units (for a "
+                        "unit string, convert it first: ks_jax.units.parse_quantity)")
     holder = inputs.vehicles[vi] if group == "vehicles" else inputs.contact
     leaf = getattr(holder, name)
     new = jnp.asarray(leaf).at[idx].set(value) if idx else value
@@ -518,7 +527,8 @@ def check_output_path(path: str):
     vector = name in {"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
                       "delta_v_body", "velocity_after", "angular_velocity_after"}
     if vector and (len(idx) != 1 or idx[0] > 2):
-        raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]")
+        raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]"
+                        if len(idx) != 1 else f"path '{path}': index out of range (0..2)")
     if not vector and idx:
         raise PathError(f"path '{path}': '{name}' is a number and takes no index")
     return group, vi, name, idx

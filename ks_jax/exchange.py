@@ -62,6 +62,7 @@ from .types import (
     INVALID_NORMAL,
     INVALID_PENETRATION_TIME,
     INVALID_RESTITUTION,
+    INVALID_SMOOTHING,
     OK,
     SEPARATING,
     Contact,
@@ -164,8 +165,9 @@ def input_status(vehicle1, state1, vehicle2, state2, contact):
     leaves = jax.tree_util.tree_leaves((vehicle1, state1, vehicle2, state2, contact))
     finite = _all([jnp.isfinite(c) for x in leaves for c in _components(x)])
 
-    def box_ok(v):
-        return (v.length > 0) & (v.width > 0) & (v.height > 0)
+    def box_ok(v):  # the CG inside the box, as case files require (a swept cg_to_front may leave it)
+        return ((v.length > 0) & (v.width > 0) & (v.height > 0) & (v.cg_to_front >= 0) & (v.cg_to_front <= v.length)
+                & (v.cg_height >= 0) & (v.cg_height <= v.height))
 
     checks = [
         (finite, INVALID_NONFINITE),
@@ -307,8 +309,13 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
 
 
 def _exchange(vehicle1, state1, vehicle2, state2, contact, smoothing):
-    """``exchange`` as written: every transformation sees these operations."""
+    """``exchange`` as written: every transformation sees these operations. A ``smoothing`` that is
+    an array (traced under jit, or a JAX scalar) is checked per row: out of [0, 1), status
+    INVALID_SMOOTHING (a Python number is checked, and refused, by ``impulse_stage``)."""
     status = input_status(vehicle1, state1, vehicle2, state2, contact)
+    if not isinstance(smoothing, (int, float)):
+        tau_ok = (smoothing >= 0) & (smoothing < 1)  # NaN fails
+        status = jnp.where((status == OK) & ~tau_ok, jnp.int32(INVALID_SMOOTHING), status)
     return exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing, status)
 
 

@@ -79,13 +79,19 @@ class State(NamedTuple):
     ):
         """State from SI values (angles in rad, rates in rad/s).
 
-        position: (2,) or (3,); a 2D position gets z = ``cg_height`` (default 0).
+        position: (2,) or (3,); a 2D position gets z = ``cg_height``, the vehicle's (MODEL.md
+        section 2), which must then be given (a State does not know its vehicle).
         Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw).
         Either ``yaw_rate`` or ``angular_velocity`` (3,).
         """
         position = _f(position)
+        if position.shape[-1] not in (2, 3):
+            raise ValueError(f"State.create: position has shape {position.shape}: give (x, y, z) or (x, y), in m")
         if position.shape[-1] == 2:
-            z = _f(0.0 if cg_height is None else cg_height)
+            if cg_height is None:
+                raise ValueError("State.create: position (x, y) has no z: give (x, y, z), or cg_height= (the "
+                                 "vehicle's; MODEL.md section 2: z defaults to cg_height)")
+            z = _f(cg_height)
             position = jnp.concatenate([position, jnp.broadcast_to(z, position.shape[:-1])[..., None]], -1)
         yaw = _f(yaw)
         if velocity is None:
@@ -211,6 +217,7 @@ INVALID_NORMAL = 19
 INVALID_PENETRATION_TIME = 20
 INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see ``case.speed_status``
 INVALID_SPEED_2 = 22
+INVALID_SMOOTHING = 23  # an array ``smoothing`` (a Python number is refused by a ValueError)
 
 STATUS_TEXT = {
     OK: "ok",
@@ -221,14 +228,17 @@ STATUS_TEXT = {
     INVALID_MASS_2: "invalid: vehicles[1].mass must be positive",
     INVALID_INERTIA_1: "invalid: vehicles[0].inertia must be symmetric positive definite",
     INVALID_INERTIA_2: "invalid: vehicles[1].inertia must be symmetric positive definite",
-    INVALID_BOX_1: "invalid: vehicles[0] length, width and height must be positive",
-    INVALID_BOX_2: "invalid: vehicles[1] length, width and height must be positive",
+    INVALID_BOX_1: ("invalid: vehicles[0] length, width and height must be positive, cg_to_front in "
+                      "[0, length] and cg_height in [0, height]"),
+    INVALID_BOX_2: ("invalid: vehicles[1] length, width and height must be positive, cg_to_front in "
+                      "[0, length] and cg_height in [0, height]"),
     INVALID_RESTITUTION: "invalid: contact.restitution must be in [-1, 1]",
     INVALID_FRICTION: "invalid: contact.friction must be >= 0",
     INVALID_NORMAL: "invalid: contact.normal must be a non-zero vector",
     INVALID_PENETRATION_TIME: "invalid: contact.penetration_time must be >= 0",
     INVALID_SPEED_1: "invalid: vehicles[0].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SPEED_2: "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)",
+    INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
 }
 
 

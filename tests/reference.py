@@ -143,7 +143,8 @@ def input_status(case):
         if not (np.allclose(ib, ib.T, rtol=0, atol=1e-9 * np.abs(ib).max()) and np.all(np.linalg.eigvalsh(ib) > 0)):
             return f"invalid: inertia {i + 1}"
     for i, v in enumerate((v1, v2)):
-        if not (v["length"] > 0 and v["width"] > 0 and v["height"] > 0):
+        if not (v["length"] > 0 and v["width"] > 0 and v["height"] > 0 and 0 <= v["cg_to_front"] <= v["length"]
+                and 0 <= v["cg_height"] <= v["height"]):  # the CG inside its box
             return f"invalid: box {i + 1}"
     if not -1.0 <= c["restitution"] <= 1.0:
         return "invalid: restitution"

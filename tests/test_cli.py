@@ -241,6 +241,21 @@ def test_paths_refuse_unknown_names():
         ks_jax.get_output(ks_jax.solve(case).result, "contact.impulse_size")
     new = ks_jax.set_input(case.inputs, "vehicles[1].yaw_rate", 0.5)
     assert float(ks_jax.get_input(new, "vehicles[1].angular_velocity[2]")) == 0.5
+    for path in ("vehicles[1].inertia[3]", "contact.point[3]"):
+        with pytest.raises(CaseError, match=r"index out of range \(0..2\)"):
+            ks_jax.get_input(case.inputs, path)
+    with pytest.raises(CaseError, match=r"index out of range \(0..2\)"):
+        ks_jax.get_output(ks_jax.solve(case).result, "vehicles[0].delta_v[5]")
+    for value in ("20 mph", None, [1.0, 2.0]):
+        with pytest.raises(CaseError, match="the value must be one number, in SI units"):
+            ks_jax.set_input(case.inputs, "vehicles[1].speed", value)
+
+
+def test_state_needs_a_height_for_a_2d_position():
+    with pytest.raises(ValueError, match=r"position \(x, y\) has no z"):
+        ks_jax.State.create([1.0, 2.0], speed=3.0)
+    s = ks_jax.State.create([1.0, 2.0], speed=3.0, cg_height=0.6)
+    np.testing.assert_array_equal(np.asarray(s.position), [1.0, 2.0, 0.6])
 
 
 def test_ees_undefined_when_crush_is_rounding_error():

@@ -309,6 +309,10 @@ def _bad_rows(base, rng):
     row(t.INVALID_NONFINITE, setv(1, "mass", np.nan))
     row(t.INVALID_NORMAL, setc("normal", np.zeros(3)))
     row(t.INVALID_BOX_1, setv(0, "length", 0.0))
+    row(t.INVALID_BOX_2, lambda c: c["vehicles"][1].__setitem__("cg_to_front", c["vehicles"][1]["length"] + 0.01))
+    row(t.INVALID_BOX_1, setv(0, "cg_to_front", -0.01))
+    row(t.INVALID_BOX_2, lambda c: c["vehicles"][1].__setitem__("cg_height", c["vehicles"][1]["height"] + 0.01))
+    row(t.INVALID_BOX_1, setv(0, "cg_height", -0.01))
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     if full:
         one_negative = q @ np.diag([900.0, 2500.0, -40.0]) @ q.T
@@ -435,3 +439,19 @@ def test_float32_agrees_with_float64(kit, random_cases):
     assert float(con["energy_loss"][-1]) == pytest.approx(19141.047, rel=kit.rtol_float32)
     assert float(a["crush"][-1]) / U.FT == pytest.approx(1.396, rel=kit.rtol_float32)
     assert float(b["ees"][-1]) / U.MPH == pytest.approx(2.213, rel=1e-3)
+
+
+def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
+    """A Python number out of [0, 1) is refused; an array one (traced under jit) flags the row with
+    INVALID_SMOOTHING and NaN results; an array one in range gives the Python number's results."""
+    args = kit.inputs(random_cases["principal"][5])
+    with pytest.raises(ValueError, match=r"smoothing must be in \[0, 1\)"):
+        ks_jax.exchange(*args, smoothing=1.5)
+    f = jax.jit(lambda tau: ks_jax.exchange(*args, smoothing=tau))
+    for tau in (2.0, -0.1, float("nan"), 1.0):
+        res = f(tau)
+        assert int(res.contact.status) == t.INVALID_SMOOTHING, tau
+        assert np.all(np.isnan(np.asarray(res.contact.impulse))), tau
+    good, want = f(1e-3), ks_jax.exchange(*args, smoothing=1e-3)
+    assert int(good.contact.status) == t.OK
+    np.testing.assert_allclose(np.asarray(good.contact.impulse), np.asarray(want.contact.impulse), rtol=1e-12)
