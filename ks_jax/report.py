@@ -21,19 +21,30 @@ def _plain(x):
     return [_plain(v) for v in x]
 
 
+def _no_impulse(sol):
+    """No impulse was exchanged (separating, no contact, eps = -1): a PDOF is then undefined."""
+    return not float(sol.result.contact.impulse_magnitude) > 0
+
+
 def solution_dict(sol) -> dict:
     """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, keys of MODEL.md section 4,
-    status as words, NaN as null. An invalid case has only its status."""
+    status as words, NaN as null. An invalid case has only its status. What is not defined is
+    null too: ``pdof`` and ``pdof_clock`` where no impulse was exchanged, ``time`` where the
+    vehicles never touch (the exchange carries stand-in numbers there, never NaN)."""
     if sol.result is None:
         return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
     c = sol.result.contact
     contact = {k: _plain(getattr(c, k)) for k in ContactResult._fields if k != "status"}
     contact["status"] = sol.status
+    if sol.status == "no_contact":
+        contact["time"] = None
     vehicles = []
     for name, v in zip(sol.case.vehicle_names, sol.result.vehicles):
         d = {"name": name}
         d.update({k: _plain(getattr(v, k)) for k in VehicleResult._fields})
         d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
+        if _no_impulse(sol):
+            d["pdof"] = d["pdof_clock"] = None
         vehicles.append(d)
     return {"name": sol.case.name, "contact": contact, "vehicles": vehicles}
 
@@ -56,6 +67,10 @@ def _timing_rows(sol):
     if not (sol.case.auto_point or sol.case.auto_normal):
         return [_row("timing", "explicit contact: exchange at the case state")]
     dt = float(sol.case.inputs.contact.penetration_time)
+    if sol.status == "no_contact":
+        from .geometry import HORIZON
+
+        return [_row("first contact (timing)", f"none within {HORIZON:g} s of free motion")]
     return [_row("first contact (timing)", f"{_fmt(c.time, 4)} s"),
             _row("exchange (+ depth of penetration)", f"{_fmt(c.time + dt, 4)} s", f"(+{_fmt(dt, 4)} s)")]
 
@@ -82,7 +97,7 @@ def text_report(sol, reference: bool = True) -> str:
              f"{_fmt(c.impulse_normal / U.LBF_S)} / {_fmt(c.impulse_tangential / U.LBF_S)} lbf s"),
         _row("  azimuth / elevation", f"{_fmt(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
         _row("deformation energy (loss)", f"{_fmt(c.energy_loss)} J", f"{_fmt(c.energy_loss / U.FT_LBF, 2)} ft lbf"),
-        _row("sliding at separation", "yes" if bool(c.sliding) else "no"),
+        _row("sliding at separation", "no impulse" if _no_impulse(sol) else "yes" if bool(c.sliding) else "no"),
         _row("closing speed at centroid", f"{_fmt(np.linalg.norm(c.closing_velocity))} m/s",
              f"{_fmt(np.linalg.norm(c.closing_velocity) / U.MPH, 2)} mph"),
         _row("separation speed at centroid", f"{_fmt(np.linalg.norm(c.separation_velocity))} m/s",
@@ -95,7 +110,8 @@ def text_report(sol, reference: bool = True) -> str:
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
-            _row("PDOF", f"{_fmt(v.pdof, 1)} deg ({int(v.pdof_clock)} o'clock)"),
+            _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
+                 else f"{_fmt(v.pdof, 1)} deg ({int(v.pdof_clock)} o'clock)"),
             _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
             _row("EES", f"{_fmt(v.ees)} m/s", f"{_fmt(v.ees / U.MPH)} mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
@@ -105,7 +121,10 @@ def text_report(sol, reference: bool = True) -> str:
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
     if sol.status == "no_contact":
-        lines.append("\n  note: the footprints never touch under free motion from the case state: no exchange.")
+        from .geometry import HORIZON
+
+        lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
+                     "(the search horizon): no exchange.")
     elif not (v1.crush + v2.crush > 0):
         lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
     elif not np.isfinite(v1.ees):

@@ -251,6 +251,21 @@ def test_paths_refuse_unknown_names():
             ks_jax.set_input(case.inputs, "vehicles[1].speed", value)
 
 
+def test_no_impulse_has_no_pdof(tmp_path, capsys):
+    """Both vehicles at rest: separating, no impulse, so no principal direction of force."""
+    d = copy.deepcopy(US_CASE)
+    d["vehicles"][1]["speed"] = "0 mph"
+    del d["vehicles"][1]["yaw_rate"]
+    path = tmp_path / "rest.json"
+    path.write_text(json.dumps(d))
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    res = json.loads(out)["cases"][0]
+    assert code == 0 and res["contact"]["status"] == "separating" and res["contact"]["impulse_magnitude"] == 0.0
+    assert all(v["pdof"] is None and v["pdof_clock"] is None for v in res["vehicles"])
+    code, out, _ = run_cli(capsys, "solve", str(path))
+    assert out.count("undefined (no impulse)") == 2 and "no impulse" in out.split("sliding at separation")[1][:40]
+
+
 def test_state_needs_a_height_for_a_2d_position():
     with pytest.raises(ValueError, match=r"position \(x, y\) has no z"):
         ks_jax.State.create([1.0, 2.0], speed=3.0)

@@ -450,3 +450,27 @@ def test_shipped_automatic_cases_through_the_cli(tmp_path):
     assert x == pytest.approx(6.0 * U.FT, abs=1e-9) and y == pytest.approx((-3.0 + 1.1) * U.FT, abs=1e-9)
     assert 270 < d["vehicles"][1]["pdof"] < 360  # pickup: frontal, dragged to its right by the sedan
     assert d["vehicles"][0]["pdof"] < 90  # from the right front quarter: the sedan drives into the force
+
+
+def test_never_touching_case_reads_as_such(tmp_path):
+    """Through the command line: no first-contact time and no PDOF where nothing was exchanged, in the
+    panel and in the JSON (null), and the panel names the search horizon."""
+    from ks_jax.cli import main
+
+    raw = json.loads((resources.files("ks_jax.cases") / "auto_seed_000.json").read_text())
+    raw["vehicles"][1]["position"] = ["-10 ft", "12 ft"]  # the next lane: never touching
+    path = tmp_path / "apart.json"
+    path.write_text(json.dumps(raw))
+    for flags in ([], ["--json"]):
+        buf = io.StringIO()
+        with redirect_stdout(buf):
+            assert main(["solve", str(path), *flags]) == 0
+        out = buf.getvalue()
+        if flags:
+            d = json.loads(out)["cases"][0]
+            assert d["contact"]["status"] == "no_contact" and d["contact"]["time"] is None
+            assert all(v["pdof"] is None and v["pdof_clock"] is None for v in d["vehicles"])
+            assert d["contact"]["impulse_magnitude"] == 0.0
+        else:
+            assert f"none within {G.HORIZON:g} s of free motion" in out and "o'clock" not in out
+            assert out.count("undefined (no impulse)") == 2
