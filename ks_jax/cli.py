@@ -62,7 +62,7 @@ def _cmd_solve(args) -> int:
 
         save_top_view(solutions, args.plot)
         print(f"\ntop view written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
-    bad = [s for s in solutions if s.result is None]
+    bad = [s for s in solutions if s.status.startswith("invalid")]
     for s in bad:
         print(f"ks-jax: case '{s.case.name}' not solved: {s.status}", file=sys.stderr)
     return 1 if bad else 0

@@ -60,6 +60,7 @@ from .types import (
     INVALID_MASS_2,
     INVALID_NONFINITE,
     INVALID_NORMAL,
+    INVALID_OVERFLOW,
     INVALID_PENETRATION_TIME,
     INVALID_RESTITUTION,
     INVALID_SMOOTHING,
@@ -627,7 +628,12 @@ def values_impulse_stage(smoothing):
 
 
 def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
-    """MODEL.md section 4 from ``impulse_stage``'s output (same inputs and status)."""
+    """MODEL.md section 4 from ``impulse_stage``'s output (same inputs and status). Finite inputs
+    whose energy loss is not finite (far too large, e.g. a speed of 1e300 m/s: the energy reads the
+    velocities before and after, so an overflow anywhere shows in it) get status INVALID_OVERFLOW,
+    never a silent NaN under "ok" or "separating". Their other results are left as computed (some
+    infinite or NaN): masking them all by the energy made XLA recompute it in every output's loop,
+    1.3x the time per row (benchmarks/RESULTS.md), for rows no real case reaches."""
     ok = status == OK
     vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
     status = jnp.where(ok & ~stage.approaching, jnp.int32(SEPARATING), status)
@@ -639,4 +645,7 @@ def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: Im
         (vehicle1, state1, stage.rot1, stage.a1, stage.r1),
         (vehicle2, state2, stage.rot2, stage.a2, stage.r2),
     )
+    finite = jnp.isfinite(result.contact.energy_loss)  # reads J, u and every velocity: any overflow shows here
+    status = jnp.where(ok & ~finite, jnp.int32(INVALID_OVERFLOW), result.contact.status)
+    result = result._replace(contact=result.contact._replace(status=status))
     return derived.mask_invalid(result, ok)

@@ -84,7 +84,7 @@ def top_view(solution, ax=None):
     case, res = solution.case, solution.result
     names = case.vehicle_names
     ax.set_title(f"{case.name}\nstatus: {solution.status}", fontsize=9)
-    if case.inputs is None or res is None:
+    if case.inputs is None or res is None or solution.status.startswith("invalid"):
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
         return ax
     inputs = case.inputs

@@ -31,7 +31,7 @@ def solution_dict(sol) -> dict:
     status as words, NaN as null. An invalid case has only its status. What is not defined is
     null too: ``pdof`` and ``pdof_clock`` where no impulse was exchanged, ``time`` where the
     vehicles never touch (the exchange carries stand-in numbers there, never NaN)."""
-    if sol.result is None:
+    if sol.result is None or sol.status.startswith("invalid"):
         return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
     c = sol.result.contact
     contact = {k: _plain(getattr(c, k)) for k in ContactResult._fields if k != "status"}
@@ -78,7 +78,7 @@ def _timing_rows(sol):
 def text_report(sol, reference: bool = True) -> str:
     """The auto-ees panel of one solved case, SI beside US units."""
     lines = [f"Case: {sol.case.name}"]
-    if sol.result is None:
+    if sol.result is None or sol.status.startswith("invalid"):
         lines.append(f"  status: {sol.status}")
         return "\n".join(lines)
     c = sol.result.contact

@@ -218,6 +218,7 @@ INVALID_PENETRATION_TIME = 20
 INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see ``case.speed_status``
 INVALID_SPEED_2 = 22
 INVALID_SMOOTHING = 23  # an array ``smoothing`` (a Python number is refused by a ValueError)
+INVALID_OVERFLOW = 24  # finite inputs whose results are not (say a speed of 1e300 m/s)
 
 STATUS_TEXT = {
     OK: "ok",
@@ -239,6 +240,7 @@ STATUS_TEXT = {
     INVALID_SPEED_1: "invalid: vehicles[0].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SPEED_2: "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
+    INVALID_OVERFLOW: "invalid: the results overflow (an input is far too large)",
 }
 
 

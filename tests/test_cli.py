@@ -266,6 +266,19 @@ def test_no_impulse_has_no_pdof(tmp_path, capsys):
     assert out.count("undefined (no impulse)") == 2 and "no impulse" in out.split("sliding at separation")[1][:40]
 
 
+def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
+    d = copy.deepcopy(US_CASE)
+    d["vehicles"][1]["speed"] = 1e300  # m/s: finite, but its energy is not
+    path = tmp_path / "huge.json"
+    path.write_text(json.dumps(d))
+    code, out, err = run_cli(capsys, "solve", str(path), "--plot", str(tmp_path / "huge.png"))
+    assert code == 1 and "status: invalid: the results overflow" in out and "undefined" not in out
+    assert "not solved" in err and (tmp_path / "huge.png").read_bytes()[:4] == b"\x89PNG"
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    assert json.loads(out)["cases"][0] == {"name": "units check", "vehicles": [],
+                                           "contact": {"status": "invalid: the results overflow (an input is far too large)"}}
+
+
 def test_state_needs_a_height_for_a_2d_position():
     with pytest.raises(ValueError, match=r"position \(x, y\) has no z"):
         ks_jax.State.create([1.0, 2.0], speed=3.0)

@@ -455,3 +455,16 @@ def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
     good, want = f(1e-3), ks_jax.exchange(*args, smoothing=1e-3)
     assert int(good.contact.status) == t.OK
     np.testing.assert_allclose(np.asarray(good.contact.impulse), np.asarray(want.contact.impulse), rtol=1e-12)
+
+
+def test_results_that_overflow_get_a_status(kit, random_cases):
+    """Finite inputs far too large for float64 (1e300 m/s): INVALID_OVERFLOW in that row, never a NaN
+    under "ok" or "separating"; the other rows of the batch are untouched."""
+    cases = [copy.deepcopy(c) for c in random_cases["principal"][:3]]
+    cases[1]["vehicles"][1]["velocity"] = np.array([1e300, 0.0, 0.0])
+    eng = kit.solve(cases)
+    assert list(eng["contact"]["status"]) == [t.OK, t.INVALID_OVERFLOW, t.OK]
+    assert not np.isfinite(eng["contact"]["energy_loss"][1])
+    for k in (0, 2):
+        one = kit.solve([cases[k]])
+        np.testing.assert_array_equal(eng["contact"]["impulse"][k], one["contact"]["impulse"][0])
