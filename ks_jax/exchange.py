@@ -629,11 +629,10 @@ def values_impulse_stage(smoothing):
 
 def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: ImpulseStage) -> ExchangeResult:
     """MODEL.md section 4 from ``impulse_stage``'s output (same inputs and status). Finite inputs
-    whose energy loss is not finite (far too large, e.g. a speed of 1e300 m/s: the energy reads the
-    velocities before and after, so an overflow anywhere shows in it) get status INVALID_OVERFLOW,
-    never a silent NaN under "ok" or "separating". Their other results are left as computed (some
-    infinite or NaN): masking them all by the energy made XLA recompute it in every output's loop,
-    1.3x the time per row (benchmarks/RESULTS.md), for rows no real case reaches."""
+    far too large (e.g. a speed of 1e300 m/s), where |J|^2, |u|^2 or m |v|^2 overflows, get status
+    INVALID_OVERFLOW, never a silent NaN under "ok" or "separating". Their other results are left as
+    computed (some infinite or NaN): masking them all by such a check made XLA recompute it in every
+    output's loop, 1.3x the time per row (benchmarks/RESULTS.md), for rows no real case reaches."""
     ok = status == OK
     vehicle1, state1, vehicle2, state2, contact = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
     status = jnp.where(ok & ~stage.approaching, jnp.int32(SEPARATING), status)
@@ -645,7 +644,12 @@ def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: Im
         (vehicle1, state1, stage.rot1, stage.a1, stage.r1),
         (vehicle2, state2, stage.rot2, stage.a2, stage.r2),
     )
-    finite = jnp.isfinite(result.contact.energy_loss)  # reads J, u and every velocity: any overflow shows here
+    # from what every result reads anyway (J, u, the velocities and masses): an energy check would make a
+    # loss that masks by the status compute the energy loss too (1.1-1.2x its forward; RESULTS.md)
+    j, u = stage.j, stage.u
+    scale = la.dot(j, j) + la.dot(u, u) + vehicle1.mass * la.dot(state1.velocity, state1.velocity) + \
+        vehicle2.mass * la.dot(state2.velocity, state2.velocity)
+    finite = jnp.isfinite(scale)
     status = jnp.where(ok & ~finite, jnp.int32(INVALID_OVERFLOW), result.contact.status)
     result = result._replace(contact=result.contact._replace(status=status))
     return derived.mask_invalid(result, ok)
