@@ -366,6 +366,8 @@ def load_cases(path) -> list[Case]:
     path = Path(path)
     if not path.exists():
         raise CaseError(f"{path}: no such file")
+    if path.is_dir():
+        raise CaseError(f"{path}: is a directory; give a case file (JSON or TOML)")
     return cases_from_data(_read(path), str(path))
 
 

@@ -79,7 +79,9 @@ def solve(cases, smoothing: float = 0.0):
     (bad input in a multi-case file) gets status "invalid: <reason>" and no numbers.
     """
     single = isinstance(cases, Case)
-    cases = [cases] if single else list(cases)
+    cases = [cases] if single else list(cases) if isinstance(cases, (list, tuple)) else None
+    if cases is None or not all(isinstance(c, Case) for c in cases):
+        raise TypeError("solve takes a Case or a list of them: ks_jax.load_case(path) reads a case file")
     if not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     out: list[Solution | None] = [None] * len(cases)

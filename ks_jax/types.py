@@ -22,6 +22,15 @@ def _f(x):
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
+def _last(where, name, x, sizes, meaning):
+    """``x`` as ``_f`` gives it, after checking that its last axis has one of ``sizes`` entries (a
+    leading batch axis is allowed): a clear error naming the field instead of one from deep inside."""
+    x = _f(x)
+    if x.ndim == 0 or x.shape[-1] not in sizes:
+        raise ValueError(f"{where}: {name} has shape {x.shape}: give {meaning}")
+    return x
+
+
 class Vehicle(NamedTuple):
     """Constant properties of one vehicle.
 
@@ -45,6 +54,8 @@ class Vehicle(NamedTuple):
         """Vehicle from SI values; ``cg_to_front`` defaults to half the length."""
         if cg_to_front is None:
             cg_to_front = 0.5 * jnp.asarray(length)
+        inertia = _last("Vehicle.create", "inertia", inertia, (3,),
+                        "the principal moments (Ixx, Iyy, Izz) or a (3, 3) tensor, in kg m^2")
         return cls(*(_f(a) for a in (mass, inertia, length, width, height, cg_to_front, cg_height)))
 
 
@@ -84,9 +95,7 @@ class State(NamedTuple):
         Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw).
         Either ``yaw_rate`` or ``angular_velocity`` (3,).
         """
-        position = _f(position)
-        if position.shape[-1] not in (2, 3):
-            raise ValueError(f"State.create: position has shape {position.shape}: give (x, y, z) or (x, y), in m")
+        position = _last("State.create", "position", position, (2, 3), "(x, y, z) or (x, y), in m")
         if position.shape[-1] == 2:
             if cg_height is None:
                 raise ValueError("State.create: position (x, y) has no z: give (x, y, z), or cg_height= (the "
@@ -101,13 +110,14 @@ class State(NamedTuple):
             speed = _f(speed)
             sin, cos = la.sincos(course)
             velocity = jnp.stack([speed * cos, speed * sin, jnp.zeros_like(speed)], -1)
-        velocity = _f(velocity)
+        velocity = _last("State.create", "velocity", velocity, (2, 3), "(vx, vy, vz) or (vx, vy), in m/s")
         if velocity.shape[-1] == 2:
             velocity = jnp.concatenate([velocity, jnp.zeros_like(velocity[..., :1])], -1)
         if angular_velocity is None:
             wz = _f(0.0 if yaw_rate is None else yaw_rate)
             angular_velocity = jnp.stack([jnp.zeros_like(wz), jnp.zeros_like(wz), wz], -1)
-        return cls(position, velocity, yaw, _f(pitch), _f(roll), _f(angular_velocity))
+        angular_velocity = _last("State.create", "angular_velocity", angular_velocity, (3,), "(wx, wy, wz), in rad/s")
+        return cls(position, velocity, yaw, _f(pitch), _f(roll), angular_velocity)
 
 
 def normal_from_angles(azimuth, pitch=0.0):
@@ -139,7 +149,9 @@ class Contact(NamedTuple):
             if azimuth is None:
                 raise ValueError("Contact.create needs normal or azimuth")
             normal = normal_from_angles(azimuth, normal_pitch)
-        return cls(_f(point), _f(normal), _f(restitution), _f(friction), _f(penetration_time))
+        point = _last("Contact.create", "point", point, (3,), "(x, y, z), in m")
+        normal = _last("Contact.create", "normal", normal, (3,), "a vector (nx, ny, nz), or azimuth=")
+        return cls(point, normal, _f(restitution), _f(friction), _f(penetration_time))
 
 
 class ContactResult(NamedTuple):

@@ -280,6 +280,14 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
 
 
 def test_state_needs_a_height_for_a_2d_position():
+    for make, message in (
+            (lambda: ks_jax.Contact.create([-2.25, 0.0], azimuth=0.0), r"Contact.create: point has shape \(2,\)"),
+            (lambda: ks_jax.Vehicle.create(1500.0, [500.0, 2000.0], 4.5, 1.8), r"Vehicle.create: inertia has shape"),
+            (lambda: ks_jax.State.create([0, 0, 0.5], velocity=[1, 2, 3, 4]), r"State.create: velocity has shape"),
+            (lambda: ks_jax.solve("case.json"), "solve takes a Case"),
+            (lambda: ks_jax.load_case(Path(__file__).parent), "is a directory")):
+        with pytest.raises((ValueError, TypeError), match=message):
+            make()
     with pytest.raises(ValueError, match=r"position \(x, y\) has no z"):
         ks_jax.State.create([1.0, 2.0], speed=3.0)
     s = ks_jax.State.create([1.0, 2.0], speed=3.0, cg_height=0.6)
