@@ -283,7 +283,8 @@ def sweep_view(result, output=None, ax=None, contours=True):
     thinned = any(k > 1 for k in result.strides)
     note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
     if missing:
-        note.append(f"{missing} of {shown.size} points without a result (grey)")
+        how = "left out" if result.mode == "zip" else "gaps" if len(result.axes) == 1 else "grey"
+        note.append(f"{missing} of {shown.size} points without a result ({how})")
     finite = shown.compressed()
     flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
     if flat:  # one value everywhere (to rounding): say it, no contours of the rounding

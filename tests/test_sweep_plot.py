@@ -56,7 +56,7 @@ def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     np.testing.assert_allclose(shown[:, ~bad], want[:, ~bad], rtol=1e-12)
     assert shown.mask[:, bad].all() and not shown.mask[:, ~bad].any()
     assert (r["status"][:, bad] == 17).all()
-    assert f"{10 * bad.sum()} of 70 points without a result" in ax.get_title()
+    assert f"{10 * bad.sum()} of 70 points without a result (grey)" in ax.get_title()
     assert ax.get_xlabel() == "vehicles[1].speed [mph]" and ax.get_ylabel() == "contact.restitution"
     assert ax.get_title().startswith(f"{DV1} [mph]")
     assert ax.get_xlim()[0] < 6 < 60 < ax.get_xlim()[1]
@@ -79,11 +79,13 @@ def test_line_for_one_input_and_histogram_for_samples(case):
     np.testing.assert_allclose(line.get_ydata(), r[DV1] / MPH, rtol=1e-12)
 
     eps = np.random.default_rng(3).uniform(0.0, 0.3, 400)
+    eps[:7] = 1.5  # out of range: no result, left out of the histogram
     z = sweep(case, {"contact.restitution": eps}, outputs=[DV1], mode="zip")
     ax = draw(z)
-    assert sum(p.get_height() for p in ax.patches) == 400
+    assert sum(p.get_height() for p in ax.patches) == 393
+    assert "7 of 400 points without a result (left out)" in ax.get_title()
     median = [ln for ln in ax.get_lines() if ln.get_label().startswith("median")][0]
-    assert median.get_xdata()[0] == pytest.approx(np.median(z[DV1]) / MPH, rel=1e-12)
+    assert median.get_xdata()[0] == pytest.approx(np.median(z[DV1][7:]) / MPH, rel=1e-12)
 
 
 def test_sliding_is_drawn_as_stick_or_slide(case):
