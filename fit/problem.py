@@ -130,6 +130,21 @@ def _field(path):
     return parse_path(path)[2]
 
 
+def _q(x_si, path) -> str:
+    """A value of ``path`` as the user reads it: '100 mph (44.7 m/s)' (errors quote the file's units,
+    not only the SI number they were converted to)."""
+    from .uncertainty import fmt
+
+    try:
+        kind = input_kind(path)
+    except PathError:
+        try:
+            kind = output_kind(path)
+        except (PathError, KeyError):
+            return f"{x_si:.6g} (SI)"
+    return fmt(float(x_si), kind, digits=6, si=True)
+
+
 def check_unknown(case: Case, u: Unknown) -> Unknown:
     """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError)."""
     name = case.name
@@ -143,23 +158,23 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
                         f"give contact.{field} in the case to fit it")
     lo, hi = float(u.lower), float(u.upper)
     if math.isnan(lo) or math.isnan(hi) or not lo < hi:
-        raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{lo}, {hi}] (SI): the lower bound must be "
-                        "below the upper bound")
+        raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: the lower "
+                        "bound must be below the upper bound")
     if field in INPUT_LIMITS:
         plo, phi, strict = INPUT_LIMITS[field]
         if lo < plo or (strict and lo <= plo) or hi > phi:
             rule = f"{'>' if strict else '>='} {plo}" + (f" and <= {phi}" if math.isfinite(phi) else "")
-            raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{lo:.6g}, {hi:.6g}] (SI): "
-                            f"{field} must be {rule}, so must its bounds")
+            raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: "
+                            f"{field} must be {rule} (SI), so must its bounds")
     if field == "speed" and not math.isfinite(lo):
         raise CaseError(f"case '{name}': unknowns: {u.path}: a speed needs a lower bound >= 0")
     if u.start is not None and not lo <= u.start <= hi:
-        raise CaseError(f"case '{name}': unknowns: {u.path}: start {u.start:.6g} (SI) is outside the bounds "
-                        f"[{lo:.6g}, {hi:.6g}]")
+        raise CaseError(f"case '{name}': unknowns: {u.path}: start {_q(u.start, u.path)} is outside the bounds "
+                        f"[{_q(lo, u.path)}, {_q(hi, u.path)}]")
     if u.prior is not None:
         mean, sigma = u.prior
         if not (math.isfinite(mean) and math.isfinite(sigma) and sigma > 0):
-            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {mean}, sigma {sigma}): "
+            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {_q(mean, u.path)}, sigma {_q(sigma, u.path)}): "
                             "needs a finite mean and a positive sigma")
     return Unknown(u.path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
                    None if u.prior is None else (float(u.prior[0]), float(u.prior[1])))
@@ -186,9 +201,9 @@ def evidence_kind(case: Case, path: str):
 def check_evidence(case: Case, e: Evidence) -> Evidence:
     evidence_kind(case, e.path)  # raises on a bad path
     if not math.isfinite(e.value):
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {e.value} must be finite")
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)} must be finite")
     if not (math.isfinite(e.sigma) and e.sigma > 0):
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {e.sigma}: must be positive "
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {_q(e.sigma, e.path)}: must be positive "
                         "(an exact measurement is an input, not evidence)")
     return Evidence(e.path.replace(" ", ""), float(e.value), float(e.sigma))
 

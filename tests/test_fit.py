@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import jax
@@ -206,9 +207,15 @@ def test_seed_001_both_speeds_move_together():
      [{"quantity": "contact.sliding", "value": 1, "sigma": 1}], "contact.sliding"),
     ({"vehicles[1].speed": {"bounds": [0, 30]}},
      [{"quantity": "contact.energy_loss", "value": "1 kJ", "sigma": 0}], "sigma"),
+    # the file's units quoted, then SI: 100 mph = 44.704 m/s; 0.5 mph = 0.22352 m/s
+    ({"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"], "start": "100 mph"}}, SEED_EVIDENCE,
+     "start 100 mph (44.704 m/s) is outside the bounds [0 mph (0 m/s), 60 mph (26.8224 m/s)]"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6 mph", "sigma": "-0.5 mph"}],
+     "sigma = -0.5 mph (-0.22352 m/s): must be positive"),
 ])
 def test_bad_unknowns_and_evidence_are_refused(unknowns, evidence, words):
-    with pytest.raises(CaseError, match=words.replace("[", r"\[").replace("]", r"\]").replace(".", r"\.")):
+    with pytest.raises(CaseError, match=re.escape(words)):
         fit.reconstruct(load_case(SEED), unknowns, evidence)
 
 
