@@ -523,6 +523,10 @@ def check_output_path(path: str):
 
     group, vi, name, idx = parse_path(path)
     fields = VehicleResult._fields if group == "vehicles" else ContactResult._fields
+    if group == "contact" and name == "status":
+        raise PathError(f"path '{path}': the status is a code, not a number to sweep, fit or compare: read "
+                        "result.contact.status (ks_jax.status_text gives its words); a sweep always returns "
+                        "'status'")
     if name not in fields or name == "status":
         raise PathError(f"path '{path}': '{name}' is not a {'vehicle' if group == 'vehicles' else 'contact'} result; "
                         f"results are {', '.join(f for f in fields if f != 'status')}")

@@ -246,6 +246,8 @@ def test_paths_refuse_unknown_names():
             ks_jax.get_input(case.inputs, path)
     with pytest.raises(CaseError, match=r"index out of range \(0..2\)"):
         ks_jax.get_output(ks_jax.solve(case).result, "vehicles[0].delta_v[5]")
+    with pytest.raises(CaseError, match=r"the status is a code.*read result.contact.status"):
+        ks_jax.get_output(ks_jax.solve(case).result, "contact.status")
     for value in ("20 mph", None, [1.0, 2.0]):
         with pytest.raises(CaseError, match="the value must be one number, in SI units"):
             ks_jax.set_input(case.inputs, "vehicles[1].speed", value)
