@@ -47,6 +47,12 @@ def single(case, point, path):
 _SOLVE = jax.jit(ks_jax.solve_inputs, static_argnums=(1, 2))  # one compile per contact mode
 
 
+def _no_tangential(case, point):
+    tangential, _ = single(case, point, "contact.impulse_tangential")
+    magnitude, _ = single(case, point, "contact.impulse_magnitude")
+    return tangential <= 1e-12 * magnitude
+
+
 def assert_matches(result, case, points):
     """points: list of (result index, {path: value})."""
     for index, point in points:
@@ -56,6 +62,11 @@ def assert_matches(result, case, points):
             assert result["status"][index] == status
             if status >= 10 and path != "contact.sliding":  # invalid: NaN; separating: numbers
                 assert np.isnan(got), (path, index)
+            elif path == "contact.sliding" and status == 0 and _no_tangential(case, point):
+                # |T_c| > mu N_c with mu = 0 and T_c = 0 to rounding (an inline impact): the flag is the
+                # sign of rounding noise, which the sweep's and the single solve's programs round
+                # differently; the impulse is the same either way (compared above and below)
+                continue
             else:
                 np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-9, err_msg=f"{path} at {point}")
 
