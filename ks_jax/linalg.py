@@ -320,5 +320,5 @@ def degrees_0_360(rad):
     """Radians in [-pi, pi] (an ``atan2``) -> degrees in [0, 360). No jnp.mod: on a CPU it is a
     scalar libm call per value."""
     d = jnp.degrees(rad)
-    d = jnp.where(d < 0.0, d + 360.0, d) + 0.0  # + 0.0: -0.0 becomes 0.0
-    return jnp.where(d >= 360.0, 0.0, d)
+    d = jnp.where(d < 0.0, d + 360.0, d)
+    return jnp.where((d >= 360.0) | (d == 0.0), 0.0, d)  # d == 0.0: -0.0 (a frontal force) becomes 0.0

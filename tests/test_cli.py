@@ -95,6 +95,7 @@ def test_seed_case_files_json_and_toml(capsys):
     assert [v["ees"] / U.MPH for v in res["vehicles"]] == pytest.approx([11.281, 2.213], abs=1e-3)
     assert [v["crush"] / U.FT for v in res["vehicles"]] == pytest.approx([1.396, 0.059], abs=1e-4)
     assert [v["pdof"] for v in res["vehicles"]] == pytest.approx([180.0, 0.0])
+    assert '"pdof": -0.0' not in out and math.copysign(1.0, res["vehicles"][1]["pdof"]) == 1.0  # [0, 360)
     assert [v["pdof_clock"] for v in res["vehicles"]] == [6, 12]
     code, out, _ = run_cli(capsys, "solve", str(root / "seed_001_lucid_kia.toml"), "--json")
     res = json.loads(out)["cases"][0]
