@@ -174,7 +174,8 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     if u.prior is not None:
         mean, sigma = u.prior
         if not (math.isfinite(mean) and math.isfinite(sigma) and sigma > 0):
-            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {_q(mean, u.path)}, sigma {_q(sigma, u.path)}): "
+            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {_q(mean, u.path)}, "
+                            f"sigma {_q(sigma, u.path)}): "
                             "needs a finite mean and a positive sigma")
     return Unknown(u.path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
                    None if u.prior is None else (float(u.prior[0]), float(u.prior[1])))

@@ -511,7 +511,8 @@ def course_ties(case: "Case", paths) -> tuple:
         if group != "vehicles" or name != "yaw":
             continue
         vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
-        raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) and isinstance(vehicles[vi], dict) else {}
+        raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) else {}
+        raw = raw if isinstance(raw, dict) else {}
         if "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths:
             ties.append((k, f"vehicles[{vi}].course"))
     return tuple(ties)

@@ -289,8 +289,8 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
         if split:
             return None
         status, trig = prepared
-        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v, ties)), smoothing, st, tr,
-                                                         for_gradients=False))(status, trig, *vals)
+        return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v, ties)), smoothing,
+                                                         st, tr, for_gradients=False))(status, trig, *vals)
 
     def solve_fn(base, vals, prepared, stage):
         status, _ = prepared
