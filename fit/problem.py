@@ -35,6 +35,7 @@ from ks_jax.case import (
     Case,
     CaseError,
     PathError,
+    automatic_part,
     check_output_path,
     course_ties,
     get_input,
@@ -153,7 +154,7 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
     field = _field(u.path)
-    if field == "point" and case.auto_point or field == "normal" and case.auto_normal:
+    if automatic_part(case, u.path):
         raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
                         f"give contact.{field} in the case to fit it")
     lo, hi = float(u.lower), float(u.upper)

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import linalg as la
 from . import units as U
-from .types import INVALID_SPEED_1, INVALID_SPEED_2, OK, Contact, State, Vehicle, normal_from_angles
+from .types import INVALID_NONFINITE, INVALID_SPEED_1, INVALID_SPEED_2, OK, Contact, State, Vehicle, normal_from_angles
 
 
 class CaseError(ValueError):
@@ -488,14 +488,23 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     return inputs._replace(contact=holder)
 
 
-def speed_status(inputs: CaseInputs):
-    """() int32: INVALID_SPEED_1 (2) where vehicle 1's (2's) ``speed`` is negative, else OK.
+def speed_status(inputs: CaseInputs, status):
+    """``status`` (() int, the exchange's) with INVALID_SPEED_1 (2) where vehicle 1's (2's) ``speed``
+    is negative and ``status`` is not already invalid (the exchange's reasons come first).
 
     A case file refuses a negative speed; a swept, sampled or fitted one can reach it, and
     ``to_pytrees`` would turn it into travel backwards along the course. ``solve_inputs`` and the
     sweeps give such a row this status and NaN results instead (traceable, per row)."""
     s1, s2 = inputs.vehicles[0].speed, inputs.vehicles[1].speed
-    return jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(s2 < 0, INVALID_SPEED_2, OK)).astype(jnp.int32)
+    code = jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(s2 < 0, INVALID_SPEED_2, OK))
+    return jnp.where((code != OK) & (status < INVALID_NONFINITE), code, status).astype(jnp.asarray(status).dtype)
+
+
+def automatic_part(case: "Case", path) -> str | None:
+    """"point" or "normal" if ``path`` names the part of the contact that automatic contact computes
+    in ``case`` (not an input there: a sweep or a fit refuses to vary it), else None."""
+    _, _, name, _ = _input_leaf(path)
+    return name if (name == "point" and case.auto_point or name == "normal" and case.auto_normal) else None
 
 
 def course_ties(case: "Case", paths) -> tuple:

@@ -6,13 +6,12 @@ from dataclasses import dataclass
 from functools import partial
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .case import Case, CaseInputs, as_arrays, speed_status, to_pytrees
 from .derived import mask_invalid
 from .exchange import exchange
-from .types import INVALID_NONFINITE, OK, ExchangeResult, status_text
+from .types import ExchangeResult, status_text
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
@@ -33,16 +32,9 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
                                     auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
     else:
         result = exchange(v1, s1, v2, s2, contact, smoothing)
-    return with_speed_status(result, speed_status(inputs))
-
-
-def with_speed_status(result: ExchangeResult, code) -> ExchangeResult:
-    """``result`` with status ``code`` and NaN results where ``code`` (``case.speed_status``) is not
-    OK and the result's own status is not already invalid."""
-    status = result.contact.status
-    bad = (code != OK) & (status < INVALID_NONFINITE)
-    result = mask_invalid(result, ~bad)
-    return result._replace(contact=result.contact._replace(status=jnp.where(bad, code, status).astype(status.dtype)))
+    status = speed_status(inputs, result.contact.status)
+    result = mask_invalid(result, status == result.contact.status)  # NaN where the speed made it invalid
+    return result._replace(contact=result.contact._replace(status=status))
 
 
 @partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))

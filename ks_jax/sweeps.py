@@ -65,9 +65,9 @@ import numpy as np
 
 from . import units as U
 from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, output_kind
-from .case import course_ties, set_input, speed_status, to_pytrees
+from .case import automatic_part, course_ties, set_input, speed_status, to_pytrees
 from .exchange import CHUNK_ROWS
-from .types import OK, STATUS_TEXT, status_text
+from .types import STATUS_TEXT, status_text
 
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
@@ -281,7 +281,7 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
         def one(*v):
             inputs = _row_inputs(base, paths, v, ties)
             status, trig = prepare(*to_pytrees(inputs))
-            return jnp.where(status == OK, speed_status(inputs), status), trig
+            return speed_status(inputs, status), trig
 
         return vals, jax.vmap(one)(*vals)
 
@@ -401,8 +401,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         raise CaseError("sweep needs at least one input path to vary: over={path: values}")
     paths = tuple(over)
     for p in paths:
-        _, _, name, _ = _input_leaf(p)  # raises PathError (a CaseError) naming the path
-        if name == "point" and case.auto_point or name == "normal" and case.auto_normal:
+        name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
+        if name:
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
                             f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
                             "to vary it")
