@@ -92,7 +92,7 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
     u_after = (v1.velocity_after + la.cross(v1.angular_velocity_after, r1)) - (
         v2.velocity_after + la.cross(v2.angular_velocity_after, r2)
     )
-    energy = -0.5 * la.dot(j, u + u_after)
+    energy = la.plain_zero(-0.5 * la.dot(j, u + u_after))  # J = 0 (separating): 0, not -0
     ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass,
                           body1[0].length + body2[0].length)
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)

@@ -318,7 +318,21 @@ def safe_atan2(y, x):
 
 def degrees_0_360(rad):
     """Radians in [-pi, pi] (an ``atan2``) -> degrees in [0, 360). No jnp.mod: on a CPU it is a
-    scalar libm call per value."""
+    scalar libm call per value. Where a value is put to 0 (-0.0, as a frontal force gives, and a
+    tiny negative angle that rounds to 360) its derivative is kept: the angle's rate of turning."""
     d = jnp.degrees(rad)
     d = jnp.where(d < 0.0, d + 360.0, d)
-    return jnp.where((d >= 360.0) | (d == 0.0), 0.0, d)  # d == 0.0: -0.0 (a frontal force) becomes 0.0
+    return value_with_gradient(jnp.where((d >= 360.0) | (d == 0.0), 0.0, d), d)
+
+
+def plain_zero(x):
+    """``x`` with -0.0 written 0.0 (a result that no impulse made is 0, not "-0" in a file); its
+    derivative is that of ``x`` everywhere, 0 included."""
+    return value_with_gradient(jnp.where(x == 0.0, 0.0, x), x)
+
+
+def value_with_gradient(value, x):
+    """``value`` (equal to ``x`` or a corrected form of it, such as -0.0 -> 0.0) with the derivative of
+    ``x``: a ``jnp.where`` alone would make the derivative 0 where it corrects. x - stop_gradient(x) is
+    +0.0 for every finite x, so the value is ``value`` exactly."""
+    return lax.stop_gradient(value) + (x - lax.stop_gradient(x))

@@ -362,3 +362,30 @@ def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
             fd = (np.asarray(f(*args_p)) - np.asarray(f(*args_m))) / (2 * h)
             np.testing.assert_allclose(jac[:, i], fd, rtol=1e-5, atol=1e-5 * (1 + np.max(np.abs(fd))),
                                        err_msg=f"argument {k}, component {i}")
+
+
+def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
+    """In the inline head-on the force on vehicle 2 is exactly frontal (pdof 0.0) and the impulse
+    azimuth is exactly 180 deg (vehicle 1 is pushed straight back). Turning vehicle 2's velocity a little sideways turns every angle: their
+    derivatives with respect to v_y at exactly that point equal central differences of the angle
+    taken modulo 360 (one side of the point reads near 0 deg, the other near 360)."""
+    case = head_on()
+    v1, s1, v2, s2, c = kit.inputs(case)
+    angles = {"pdof 1": lambda r: r.vehicles[0].pdof, "pdof 2": lambda r: r.vehicles[1].pdof,
+              "impulse azimuth": lambda r: r.contact.impulse_azimuth,
+              "course after 1": lambda r: r.vehicles[0].course_after}
+
+    def angle(vy, name):
+        res = ks_jax.exchange(v1, s1, v2, s2._replace(velocity=s2.velocity.at[1].set(vy)), c, smoothing=TAU)
+        return angles[name](res)
+
+    h = 1e-6
+    assert float(angle(0.0, "pdof 2")) == 0.0 and float(angle(0.0, "impulse azimuth")) == 180.0
+    assert sorted([float(angle(h, "pdof 2")), float(angle(-h, "pdof 2"))]) == [pytest.approx(0.0, abs=1e-3),
+                                                                             pytest.approx(360.0, abs=1e-3)]
+    for name in angles:
+        step = float(angle(h, name)) - float(angle(-h, name))
+        fd = ((step + 180.0) % 360.0 - 180.0) / (2 * h)
+        ad = float(jax.jit(jax.grad(angle), static_argnums=1)(0.0, name))
+        assert abs(fd) > 1.0, name  # the angle does turn
+        np.testing.assert_allclose(ad, fd, rtol=1e-6, err_msg=name)

@@ -99,6 +99,21 @@ def test_degrees_and_clock():
     assert math.isclose(float(la.degrees_0_360(la.atan2(-1.0, 0.0))), 270.0)
 
 
+def test_corrected_zeros_keep_their_derivative():
+    """-0.0 is written 0.0 (and an angle that rounds to 360 deg is 0), but the derivative stays that of
+    the uncorrected value (d/dx of degrees(x) is 180/pi, d/dx of -x*x/2 + 3x is 3 at 0): a plain
+    ``jnp.where`` would make it 0 exactly there."""
+    values, grads = jax.vmap(jax.value_and_grad(lambda r: la.degrees_0_360(r)))(jnp.array([-0.0, 0.0, -1e-17, 0.3]))
+    np.testing.assert_array_equal(np.signbit(values), False)
+    np.testing.assert_array_equal(values[:3], 0.0)
+    np.testing.assert_allclose(grads, 180.0 / np.pi, rtol=1e-15)
+    value, grad = jax.value_and_grad(lambda x: la.plain_zero(-0.5 * x * x * 0.0 - 0.0 * x))(2.0)
+    assert value == 0.0 and not np.signbit(value) and grad == 0.0
+    f = lambda x: la.plain_zero(-(x * x) / 2 + 3 * x)  # noqa: E731
+    assert np.signbit(float(-(0.0 * 0.0) / 2 + 3 * -0.0)) and not np.signbit(float(f(-0.0)))
+    assert float(jax.grad(f)(-0.0)) == 3.0 and float(jax.grad(f)(1.0)) == 2.0 and float(f(1.0)) == 2.5
+
+
 @pytest.mark.parametrize("diagonal", [False, True])
 def test_world_inverse_inertia_derivative_matches_plain_autodiff(diagonal):
     """The hand-written tangent of R I^-1 R^T against autodiff of jnp.linalg.inv and the rotation."""
