@@ -67,7 +67,7 @@ from . import units as U
 from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, output_kind
 from .case import automatic_part, course_ties, set_input, speed_status, to_pytrees
 from .exchange import CHUNK_ROWS
-from .types import STATUS_TEXT, status_text
+from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
@@ -124,11 +124,12 @@ class SweepResult(Mapping):
 
     def table(self, units="si"):
         """Flat columns (one row per point): the inputs, the outputs, the status code, as a .csv of
-        ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame).
+        ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame): a flag
+        (``contact.sliding``) of an invalid row is None (an object column where there is one).
         units: "si", or "us" (mph, ft, lbf s, ft lbf, deg, deg/s, lb; the unit in each name)."""
         _check_units(units, "units")
-        return _columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
-                        _outputs_in_units(self.outputs, units))
+        return _missing_flags(_columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
+                                       _outputs_in_units(self.outputs, units)))
 
     def thinned(self, limit=None):
         """This result with at most ``limit`` values along each axis (default: ``PLOT_LIMITS``,
@@ -659,8 +660,26 @@ def _in_units(path, values, kind, units):
 
 
 def _axes_in_units(axes, units):
-    """{name: values} of the swept inputs ``axes`` (path -> values) by ``_in_units``."""
-    return dict(_in_units(p, v, input_kind(p), units) for p, v in axes.items())
+    """{name: values} of the swept inputs ``axes`` (path -> values) by ``_in_units``; a converted
+    value is given as its 15-significant-digit form where that lies within two units in the last
+    place (the conversion's own rounding): 30 mph, not 29.999999999999996."""
+    named = dict(_in_units(p, v, input_kind(p), units) for p, v in axes.items())
+    if units == "si":
+        return named
+    return {name: _typed_back(v) if name.endswith("]") else v for name, v in named.items()}
+
+
+def _typed_back(values):
+    """``values`` (floats) with each one that is within 2 ulp of a 15-significant-digit number replaced
+    by that number (undoing the rounding of a unit conversion of a value typed in short decimals)."""
+    if not np.issubdtype(values.dtype, np.floating) or values.dtype.itemsize < 8:
+        return values
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        digits = np.where(values == 0, 0, np.floor(np.log10(np.abs(values))))
+        scale = 10.0 ** (14 - digits)
+        short = np.round(values * scale) / scale
+    near = np.isfinite(short) & (np.abs(short - values) <= 2 * np.spacing(np.abs(values)))
+    return np.where(near, short, values)
 
 
 def _outputs_in_units(outputs, units):
@@ -680,6 +699,30 @@ def _arrow_csv():
     return pyarrow.csv
 
 
+def _invalid_rows(codes):
+    """Which status codes are "invalid: ..." (every code from ``INVALID_NONFINITE`` on)."""
+    return np.asarray(codes) >= INVALID_NONFINITE
+
+
+def _missing_flags(cols):
+    """``cols`` with each flag (bool) column an object array holding None on the invalid rows, where
+    there are any (their numbers are NaN; a False would read as a result)."""
+    invalid = _invalid_rows(cols["status"])
+    if not invalid.any():
+        return cols
+    return {k: np.where(invalid, None, v) if v.dtype == bool else v for k, v in cols.items()}
+
+
+def _arrow_table(cols):
+    """A pyarrow table of ``cols`` (name -> flat array, "status" among them); a flag (bool) of an
+    invalid row is null (its numbers are NaN), not a false that would read as a result."""
+    import pyarrow as pa
+
+    invalid = _invalid_rows(cols["status"])
+    return pa.table({k: pa.array(v, mask=invalid) if v.dtype == bool and invalid.any() else v
+                     for k, v in cols.items()})
+
+
 def _status_texts(codes):
     """The status text of each code (an object array sharing one string per distinct code)."""
     distinct, which = np.unique(codes, return_inverse=True)
@@ -691,7 +734,8 @@ class ResultWriter:
     pass ``writer.chunk`` as ``on_chunk`` (with ``keep=False``), then call ``close()`` (or ``abort()``
     on an error). Memory stays at a few chunks whatever the number of points (``ks-jax sweep``).
 
-    .csv: one row per point: the swept inputs, the outputs, ``status``, ``status_text``. Where
+    .csv: one row per point: the swept inputs, the outputs, ``status``, ``status_text``; an invalid
+    row's numbers are NaN and its flags (``contact.sliding``) empty (null in .parquet). Where
     pyarrow is installed its CSV writer formats the numbers (shortest text that reads back as the same
     float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"; float32 results as float32, so
     "0.1" where the csv module writes 0.10000000149011612), writes booleans true / false and
@@ -699,13 +743,15 @@ class ResultWriter:
     quoted only where they must be), several times slower: Python's float formatting is the cost.
     .parquet: the same columns (pyarrow), in row groups of about 2^18 points.
     .npz: one array per output in the result's shape, ``axis:<path>`` for the axes, the status codes
-    and texts. Each array is appended to a temporary .npy file beside ``out``, chunk by chunk; ``close``
+    and texts (a bool array has no empty value: an invalid row's flag is False there, read its
+    status). Each array is appended to a temporary .npy file beside ``out``, chunk by chunk; ``close``
     stores them in ``out`` (uncompressed, as ``np.savez``), so the disk briefly holds them twice.
     The file is written as ``.<name>.partial`` beside ``out`` and renamed to ``out`` by ``close``: a
     sweep that fails leaves an earlier ``out`` as it was.
     ``units="us"``: every swept input and output in the units of ``units.US_DISPLAY`` (mph, ft, lbf s,
     ft lbf, deg, deg/s, lb), its unit in its name ("vehicles[1].speed [mph]", in every format);
-    dimensionless ones, booleans and the status as they are. Default "si": SI, names as paths.
+    dimensionless ones, booleans and the status as they are; a swept value typed as 25 mph is 25, not
+    the 24.999999999999996 that comes back from m/s. Default "si": SI, names as paths.
     """
 
     ROW_GROUP = 1 << 18
@@ -760,29 +806,29 @@ class ResultWriter:
         else:
             cols = _columns(self._column_axes, self.mode, lo, hi, chunk)
             cols["status_text"] = _status_texts(cols["status"])
-            if self.kind == ".csv":
+            if self.kind == ".csv" and self._arrow_csv is None:
                 self._csv_chunk(cols)
             else:
-                self._pending.append(cols)
-                if sum(len(c["status"]) for c in self._pending) >= self.ROW_GROUP:
-                    self._flush_parquet()
+                table = _arrow_table(cols)
+                if self.kind == ".csv":
+                    self._arrow_csv_chunk(table)
+                else:
+                    self._pending.append(table)
+                    if sum(t.num_rows for t in self._pending) >= self.ROW_GROUP:
+                        self._flush_parquet()
         self._written += hi - lo
 
     def _csv_chunk(self, cols):
         import csv
 
-        if self._arrow_csv is not None:
-            return self._arrow_csv_chunk(cols)
         if self._file is None:
             self._file = self._partial.open("w", newline="")
             self._csv = csv.writer(self._file)
             self._csv.writerow(list(cols))
-        self._csv.writerows(zip(*(c.tolist() for c in cols.values())))
+        texts = (c.tolist() for c in _missing_flags(cols).values())  # a flag of an invalid row: ""
+        self._csv.writerows(zip(*texts))
 
-    def _arrow_csv_chunk(self, cols):
-        import pyarrow as pa
-
-        table = pa.table(cols)
+    def _arrow_csv_chunk(self, table):
         if self._file is None:
             options = self._arrow_csv.WriteOptions(quoting_style="needed")
             self._file = self._arrow_csv.CSVWriter(str(self._partial), table.schema, write_options=options)
@@ -794,7 +840,7 @@ class ResultWriter:
 
         if not self._pending:
             return
-        table = pa.table({k: np.concatenate([c[k] for c in self._pending]) for k in self._pending[0]})
+        table = pa.concat_tables(self._pending)
         if self._parquet is None:
             self._parquet = pq.ParquetWriter(self._partial, table.schema)
         self._parquet.write_table(table)

@@ -18,6 +18,7 @@ jax.config.update("jax_enable_x64", True)  # also set by conftest; kept so the m
 import ks_jax  # noqa: E402
 from ks_jax.case import CaseError, as_arrays, get_output, set_input  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
+from ks_jax import units as U  # noqa: E402
 from ks_jax.sweeps import DEFAULT_OUTPUTS, ResultWriter, parse_over, sweep, write_results  # noqa: E402
 
 CASES = Path(ks_jax.__file__).parent / "cases"
@@ -325,8 +326,10 @@ def read_table(path):
         names, *rows = list(csv.reader(f))
 
     def column(values):
-        if values[0].lower() in ("true", "false"):  # the csv module writes True, pyarrow true
-            return np.array([v.lower() == "true" for v in values])
+        flags = {v.lower() for v in values}
+        if flags <= {"true", "false", ""} and flags != {""}:  # the csv module writes True, pyarrow true
+            read = np.array([{"true": True, "false": False}.get(v.lower()) for v in values], dtype=object)
+            return read if "" in flags else read.astype(bool)  # an empty field (invalid row): None
         try:
             return np.array(values, dtype=float)
         except ValueError:
@@ -368,6 +371,18 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     np.testing.assert_array_equal(a["contact.restitution"], np.tile(np.linspace(0, 1.2, 13), 21))
     assert list(a["status_text"]) == [ks_jax.status_text(int(c)) for c in a["status"]]
     assert {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"} == set(a["status_text"])
+    assert_no_flag_on_invalid_rows(a, kept)
+
+
+def assert_no_flag_on_invalid_rows(table, result):
+    """A flag (``contact.sliding``) of an invalid row is an empty field (.csv) or null (.parquet): its
+    numbers are NaN, and "false" would read as a result; every other row holds the sweep's flag."""
+    invalid = table["status"] >= 10
+    assert invalid.any() and not invalid.all()
+    flags = table["contact.sliding"]
+    assert all(f is None for f in flags[invalid])
+    assert [bool(f) for f in flags[~invalid]] == np.ravel(result["contact.sliding"])[~invalid].tolist()
+    assert all(isinstance(f, (bool, np.bool_)) for f in flags[~invalid])
 
 
 def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
@@ -398,7 +413,10 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
         a, b = read_table(tmp_path / f"{name}_arrow.csv"), read_table(tmp_path / f"{name}_csv.csv")
         assert (tmp_path / f"{name}_arrow.csv").read_text() != (tmp_path / f"{name}_csv.csv").read_text()
         assert list(a) == list(b) == [*result.inputs(), *outs, "status", "status_text"]
-        for p in outs:  # as the sweep stored them (float32 read as float32)
+        if name == "zip":  # with invalid rows
+            assert_no_flag_on_invalid_rows(a, result)
+            assert_no_flag_on_invalid_rows(b, result)
+        for p in outs:  # as the sweep stored them (float32 read as float32; None, a missing flag: False)
             a[p], b[p] = (x[p].astype(result[p].dtype) for x in (a, b))
         for k in a:
             np.testing.assert_array_equal(a[k], b[k], err_msg=f"{name}: {k}")
@@ -431,6 +449,26 @@ def test_large_csv_without_pyarrow_suggests_it(tmp_path, capsys, monkeypatch):
                                   read_table(tmp_path / "b.csv")["contact.impulse_magnitude"])
 
 
+def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
+    """A value typed in mph or ft comes back from SI as 24.999999999999996 mph or 1.9999999999999996 ft;
+    the file (and the .npz axis) give it as typed, and leave values that are not short decimals as
+    converted (within 2 units in the last place)."""
+    args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5", "--over", "vehicles[0].cg_height=1ft:3ft:7",
+            "--output", "contact.impulse_magnitude", "--units", "us", "--no-progress"]
+    assert main([*args, "--out", str(tmp_path / "us.csv")]) == 0
+    assert main([*args, "--out", str(tmp_path / "us.npz")]) == 0
+    capsys.readouterr()
+    miles, feet = np.linspace(10 * U.MPH, 30 * U.MPH, 5) / U.MPH, np.linspace(1 * U.FT, 3 * U.FT, 7) / U.FT
+    assert miles[3] != 25.0 and feet[3] != 2.0  # what plain conversion gives
+    table, npz = read_table(tmp_path / "us.csv"), np.load(tmp_path / "us.npz")
+    for speeds, heights in ((table["vehicles[1].speed [mph]"][::7], table["vehicles[0].cg_height [ft]"][:7]),
+                            (npz["axis:vehicles[1].speed [mph]"], npz["axis:vehicles[0].cg_height [ft]"])):
+        np.testing.assert_array_equal(speeds, [10.0, 15.0, 20.0, 25.0, 30.0])
+        np.testing.assert_array_equal(heights[::3], [1.0, 2.0, 3.0])
+        np.testing.assert_allclose(heights, feet, rtol=4e-16)
+        assert heights[1] != round(heights[1], 14)  # 4/3 ft: as converted
+
+
 def test_files_in_us_units(tmp_path, capsys):
     """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
     column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
@@ -449,9 +487,10 @@ def test_files_in_us_units(tmp_path, capsys):
     si, us = read_table(tmp_path / "si.csv"), read_table(tmp_path / "us.csv")
     si_npz, us_npz = np.load(tmp_path / "si.npz"), np.load(tmp_path / "us.npz")
     assert list(us)[:3] == ["vehicles[1].speed [mph]", "contact.normal [deg]", "contact.restitution"]
-    np.testing.assert_allclose(us["vehicles[1].speed [mph]"], np.repeat([10.0, 20.0, 30.0], 6), rtol=1e-14)
-    np.testing.assert_allclose(us["contact.normal [deg]"], np.tile(np.repeat([0.0, 20.0, 40.0], 2), 3), atol=1e-12)
-    np.testing.assert_allclose(us_npz["axis:vehicles[1].speed [mph]"], [10.0, 20.0, 30.0], rtol=1e-14)
+    np.testing.assert_array_equal(us["vehicles[1].speed [mph]"], np.repeat([10.0, 20.0, 30.0], 6))
+    np.testing.assert_array_equal(us["contact.normal [deg]"], np.tile(np.repeat([0.0, 20.0, 40.0], 2), 3))
+    np.testing.assert_array_equal(us_npz["axis:vehicles[1].speed [mph]"], [10.0, 20.0, 30.0])
+    np.testing.assert_array_equal(us_npz["axis:contact.normal [deg]"], [0.0, 20.0, 40.0])
     for p, (unit, scale) in outs.items():
         name = p if unit is None else f"{p} [{unit}]"
         if unit is None:
@@ -471,7 +510,10 @@ def test_files_in_us_units(tmp_path, capsys):
     assert set(table_us) == set(us) - {"status_text"} and set(table_si) == set(si) - {"status_text"}
     for table, file in ((table_us, us), (table_si, si)):
         for k in table:
-            np.testing.assert_allclose(table[k], file[k], rtol=1e-13, atol=1e-12, err_msg=k)
+            if k == "contact.sliding":  # None on the invalid rows, in the file and in the table
+                np.testing.assert_array_equal(table[k], file[k], err_msg=k)
+            else:
+                np.testing.assert_allclose(table[k], file[k], rtol=1e-13, atol=1e-12, err_msg=k)
     with pytest.raises(CaseError, match="units = 'imperial': the units of a results file must be 'si' or 'us'"):
         write_results(kept, tmp_path / "x.csv", units="imperial")
     assert not (tmp_path / "x.csv").exists()
