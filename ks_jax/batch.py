@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from .exchange import CHUNK_ROWS, _fenced, as_chunks, prepare, results_stage, values_impulse_stage
+from .exchange import CHUNK_ROWS, _fenced, as_chunks, exchange, prepare, results_stage, values_impulse_stage
 from .types import Contact, ExchangeResult, State, Vehicle
 
 DEFAULT_CHUNK = CHUNK_ROWS  # rows per chunk, as in ``sweep`` and ``exchange``'s vmap rule
@@ -63,7 +63,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
 
     Every leaf has the batch size N first (a (3,) input becomes (N, 3)). Returns the
     ExchangeResult with a leading axis N, as NumPy arrays; rows with invalid inputs get their
-    status code and NaN, as in ``exchange``. ``chunk``: rows per chunk (default 16384).
+    status code and NaN, as in ``exchange``; a batch of no rows, results of no rows.
+    ``chunk``: rows per chunk (default 16384).
     ``out``: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an
     earlier result of a batch of the same size), written in place and returned. In a loop over
     batches this saves the first touch of ~520 bytes of new memory per row, whose cost on the
@@ -73,7 +74,7 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     if int(chunk) < 1:
         raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
-    args = (vehicle1, state1, vehicle2, state2, contact)
+    args, target = (vehicle1, state1, vehicle2, state2, contact), out
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
         raise TypeError("exchange_batch computes values into NumPy arrays and cannot run under jax.jit, "
                         "jax.grad or jax.vmap; there, use jax.vmap(ks_jax.exchange)")
@@ -82,13 +83,17 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         raise ValueError("exchange_batch: every input needs the same leading batch axis; got sizes "
                          f"{sorted(map(str, sizes))}")
     n = sizes.pop()
-    if n == 0:
-        raise ValueError("exchange_batch: the batch is empty")
     given = [x for x in jax.tree_util.tree_leaves(args) if isinstance(x, np.ndarray)]
     args = jax.tree_util.tree_map(jnp.asarray, args)
+    if n == 0:  # nothing to solve (a filtered batch may be empty): empty results, shaped and typed
+        empty = jax.tree_util.tree_map(np.array, jax.vmap(lambda *a: exchange(*a, smoothing=smoothing))(*args))
+        if target is None:
+            return empty
+        _checked_out(target, empty, 0, given)
+        return target
     size = min(int(chunk), n)
     prep, imp, res = _stages(size, float(smoothing))
-    target, out, treedef, pending = out, None, None, None
+    out, treedef, pending = None, None, None
 
     def store(lo, start, chunk_result):  # rows lo.. of the batch from a chunk that starts at ``start``
         for o, x in zip(out, jax.tree_util.tree_leaves(chunk_result)):

@@ -109,6 +109,21 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
         ks_jax.exchange_batch(*numpy_inputs, out=aliased)
 
 
+def test_exchange_batch_of_no_rows(kit, random_cases):
+    """An empty batch (a filtered batch may be) gives empty results with the fields, trailing shapes and
+    dtypes of a one-row batch's; an ``out`` of that shape is returned as it is."""
+    one = kit.inputs(random_cases["principal"][:1])
+    none = jax.tree_util.tree_map(lambda x: np.asarray(x)[:0], one)
+    got, row = ks_jax.exchange_batch(*none), ks_jax.exchange_batch(*one)
+    assert jax.tree_util.tree_structure(got) == jax.tree_util.tree_structure(row)
+    for a, b in zip(_leaves(got), _leaves(row)):
+        assert isinstance(a, np.ndarray) and a.shape == (0,) + b.shape[1:] and a.dtype == b.dtype
+    assert ks_jax.exchange_batch(*none, out=got) is got
+    wrong = got._replace(contact=got.contact._replace(impulse=np.zeros((1, 3))))
+    with pytest.raises(ValueError, match=r"out\.contact\.impulse = ndarray float64\[1, 3\]"):
+        ks_jax.exchange_batch(*none, out=wrong)
+
+
 # --------------------------------------------------------------------------- jax.vmap(exchange) in chunks
 @pytest.fixture
 def small_chunks(monkeypatch):
