@@ -73,6 +73,13 @@ def _draw_box(ax, corners, color, style, label=None, alpha=1.0):
     ax.plot(corners[1:3, 0], corners[1:3, 1], style, color=color, lw=3.0, alpha=alpha)  # front face
 
 
+def _arrow(ax, tip, tail, props, **kw):
+    """An arrow from ``tail`` to ``tip`` (data coordinates) that the axes' limits take in: matplotlib
+    leaves an annotation out of the autoscaling, and does not draw it at all where its tip is outside."""
+    ax.annotate("", tip, tail, arrowprops=props, **kw)
+    ax.update_datalim(np.array([tip, tail], float))
+
+
 def top_view(solution, ax=None):
     """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
     Returns the axes."""
@@ -118,8 +125,7 @@ def top_view(solution, ax=None):
         tang = np.array([-n[1], n[0]])
         half = 0.45 * extent
         ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
-        ax.annotate("", p + 0.4 * extent * n, p, arrowprops=dict(arrowstyle="-|>", color="red", lw=1.8),
-                    zorder=5)
+        _arrow(ax, p + 0.4 * extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.8), zorder=5)
         ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
         mu = float(inputs.contact.friction)
         half_angle = math.degrees(math.atan(mu))
@@ -131,7 +137,7 @@ def top_view(solution, ax=None):
         if j_mag > 0:
             k = 0.35 * extent / j_mag  # m per N s
             for i, sign in enumerate((1.0, -1.0)):
-                ax.annotate("", p + sign * k * j, p, arrowprops=dict(arrowstyle="-|>", color=COLORS[i], lw=2.5))
+                _arrow(ax, p + sign * k * j, p, dict(arrowstyle="-|>", color=COLORS[i], lw=2.5))
                 ax.plot([], [], color=COLORS[i], lw=2.5,
                         label=f"impulse on {names[i]}: {j_mag:,.0f} N s ({j_mag / U.LBF_S:,.0f} lbf s)")
         ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
@@ -153,8 +159,8 @@ def top_view(solution, ax=None):
                 # before on the left of the arrow's line, after on its right, so that they never hide
                 # each other or the impulse arrows of an inline impact
                 shift = side * 0.05 * extent * np.array([-vec[1], vec[0]]) / length
-                ax.annotate("", cgs[i] + shift + v_scale * vec, cgs[i] + shift,
-                            arrowprops=dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
+                _arrow(ax, cgs[i] + shift + v_scale * vec, cgs[i] + shift,
+                       dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
             ax.plot(*cgs[i], "o", color=COLORS[i], ms=4)
         unit = f"1 m = {1 / v_scale:.2f} m/s = {1 / v_scale / U.MPH:.2f} mph"
         ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
@@ -162,6 +168,7 @@ def top_view(solution, ax=None):
     if no_contact:
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
 
+    ax.autoscale_view()  # with the arrows' ends in the data limits
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

@@ -70,6 +70,22 @@ def test_automatic_tbone_drawing():
     np.testing.assert_allclose(shift, 44 * U.FT * 0.05, rtol=1e-9)  # the pickup moves 2.2 ft in dt_p
 
 
+@pytest.mark.parametrize("name", ["auto_tbone.json", "seed_001_lucid_kia.toml", "auto_seed_000.json"])
+def test_every_arrow_is_inside_the_axes(name):
+    """Each arrow (the normal, the impulses, the velocities) ends inside the drawn limits: matplotlib
+    does not draw an annotation whose tip is outside them (the normal of the T-bone was missing)."""
+    with resources.as_file(case_path(name)) as path:
+        sol = ks_jax.solve(ks_jax.load_case(path))
+    ax = draw(sol)
+    ax.figure.canvas.draw()
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    arrows = [t for t in ax.texts if t.arrow_patch is not None]
+    assert len(arrows) == 7  # the normal, two impulses, four velocities
+    for a in arrows:
+        for x, y in (a.xy, a.xyann):
+            assert x0 <= x <= x1 and y0 <= y <= y1, (a.arrow_patch.get_edgecolor(), (x, y), (x0, x1), (y0, y1))
+
+
 def test_explicit_contact_drawing_and_two_panels(tmp_path):
     with resources.as_file(case_path("seed_001_lucid_kia.toml")) as path:
         sol = ks_jax.solve(ks_jax.load_case(path))
