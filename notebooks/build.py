@@ -35,7 +35,9 @@ def reading():
 
 The two Virtual CRASH manual chapters on KS impulse data stage an inline rear impact and read the
 auto-ees panel: impulse, deformation energy, delta-V, crush and EES. Here both are solved with ks-jax from
-the case files shipped in the package, and every number is rebuilt by hand beside the manual's, step by step.
+the case files shipped in the package, and the impulse, energy, delta-V and EES are rebuilt by hand beside the
+manual's, step by step. (The crushes are not a check: the chapter-000 case's dimensions were chosen so that
+the box-to-centroid distances are the manual's deformations, and the hand EES below uses those crushes.)
 """),
         ("code", """
 import math
@@ -88,7 +90,7 @@ rows = [
 ]
 print(f"{'':22}{'by hand':>14}{'ks-jax':>14}{'manual':>14}")
 for name, hand, ks, manual, unit in rows:
-    f = lambda x: "" if x is None else f"{float(x):14.3f}"
+    f = lambda x: " " * 14 if x is None else f"{float(x):14.3f}"
     print(f"{name:22}{f(hand)}{f(ks)}{f(manual)}  {unit}")
 assert abs(float(sol0.result.contact.impulse_magnitude) - 5946.847) < 1e-3
 """),
@@ -98,8 +100,10 @@ assert abs(float(sol0.result.contact.impulse_magnitude) - 5946.847) < 1e-3
 ## Chapter 001: Kia K5 into a Lucid Air
 
 Lucid (vehicle 1) 155.75 slug at 5 mph; Kia (vehicle 2) 100.38 slug at 20 mph; restitution 0.1.
-The chapter's hand calculation rounds the reduced mass to 61.04 slug and the closing speed to 22 ft/s,
-so it differs from the exact numbers in the fourth digit.
+The closing speed is exactly 22 ft/s (15 mph) and the reduced mass 61.04 slug to four digits, so the impulse
+is 1.1 x 61.04 x 22 = 1477.17 lbf s; the chapter prints 1477.21 lbf s, and beside it 6571.96 N s, which is
+1477.44 lbf s. Its kinetic energies carry the same slips in the last digits (14624.38 ft lbf against
+14623.97 by hand). The hand column here is exact arithmetic, and ks-jax agrees with it.
 """),
         ("code", """
 v1, v2 = lucid_case.inputs.vehicles
@@ -123,7 +127,7 @@ rows = [
 ]
 print(f"{'':22}{'by hand':>14}{'ks-jax':>14}{'manual':>14}")
 for name, hand, ks, manual, unit in rows:
-    f = lambda x: "" if x is None else f"{float(x):14.3f}"
+    f = lambda x: " " * 14 if x is None else f"{float(x):14.3f}"
     print(f"{name:22}{f(hand)}{f(ks)}{f(manual)}  {unit}")
 """),
         ("code", "print(text_report(sol1))"),
@@ -319,7 +323,7 @@ Reading the maps:
 
 The same seed case over a 1000 x 1000 grid of Kia speed and restitution: 10^6 exchanges. Compilation happens
 once per combination of swept paths, outputs, grid shape and chunk size, so the warm-up solves only the first
-chunk (65536 points) of the same grid; the timed call then runs without compiling.
+65536 points (four chunks of 16384) of the same grid; the timed call then runs without compiling.
 """),
         ("code", """
 big = {"vehicles[1].speed": np.linspace(6, 60, 1000) * U.MPH, "contact.restitution": np.linspace(0, 0.5, 1000)}
@@ -608,13 +612,15 @@ for line in fu.unidentified:
     print(" -", line)
 """),
         ("md", """
-The fit still returns numbers (any point of the valley reproduces the evidence), but it refuses to put an error
-bar on them: the standard errors are infinite, and `unidentified` says why, in words:
+The fit still returns numbers (any point of the valley reproduces the evidence), but it gives them no usable
+error bar: the standard errors of the SUV's speed and of the restitution are infinite, the sedan's is hundreds
+of mph, and `unidentified` says why, in words:
 
 - **SUV speed and restitution**: the contact slides, so the impulse is set by the normal closing speed times
   (1 + eps); the SUV's speed and the restitution trade off along the red line above. The delta-V fixes only
   their combination.
-- **Sedan speed** (which even ends at its bound of 0 mph): the sedan moves along the contact plane. In a sliding contact the tangential impulse is
+- **Sedan speed** (which even ends at its bound of 0 mph; the restitution ends at its bound of 0.5, and
+  `fu.at_bound` says so for both): the sedan moves along the contact plane. In a sliding contact the tangential impulse is
   mu times the normal one whatever the sliding speed, so its speed hardly changes the delta-V at all: the
   evidence leaves it practically free ("poorly determined").
 
@@ -777,14 +783,19 @@ for p, sol in zip(shown, sols):
     )
 
 
+def build(name):
+    """The notebook ``name`` (a file name of ``NOTEBOOKS``) as built from the cells above, without outputs."""
+    nb = nbformat.v4.new_notebook()
+    nb.cells = NOTEBOOKS[name]()
+    for i, cell in enumerate(nb.cells):
+        cell.id = f"{Path(name).stem[:2]}-{i:02d}"   # stable ids: a rebuild changes nothing it need not
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    return nb
+
+
 def main():
-    for name, build in NOTEBOOKS.items():
-        nb = nbformat.v4.new_notebook()
-        nb.cells = build()
-        for i, cell in enumerate(nb.cells):
-            cell.id = f"{Path(name).stem[:2]}-{i:02d}"   # stable ids: a rebuild changes nothing it need not
-        nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-        nbformat.write(nb, HERE / name)
+    for name in NOTEBOOKS:
+        nbformat.write(build(name), HERE / name)
         print("wrote", HERE / name)
 
 
