@@ -34,6 +34,8 @@ def add_arguments(parser) -> None:
 
 def text_report(result) -> str:
     """What a reconstructionist reads: estimates, residuals, what is not determined."""
+    if result.status.startswith("invalid"):
+        return f"Reconstruction: {result.case_name}\n  not fitted: {result.status}"
     lines = [f"Reconstruction: {result.case_name}", ""]
     width = max(len(u.path) for u in result.unknowns) + 2
     lines.append("Estimates (+/- one standard error, Laplace):")
@@ -99,6 +101,7 @@ def run(args) -> int:
     else:
         print("\n\n".join(f"Reconstruction: {c.name}\n  not fitted: {failed[k]}" if r is None else text_report(r)
                            for k, (c, r) in enumerate(zip(cases, results))))
-    for k, message in failed.items():
+    failed.update((k, r.status) for k, r in enumerate(results) if r is not None and r.status.startswith("invalid"))
+    for k, message in sorted(failed.items()):
         print(f"ks-jax: case '{cases[k].name}' not fitted: {message}", file=sys.stderr)
     return 1 if failed else 0

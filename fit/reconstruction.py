@@ -84,6 +84,8 @@ class FitResult:
     """One reconstruction (MODEL.md section 6). Values are SI (rad for angles, rad/s for rates);
     evidence-side values (``fitted``) are in the result's units (degrees for pdof, ...).
 
+    status: the exchange's status at the estimate, or "invalid: ..." where nothing could be fitted
+    (every start's residuals not finite; then every number is NaN).
     estimate, std: path -> value (std inf = not determined by the evidence); correlation:
     path -> path -> value (nan where undefined); fitted: evidence -> fitted value; residuals:
     evidence -> (fitted - measured) / sigma (angles wrapped); converged: the best start passed
@@ -275,6 +277,36 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     )
 
 
+def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, starts) -> FitResult:
+    """The result of a case whose residuals (or their derivatives) are not finite at any start: its
+    status says which evidence cannot be computed there, and why where that is known; every number is
+    NaN (nothing was fitted, and nothing is blamed on the evidence's information)."""
+    inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
+    pred, _ = jax.jit(predict, static_argnums=0)(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
+    pred = np.asarray(pred, np.float64)
+    keys = _keys(evidence)
+    bad = [k for k, v in zip(keys, pred) if not np.isfinite(v)]
+    if bad:
+        why = ("; EES is undefined where both crushes are 0 (the impulse centroid on or outside both boxes), "
+               "so it cannot be evidence for such a contact" if any(k.split(" ")[0].endswith(".ees") for k in bad)
+               else "")
+        reason = f"invalid: {', '.join(bad)} cannot be computed (NaN) at any start{why}"
+    else:
+        reason = "invalid: the derivatives of the residuals are not finite at any start: nothing can be fitted"
+    paths = [u.path for u in unknowns]
+    nan = float("nan")
+    return FitResult(
+        case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
+        estimate={p: nan for p in paths}, std={p: nan for p in paths},
+        correlation={p: {q: nan for q in paths} for p in paths},
+        fitted={k: nan for k in keys}, residuals={k: nan for k in keys},
+        converged=False, unidentified=[], at_bound=[], cost=float("inf"), status=reason, starts=starts,
+        starts_converged=0, starts_at_best=0, iterations=0, singular_values=[],
+        covariance=np.full((len(paths), len(paths)), nan), notes=[],
+        evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
+    )
+
+
 def _progress(total, desc):
     try:
         from tqdm import tqdm
@@ -363,6 +395,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
+        if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
+            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, starts))
+            continue
         best = _best(out["cost"][i], out["converged"][i])
         row = {k: v[i, best] for k, v in out.items()}
         row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i])

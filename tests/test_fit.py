@@ -256,3 +256,37 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
     assert cases[0]["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(d["estimate"]["vehicles[1].speed"] / U.MPH)
     assert cases[1]["name"] == "bad one" and "vehicles[0].delta_v_magnitud" in cases[1]["status"]
     assert "'bad one' not fitted" in out.err
+
+
+def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsys):
+    """EES evidence where both crushes are 0 (the centroid 3 ft above both boxes: MODEL.md section 4
+    leaves EES undefined there): no start can be evaluated. That case is reported "not fitted", naming
+    the evidence, with NaN numbers and no blame on the evidence's information; the other case of the
+    batch is fitted; the command exits 1."""
+    from ks_jax.cli import main
+
+    evidence = SEED_EVIDENCE + [{"quantity": "vehicles[0].ees", "value": "8.6 mph", "sigma": "1 mph"}]
+    good = load_case(SEED)
+    raw = json.loads(json.dumps(good.raw))
+    raw["name"], raw["contact"]["point"][2] = "above both boxes", "8 ft"
+    above = case_from_dict(raw)
+    assert math.isnan(float(solve(above).result.vehicles[0].ees))  # the model's own answer there
+    unknowns = {"vehicles[1].speed": {"bounds": ["0 mph", "40 mph"]}}
+    bad, fitted = fit.reconstruct_batch([above, good], [unknowns] * 2, [evidence] * 2)
+    assert bad.status.startswith("invalid: vehicles[0].ees cannot be computed (NaN) at any start")
+    assert "both crushes are 0" in bad.status and bad.unidentified == [] and not bad.converged
+    assert all(math.isnan(v) for d in (bad.estimate, bad.std, bad.fitted, bad.residuals) for v in d.values())
+    assert fitted.status == "ok" and fitted.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
+    good_raw = json.loads(json.dumps(good.raw))
+    for r in (raw, good_raw):
+        r.update(unknowns=unknowns, evidence=evidence)
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps({"cases": [raw, good_raw]}))
+    assert main(["fit", str(path)]) == 1
+    out = capsys.readouterr()
+    assert "Reconstruction: above both boxes\n  not fitted: invalid: vehicles[0].ees cannot be computed" in out.out
+    assert "fitted 0" not in out.out and "'above both boxes' not fitted" in out.err
+    assert main(["fit", str(path), "--json"]) == 1
+    cases = json.loads(capsys.readouterr().out)["cases"]
+    assert cases[0]["estimate"] == {"vehicles[1].speed": None} and cases[0]["status"].startswith("invalid")
+    assert cases[1]["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
