@@ -50,6 +50,9 @@ def text_report(result) -> str:
                       f"{100 * mc['converged_fraction']:.0f}% converged): 5% / 50% / 95%"]
         for u in result.unknowns:
             kind = input_kind(u.path)
+            if u.path in result.not_determined:  # the refits spread over the bounds: not an interval
+                lines.append(f"  {u.path:<{width}} no interval: not determined by the evidence (below)")
+                continue
             p = [mc["percentiles"][q][u.path] for q in ("5", "50", "95")]
             lines.append(f"  {u.path:<{width}} " + " / ".join(fmt(v, kind) for v in p))
     lines += ["", "Evidence (fitted vs measured, residual in sigmas):"]

@@ -66,7 +66,8 @@ INPUT_LIMITS = {
 @dataclass(frozen=True)
 class Unknown:
     """An input to fit. ``path``: an input path ("vehicles[1].speed", "contact.point[0]");
-    ``lower``/``upper``: bounds in SI (rad for angles; +-inf for none); ``start``: optional SI
+    ``lower``/``upper``: bounds in SI (rad for angles; +-inf for none: for a speed, restitution,
+    friction or penetration time, its own limit: 0, or -1 and 1); ``start``: optional SI
     start of the first multi-start; ``prior``: optional (mean, sigma) in SI, a Gaussian prior."""
 
     path: str
@@ -136,6 +137,8 @@ def _q(x_si, path) -> str:
     not only the SI number they were converted to)."""
     from .uncertainty import fmt
 
+    if math.isinf(x_si):
+        return "none"  # a bound not given
     try:
         kind = input_kind(path)
     except PathError:
@@ -158,6 +161,9 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
         raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
                         f"give contact.{field} in the case to fit it")
     lo, hi = float(u.lower), float(u.upper)
+    if field in INPUT_LIMITS and not INPUT_LIMITS[field][2]:  # a missing bound: the input's own limit
+        lo = INPUT_LIMITS[field][0] if lo == -math.inf else lo
+        hi = INPUT_LIMITS[field][1] if hi == math.inf else hi
     if math.isnan(lo) or math.isnan(hi) or not lo < hi:
         raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: the lower "
                         "bound must be below the upper bound")
@@ -167,8 +173,6 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
             rule = f"{'>' if strict else '>='} {plo}" + (f" and <= {phi}" if math.isfinite(phi) else "")
             raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: "
                             f"{field} must be {rule} (SI), so must its bounds")
-    if field == "speed" and not math.isfinite(lo):
-        raise CaseError(f"case '{name}': unknowns: {u.path}: a speed needs a lower bound >= 0")
     if u.start is not None and not lo <= u.start <= hi:
         raise CaseError(f"case '{name}': unknowns: {u.path}: start {_q(u.start, u.path)} is outside the bounds "
                         f"[{_q(lo, u.path)}, {_q(hi, u.path)}]")
@@ -359,12 +363,15 @@ def apply_unknowns(problem: Problem, inputs, x):
 
 
 def predict(problem: Problem, inputs, x, smoothing):
-    """(predicted evidence (m,), status ()) for unknowns x (n,), SI / the result's units."""
+    """(predicted evidence (m,), (status (), sliding (), |J_t| / J_n ())) for unknowns x (n,), SI / the
+    result's units. |J_t| / J_n of a contact that sticks is the least friction that keeps it sticking."""
     inputs = apply_unknowns(problem, inputs, x)
     res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing)
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
-    return jnp.stack([jnp.asarray(p, dtype) for p in preds]), res.contact.status
+    c = res.contact
+    ratio = jnp.where(c.impulse_normal > 0, c.impulse_tangential / jnp.where(c.impulse_normal > 0, c.impulse_normal, 1), 0)
+    return jnp.stack([jnp.asarray(p, dtype) for p in preds]), (c.status, c.sliding, ratio)
 
 
 def wrap(d, period):

@@ -47,14 +47,15 @@ def _fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigm
     """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
     lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
     x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
-    with respect to the physical x, residuals (m + n,), predicted (m,), status."""
+    with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
+    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking)."""
 
     def fun(z, d):
         x = to_x(z, d["lo"], d["hi"])
-        pred, status = predict(problem, d["inputs"], x, smoothing)
+        pred, flags = predict(problem, d["inputs"], x, smoothing)
         dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
         r = jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]])
-        return r, (pred, status)
+        return r, (pred, flags)
 
     data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
             "pw": prior_weight}
@@ -65,9 +66,10 @@ def _fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigm
     # dr/dx = dr/dz / (dx/dz): the transforms are elementwise; dx/dz >= ~4e-18 thanks to Z_LIMIT
     dxdz = jax.jvp(lambda z: to_x(z, lo, hi), (sol.z,), (jnp.ones_like(sol.z),))[1]
     jac = jnp.where(dxdz[:, None, :] > 0, sol.jacobian / jnp.where(dxdz > 0, dxdz, 1.0)[:, None, :], 0.0)
-    pred, status = sol.aux
+    pred, (status, sliding, stick_ratio) = sol.aux
     return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged, "iterations": sol.iterations,
-            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status}
+            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
+            "stick_ratio": stick_ratio}
 
 
 def _best(cost, converged):
@@ -90,7 +92,8 @@ class FitResult:
     path -> path -> value (nan where undefined); fitted: evidence -> fitted value; residuals:
     evidence -> (fitted - measured) / sigma (angles wrapped); converged: the best start passed
     the solver's convergence test; unidentified: statements of what the evidence does not
-    determine; at_bound: unknowns pinned at a bound; monte_carlo: None or
+    determine; at_bound: unknowns pinned at a bound; not_determined: the unknowns among them (not
+    determined, or poorly: no usable standard error, and no Monte Carlo interval); monte_carlo: None or
     {"samples", "converged_fraction", "percentiles": {"5": {path: value}, ...}, "x": (samples, n_unknowns)
     array of every refit's estimate (SI, columns in the order of ``unknowns``), "converged": (samples,) bool};
     ``to_dict()`` keeps the first three.
@@ -107,6 +110,7 @@ class FitResult:
     converged: bool
     unidentified: list
     at_bound: list
+    not_determined: list  # unknowns with no usable standard error: not determined or poorly determined
     cost: float
     status: str
     starts: int
@@ -143,6 +147,9 @@ class FitResult:
             "at_bound": list(self.at_bound),
             "chi2": num(self.chi2),
             "status": self.status,
+            "measured": {k: num(e.value) for k, e in zip(self.residuals, self.evidence)},
+            "sigma": {k: num(e.sigma) for k, e in zip(self.residuals, self.evidence)},
+            "iterations": self.iterations,
             "starts": {"total": self.starts, "converged": self.starts_converged, "at_best": self.starts_at_best},
             "notes": list(self.notes),
         }
@@ -151,7 +158,9 @@ class FitResult:
             out["monte_carlo"] = {
                 "samples": mc["samples"],
                 "converged_fraction": mc["converged_fraction"],
-                "percentiles": {p: {k: num(v) for k, v in row.items()} for p, row in mc["percentiles"].items()},
+                # an unknown the evidence does not determine has no interval: its refits spread over the bounds
+                "percentiles": {p: {k: None if k in self.not_determined else num(v) for k, v in row.items()}
+                                for p, row in mc["percentiles"].items()},
             }
         return out
 
@@ -255,10 +264,17 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     worst = [(k, r) for k, r in zip(keys, res) if abs(r) > 3]
     if worst:
         notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{k} ({r:+.1f} sigma)" for k, r in worst)
-                     + ": the evidence disagrees with itself or with the fixed inputs")
+                     + ": the evidence disagrees with itself or with the fixed inputs (the standard errors "
+                     "assume the sigmas are right, and are too small if they are not)")
+    jac = np.asarray(row["jacobian"])[:m]
+    for k, (path, is_out, _), jrow in zip(keys, problem.evidence, jac):
+        if not is_out and np.all(jrow == 0):
+            notes.append(f"evidence {k} is an input that no unknown changes: it only adds a constant to chi^2")
     status = status_text(row["status"])
     if status != "ok":
         notes.append(f"the exchange at the estimate has status '{status}'")
+    if "contact.friction" in paths and status == "ok" and not bool(row["sliding"]):
+        _friction_bounded_below(info, paths.index("contact.friction"), float(row["stick_ratio"]))
     corr = {p: {q: float(info["corr"][i, j]) for j, q in enumerate(paths)} for i, p in enumerate(paths)}
     return FitResult(
         case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
@@ -269,12 +285,27 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
         residuals={k: float(v) for k, v in zip(keys, res)},
         converged=bool(row["converged"]),
         unidentified=info["statements"], at_bound=info["at_bound"],
+        not_determined=[p for p, a, b in zip(paths, info["undetermined"], info["poorly"]) if a or b],
         cost=best_cost, status=status, starts=len(cost_starts),
         starts_converged=int(np.sum(row["converged_starts"])), starts_at_best=at_best,
         iterations=int(row["iterations"]),
         singular_values=[float(s) for s in info["singular"]], covariance=info["cov"], notes=notes,
         evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
     )
+
+
+def _friction_bounded_below(info, j, least):
+    """A contact that sticks at the estimate: friction only has to exceed ``least`` (|J_t| / J_n); any
+    value above gives the same exchange (to the smoothing), so the evidence sets no estimate of it.
+    Marks unknown ``j`` not determined in ``info`` (``analyse``'s dict) and says so."""
+    info["std"][j] = np.inf
+    info["undetermined"][j] = True
+    info["poorly"][j] = False
+    info["cov"][j, :] = info["cov"][:, j] = np.inf
+    info["corr"][j, :] = info["corr"][:, j] = np.nan
+    info["statements"] = [s for s in info["statements"] if not s.startswith("contact.friction is ")] + [
+        f"contact.friction is bounded below only: the contact sticks at the estimate, which needs a friction of at "
+        f"least {least:.3g}; any friction above that gives the same exchange, so the evidence sets no value"]
 
 
 def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, starts) -> FitResult:
@@ -300,7 +331,8 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
         estimate={p: nan for p in paths}, std={p: nan for p in paths},
         correlation={p: {q: nan for q in paths} for p in paths},
         fitted={k: nan for k in keys}, residuals={k: nan for k in keys},
-        converged=False, unidentified=[], at_bound=[], cost=float("inf"), status=reason, starts=starts,
+        converged=False, unidentified=[], at_bound=[], not_determined=[], cost=float("inf"), status=reason,
+        starts=starts,
         starts_converged=0, starts_at_best=0, iterations=0, singular_values=[],
         covariance=np.full((len(paths), len(paths)), nan), notes=[],
         evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
@@ -338,7 +370,8 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     or a list of ``Unknown`` (SI); default: the case file's ``unknowns``. evidence: a list of
     {"quantity", "value", "sigma"} as in case files or of ``Evidence`` (result units); default:
     the case file's ``evidence``. starts: multi-start count (the first at the given starts or
-    the middle of the bounds, the rest uniform within the bounds, seeded by ``seed``).
+    the middle of the bounds, the others a Latin hypercube within the bounds (2% margins; normal
+    draws about the first start where a bound is missing), seeded by ``seed``).
     monte_carlo: number of refits with the evidence perturbed by its sigmas (0: none); their
     5/50/95 percentiles go to ``result.monte_carlo``. smoothing: the engine's smooth friction
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or

@@ -68,10 +68,20 @@ def fmt(x_si: float, kind: str, digits: int = 4, si: bool = False) -> str:
     if x_si is None or not math.isfinite(x_si):
         return "not determined" if x_si is None or math.isinf(x_si) else "nan"
     name, scale, _ = DISPLAY.get(kind, ("", 1.0, 1.0))
-    text = f"{x_si / scale:.{digits}g}" + (f" {name}" if name else "")
+    text = _number(x_si / scale, digits) + (f" {name}" if name else "")
     if si and SI_NAME.get(kind, "") != name:
-        text += f" ({x_si:.{digits}g}{' ' + SI_NAME[kind] if SI_NAME.get(kind) else ''})"
+        text += f" ({_number(x_si, digits)}{' ' + SI_NAME[kind] if SI_NAME.get(kind) else ''})"
     return text
+
+
+def _number(v: float, digits: int) -> str:
+    """``digits`` significant digits; 0 for a value within rounding of 0 (a speed at its bound of 0 is
+    1e-16 m/s), whole numbers with thousands separators from 10^digits on (89,798 ft lbf, not 8.98e+04)."""
+    if abs(v) < 1e-9:
+        return "0"
+    if abs(v) >= 10**digits:
+        return f"{v:,.0f}"
+    return f"{v:.{digits}g}"
 
 
 def scales(unknowns, x) -> np.ndarray:
@@ -141,7 +151,8 @@ def analyse(unknowns, x, J, m: int, prior_weight, rtol: float):
     m: number of evidence rows; prior_weight (n,): 1/prior sigma or 0; rtol: relative
     singular-value threshold. Returns dict with cov (n, n) (inf rows/cols for undetermined
     unknowns), std (n,), corr (n, n) (nan where undefined), singular (singular values of the
-    scaled evidence Jacobian), statements (list of str), undetermined (n,) bool, at_bound (list of str).
+    scaled evidence Jacobian), statements (list of str), undetermined (n,) bool, poorly (n,) bool (a
+    standard error wider than a uniform guess within the bounds), at_bound (list of str).
     """
     x = np.asarray(x, np.float64)
     J = np.asarray(J, np.float64)
@@ -154,7 +165,7 @@ def analyse(unknowns, x, J, m: int, prior_weight, rtol: float):
         nan = np.full(n, np.nan)
         return {"cov": np.full((n, n), np.nan), "std": nan, "corr": np.full((n, n), np.nan), "singular": nan,
                 "statements": ["the model has no finite derivatives at the estimate: no uncertainty can be given"],
-                "undetermined": np.ones(n, bool), "at_bound": []}
+                "undetermined": np.ones(n, bool), "poorly": np.zeros(n, bool), "at_bound": []}
     _, sv, Vt = np.linalg.svd(Js, full_matrices=True)
     sv_full = np.zeros(n)
     sv_full[: len(sv)] = sv
@@ -192,6 +203,7 @@ def analyse(unknowns, x, J, m: int, prior_weight, rtol: float):
             priors = [unknowns[j].path for j in np.flatnonzero(involved) if pw[j] > 0] if fixed_by_prior else []
             statements.append(describe_direction(unknowns, v, s_j, priors))
     at_bound = []
+    poorly = np.zeros(n, bool)
     for j, u in enumerate(unknowns):
         kind = input_kind(u.path)
         width = u.upper - u.lower if math.isfinite(u.upper - u.lower) else s_j[j]
@@ -201,7 +213,8 @@ def analyse(unknowns, x, J, m: int, prior_weight, rtol: float):
                                 "sets it (its standard error ignores the bound)")
         if (not undetermined[j] and math.isfinite(u.lower) and math.isfinite(u.upper)
                 and std[j] > (u.upper - u.lower) / math.sqrt(12.0)):
+            poorly[j] = True
             statements.append(f"{u.path} is poorly determined: its standard error {fmt(std[j], kind)} is wider than "
                               f"a uniform guess within its bounds ({fmt((u.upper - u.lower) / math.sqrt(12), kind)})")
     return {"cov": cov, "std": std, "corr": corr, "singular": sv_full, "statements": statements,
-            "undetermined": undetermined, "at_bound": at_bound}
+            "undetermined": undetermined, "poorly": poorly, "at_bound": at_bound}
