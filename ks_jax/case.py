@@ -465,6 +465,9 @@ def input_kind(path) -> str:
 
 
 def get_input(inputs: CaseInputs, path: str):
+    """The value of the input ``path`` (section 6: "vehicles[1].speed", "contact.point[0]",
+    "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``), SI (angles in rad); a PathError
+    names a path that is not an input. ``set_input`` is its converse."""
     group, vi, name, idx = _input_leaf(path)
     leaf = getattr(inputs.vehicles[vi] if group == "vehicles" else inputs.contact, name)
     return jnp.asarray(leaf)[idx] if idx else leaf

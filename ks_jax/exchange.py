@@ -299,8 +299,11 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
 
     Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
     ``smoothing`` tau >= 0 (dimensionless, < 1): 0 is the exact model; tau > 0 the smooth
-    friction-cone limit, O(tau) from it (see the module docstring). A row whose inputs break a
-    rule gets that rule's status code and NaN in every numeric result; it never affects other rows.
+    friction-cone limit, O(tau) from it. A row whose inputs break a rule gets that rule's status
+    code and NaN in every numeric result; it never affects other rows.
+    How the smoothing works and what ``jax.vmap`` of this function does on a CPU are written in the
+    docstring of the module ``ks_jax.exchange`` (``ks_jax.exchange`` itself names this function:
+    ``help(sys.modules["ks_jax.exchange"])``).
     """
     args = (vehicle1, state1, vehicle2, state2, contact)
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args))

@@ -132,6 +132,11 @@ def test_demo_prints_both_seed_chapters(capsys):
     assert code == 0
     assert "Saturn L300" in out and "Lucid Air" in out
     assert "5,946.847 N s" in out and "1,336.904 lbf s" in out
+    assert "The crushes agree by construction" in out
+    # the note on chapter 001's arithmetic states true numbers
+    assert "1.1 x 61.04 slug x 22 ft/s = 1477.17 lbf s" in out and f"{1.1 * 61.04 * 22:.2f}" == "1477.17"
+    assert "6571.96 N s is 1477.44 lbf s" in out and f"{6571.96 / U.LBF_S:.2f}" == "1477.44"
+    assert "1,477.169 lbf s" in out and "exact 1477.169 lbf s (6570.775 N s)" in out
 
 
 def _bad(mutate):
