@@ -13,7 +13,9 @@ import importlib
 import json
 import os
 import re
+import signal
 import sys
+import threading
 from importlib import resources
 from pathlib import Path
 
@@ -184,16 +186,27 @@ def _show_case_warnings():
     warnings.simplefilter("always", CaseWarning)
 
 
+def _terminated(signum, frame):
+    raise SystemExit(128 + signum)
+
+
 def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     _show_case_warnings()
     _compilation_cache()
     args = build_parser().parse_args(argv)
+    if argv is None and threading.current_thread() is threading.main_thread():
+        # the command itself (not a call from Python): a kill unwinds as Ctrl-C does, so that a sweep
+        # removes its unfinished file and an earlier --out stays as it was
+        signal.signal(signal.SIGTERM, _terminated)
     try:
         return args.run(args)
     except (CaseError, UnitError, FileNotFoundError, IsADirectoryError) as err:
         print(f"ks-jax: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("ks-jax: interrupted (nothing half-written is left behind)", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # the reader went away (ks-jax demo | head): not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

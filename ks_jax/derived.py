@@ -73,7 +73,7 @@ def _vehicle(force, body, point, normal_into, j_mag):
         yaw_rate_after=la.vec(w_after)[2],
         pdof=pdof_degrees(la.matvec(rot, force, transpose=True)),
         pdof_clock=jnp.zeros(()),  # filled below, from pdof
-        crush=crush_depth(point, normal_into, state.position, rot, vehicle),
+        crush=la.plain_zero(crush_depth(point, normal_into, state.position, rot, vehicle)),  # 0, not -0
         ees=jnp.zeros(()),  # filled below, needs both crushes
     )
 

@@ -547,7 +547,8 @@ class Draws(NamedTuple):
 
 def parse_over(text):
     """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values); 'PATH=uniform:LO:HI' or
-    'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``."""
+    'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``. A grid's values within 2 ulp
+    of a 15-digit decimal are that decimal (linspace's rounding undone: 0.05, not 0.049999999999999996)."""
     from .units import UnitError, parse_quantity
 
     if "=" not in text:
@@ -589,7 +590,7 @@ def parse_over(text):
         for name, part, value in zip(("START", "STOP"), parts, ends):
             if not math.isfinite(value):
                 raise CaseError(f"--over {path}: {name} = {part.strip()!r} must be a finite number")
-        return path, np.linspace(*ends, n)
+        return path, _typed_back(np.linspace(*ends, n))  # 0:0.3:7 gives 0.05, not 0.049999999999999996
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")

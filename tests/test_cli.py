@@ -104,6 +104,24 @@ def test_seed_case_files_json_and_toml(capsys):
     assert res["contact"]["energy_loss"] / U.FT_LBF == pytest.approx(14624.38, rel=1e-3)
 
 
+def test_a_centroid_on_both_faces_has_crush_zero_not_minus_zero(tmp_path, capsys):
+    """A rear-end whose centroid lies on the lead car's rear face and the follower's front face: both
+    crushes are 0 (MODEL.md section 4: the distance from P to leaving the box), written 0.0, never -0.0,
+    and the EES is undefined (null) with the report's note."""
+    d = copy.deepcopy(US_CASE)
+    a, b = d["vehicles"]
+    a.update(yaw=0, position=["0 ft", "0 ft"], speed="15 mph")  # rear face at x = 7 - 15 = -8 ft
+    b.update(yaw=0, position=["-16 ft", "0 ft"], speed="40 mph", yaw_rate=0)  # front face at -16 + 8 = -8 ft
+    d["contact"] = {"point": ["-8 ft", "0.5 ft", "1.8 ft"], "normal": 0, "restitution": 0.15, "friction": 0.6}
+    path = tmp_path / "face.json"
+    path.write_text(json.dumps(d))
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    res = json.loads(out)["cases"][0]
+    assert code == 0 and res["contact"]["status"] == "ok"
+    assert [v["crush"] for v in res["vehicles"]] == [0.0, 0.0] and '"crush": -0.0' not in out
+    assert [v["ees"] for v in res["vehicles"]] == [None, None]
+
+
 def test_json_keys_are_model_section_4(tmp_path, capsys):
     path = tmp_path / "c.json"
     path.write_text(json.dumps(US_CASE))

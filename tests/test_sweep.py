@@ -458,6 +458,10 @@ def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
     assert main([*args, "--out", str(tmp_path / "us.csv")]) == 0
     assert main([*args, "--out", str(tmp_path / "us.npz")]) == 0
     capsys.readouterr()
+    # a grid's own values: linspace's rounding undone, to 2 ulp (0.05, not 0.049999999999999996)
+    assert np.linspace(0, 0.3, 7)[1] != 0.05
+    np.testing.assert_array_equal(parse_over("contact.restitution=0:0.3:7")[1], [0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3])
+    np.testing.assert_allclose(parse_over("vehicles[1].speed=3:60:7")[1], np.linspace(3, 60, 7), rtol=5e-16, atol=0)
     miles, feet = np.linspace(10 * U.MPH, 30 * U.MPH, 5) / U.MPH, np.linspace(1 * U.FT, 3 * U.FT, 7) / U.FT
     assert miles[3] != 25.0 and feet[3] != 2.0  # what plain conversion gives
     table, npz = read_table(tmp_path / "us.csv"), np.load(tmp_path / "us.npz")
@@ -582,3 +586,30 @@ def test_sharded_equals_unsharded(case):
         sharded = np.array(sharded, dtype=float)
         np.testing.assert_array_equal(sharded, np.array(single_device, dtype=float), err_msg=k)
         np.testing.assert_allclose(sharded, np.asarray(here[k], dtype=float), rtol=1e-13, err_msg=k)
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
+    """``ks-jax sweep`` stopped by a kill (a batch system's SIGTERM) or Ctrl-C while it writes: the
+    unfinished file is removed, the earlier --out is as it was, the exit status says so (128 + signal,
+    130 for Ctrl-C) and no traceback is printed."""
+    import signal
+    import time
+
+    out = tmp_path / "out.csv"
+    out.write_text("earlier results\n")
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    proc = subprocess.Popen([sys.executable, "-m", "ks_jax.cli", "sweep", str(SEED1), "--over",
+                             "vehicles[1].speed=1:40:3000", "--over", "contact.restitution=0:0.5:1000",
+                             "--out", str(out), "--no-progress"], stderr=subprocess.PIPE, text=True, env=env)
+    partial = tmp_path / ".out.csv.partial"
+    deadline = time.monotonic() + 120
+    while not partial.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert partial.exists(), "the sweep never started writing"
+    proc.send_signal(getattr(signal, sig))
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == code, err[-2000:]
+    assert "Traceback" not in err
+    assert out.read_text() == "earlier results\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
