@@ -17,7 +17,8 @@ benchmarks/RESULTS_fit.md), and its J at the optimum is the one the Laplace cova
 anyway. optax stays available (``solver="lbfgs"`` / ``"adam"``).
 
 Multi-start: ``starts`` starts (the first at each unknown's ``start`` or the middle of its bounds,
-the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept. ``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
+the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept.
+``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
 
 Uncertainty (``fit.uncertainty``): standard errors and correlations from the Gauss-Newton
 (Laplace) covariance (J^T W J + prior)^-1 at the optimum, in the physical units (the delta

@@ -370,7 +370,8 @@ def predict(problem: Problem, inputs, x, smoothing):
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
     c = res.contact
-    ratio = jnp.where(c.impulse_normal > 0, c.impulse_tangential / jnp.where(c.impulse_normal > 0, c.impulse_normal, 1), 0)
+    pushed = c.impulse_normal > 0
+    ratio = jnp.where(pushed, c.impulse_tangential / jnp.where(pushed, c.impulse_normal, 1), 0)
     return jnp.stack([jnp.asarray(p, dtype) for p in preds]), (c.status, c.sliding, ratio)
 
 

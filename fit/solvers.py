@@ -77,9 +77,9 @@ def levenberg_marquardt(fun, z0, data, max_iter: int = 100, z_min=None, z_max=No
     entry (an unknown the residuals do not see still gets a finite, damped step). Accept when the
     cost falls; lam *= max(1/3, 1 - (2 rho - 1)^3) on acceptance, lam *= nu, nu *= 2 on rejection
     (Nielsen 1999). Converged: the gradient test (``gradient_test``), an accepted step that
-    lowers the cost by less than ftol of it, or a rejected step at the damping's ceiling ``LAM_MAX``. z is clipped to [z_min, z_max] (n,) (keeps the
-    bound transforms out of underflow). One Jacobian per iteration: (J, r) are evaluated at the
-    trial point only (the first trial is z0).
+    lowers the cost by less than ftol of it, or a rejected step at the damping's ceiling
+    ``LAM_MAX``. z is clipped to [z_min, z_max] (n,) (keeps the bound transforms out of underflow).
+    One Jacobian per iteration: (J, r) are evaluated at the trial point only (the first trial is z0).
     """
     dtype = z0.dtype
     R, n = z0.shape

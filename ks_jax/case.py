@@ -442,8 +442,8 @@ def _input_leaf(path):
             return group, vi, "inertia", (idx[0], idx[0])
         if name not in VehicleInputs._fields:
             hint = {"velocity": " (vary speed and course instead)",
-                    "weight": f" (a case's weight sets its mass: use vehicles[{vi}].mass, in lb where weights are in lbf)"
-                    }.get(name, "")
+                    "weight": f" (a case's weight sets its mass: use vehicles[{vi}].mass, in lb where weights "
+                              "are in lbf)"}.get(name, "")
             raise PathError(f"path '{path}': '{name}' is not a vehicle input{hint}; "
                             f"inputs are {', '.join(VehicleInputs._fields)}, yaw_rate")
     elif name not in ContactInputs._fields:

@@ -620,9 +620,9 @@ of mph, and `unidentified` says why, in words:
   (1 + eps); the SUV's speed and the restitution trade off along the red line above. The delta-V fixes only
   their combination.
 - **Sedan speed** (which even ends at its bound of 0 mph; the restitution ends at its bound of 0.5, and
-  `fu.at_bound` says so for both): the sedan moves along the contact plane. In a sliding contact the tangential impulse is
-  mu times the normal one whatever the sliding speed, so its speed hardly changes the delta-V at all: the
-  evidence leaves it practically free ("poorly determined").
+  `fu.at_bound` says so for both): the sedan moves along the contact plane. In a sliding contact the
+  tangential impulse is mu times the normal one whatever the sliding speed, so its speed hardly changes the
+  delta-V at all: the evidence leaves it practically free ("poorly determined").
 
 This is why the first fit needed the post-impact speeds and directions: they measure where the momentum went,
 which fixes the closing speed and the restitution separately. Without them, the restitution (or a speed) has to

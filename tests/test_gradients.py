@@ -366,9 +366,10 @@ def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
 
 def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
     """In the inline head-on the force on vehicle 2 is exactly frontal (pdof 0.0) and the impulse
-    azimuth is exactly 180 deg (vehicle 1 is pushed straight back). Turning vehicle 2's velocity a little sideways turns every angle: their
-    derivatives with respect to v_y at exactly that point equal central differences of the angle
-    taken modulo 360 (one side of the point reads near 0 deg, the other near 360)."""
+    azimuth is exactly 180 deg (vehicle 1 is pushed straight back). Turning vehicle 2's velocity a
+    little sideways turns every angle: their derivatives with respect to v_y at exactly that point
+    equal central differences of the angle taken modulo 360 (one side of the point reads near 0 deg,
+    the other near 360)."""
     case = head_on()
     v1, s1, v2, s2, c = kit.inputs(case)
     angles = {"pdof 1": lambda r: r.vehicles[0].pdof, "pdof 2": lambda r: r.vehicles[1].pdof,

@@ -32,4 +32,5 @@ def test_notebooks_are_built_from_build_py():
     assert sorted(build.NOTEBOOKS) == [p.name for p in NOTEBOOKS]
     for path in NOTEBOOKS:
         committed, built = nbformat.read(path, as_version=4), build.build(path.name)
-        assert [(c.cell_type, c.source) for c in committed.cells] == [(c.cell_type, c.source) for c in built.cells], path.name
+        cells = [[(c.cell_type, c.source) for c in nb.cells] for nb in (committed, built)]
+        assert cells[0] == cells[1], path.name

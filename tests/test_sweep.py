@@ -367,8 +367,10 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     for k in a:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
     np.testing.assert_array_equal(a["vehicles[1].delta_v[0]"], kept["vehicles[1].delta_v[0]"].ravel())
-    np.testing.assert_array_equal(a["vehicles[1].speed"], np.repeat(np.linspace(2, 30, 21), 13))
-    np.testing.assert_array_equal(a["contact.restitution"], np.tile(np.linspace(0, 1.2, 13), 21))
+    # the grid's values as typed: 2, 3.4, ..., 30 and 0, 0.1, ..., 1.2 (parse_over)
+    speeds, eps = ([float(f"{a + step * k:.12g}") for k in range(n)] for a, step, n in ((2, 1.4, 21), (0, 0.1, 13)))
+    np.testing.assert_array_equal(a["vehicles[1].speed"], np.repeat(speeds, 13))
+    np.testing.assert_array_equal(a["contact.restitution"], np.tile(eps, 21))
     assert list(a["status_text"]) == [ks_jax.status_text(int(c)) for c in a["status"]]
     assert {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"} == set(a["status_text"])
     assert_no_flag_on_invalid_rows(a, kept)
@@ -453,8 +455,9 @@ def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
     """A value typed in mph or ft comes back from SI as 24.999999999999996 mph or 1.9999999999999996 ft;
     the file (and the .npz axis) give it as typed, and leave values that are not short decimals as
     converted (within 2 units in the last place)."""
-    args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5", "--over", "vehicles[0].cg_height=1ft:3ft:7",
-            "--output", "contact.impulse_magnitude", "--units", "us", "--no-progress"]
+    args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5",
+            "--over", "vehicles[0].cg_height=1ft:3ft:7", "--output", "contact.impulse_magnitude", "--units", "us",
+            "--no-progress"]
     assert main([*args, "--out", str(tmp_path / "us.csv")]) == 0
     assert main([*args, "--out", str(tmp_path / "us.npz")]) == 0
     capsys.readouterr()
