@@ -33,14 +33,17 @@ Choices where MODEL.md is silent
   middle of the touching features (the contact manifold along the axis of least penetration),
   which is the limit of the area centroid as penetration_time -> 0.
 - Normal: perpendicular to the line through the two points where the outlines cross,
-  horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where CG 1 lies
-  relative to CG 2 (n . (x_1 - x_2) > 0; the axis of least penetration decides only if that
-  product is exactly 0), then tilted up by ``normal_pitch``: n = (cos p n_x, cos p n_y, sin p).
-  The axis of least penetration would not do for the sign: once a penetration is deeper than
-  the overlap is wide, that axis turns across the line, and its sign no longer says which way
-  vehicle 1 lies (an inline rear-end came out "separating"). Where the outlines do not cross in
-  exactly two well-separated points (collinear edges, containment, a degenerate overlap) n is
-  the axis of least penetration.
+  horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where footprint
+  1's centre lies relative to footprint 2's (n . (c_1 - c_2) > 0; the axis of least penetration
+  decides only if that product is exactly 0), then tilted up by ``normal_pitch``:
+  n = (cos p n_x, cos p n_y, sin p). The axis of least penetration would not do for the sign:
+  once a penetration is deeper than the overlap is wide, that axis turns across the line, and its
+  sign no longer says which way vehicle 1 lies (an inline rear-end came out "separating"). Nor
+  would the CGs: a CG may sit anywhere along its box, and one 1 ft behind the front face is
+  passed by the other's within a foot of penetration; the boxes' centres are passed only when
+  the penetration is half a box long. Where the outlines do not cross in exactly two points more
+  than ~1e-12 m inside both edges (collinear edges, also when rounding parts them by 1e-16 m;
+  containment; a degenerate overlap) n is the axis of least penetration.
 - Never touching within the horizon: status "no_contact" and no NaN anywhere: zero impulse,
   zero delta-V, velocity_after = velocity, crush and EES 0, ``time`` = HORIZON, point the
   midpoint of the CGs and normal the horizontal direction from CG 2 to CG 1, both at t = 0.
@@ -277,10 +280,12 @@ def polygon_area_centroid(poly, count):
     return area, origin + jnp.stack([la.safe_div(moment[0], area), la.safe_div(moment[1], area)])
 
 
-def outline_crossings(corners1, corners2):
+def outline_crossings(corners1, corners2, tol=0.0):
     """Points where the two outlines cross: (16, 2) candidates (edge i of 1 x edge j of 2),
-    (16,) mask: proper crossings only (inside both edges, not at a corner; parallel edges never),
-    so that collinear edges and corners lying on edges do not count."""
+    (16,) mask: proper crossings only, more than ``tol`` (m) inside both edges and between edges
+    more than ~tol / length from parallel, so that collinear edges and corners lying on edges do
+    not count, also where rounding moves them apart by far less than ``tol`` (a scene turned by
+    30 deg puts the corners of an inline crash 1e-16 m off each other's edges)."""
     a = corners1
     da = jnp.roll(corners1, -1, 0) - corners1
     b = corners2
@@ -291,7 +296,9 @@ def outline_crossings(corners1, corners2):
     ab = b - a
     s = la.safe_div(_cross2(ab, db), denom)
     t = la.safe_div(_cross2(ab, da), denom)
-    mask = (denom != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
+    len_a, len_b = la.safe_norm(da), la.safe_norm(db)
+    inside = (s * len_a > tol) & ((1 - s) * len_a > tol) & (t * len_b > tol) & ((1 - t) * len_b > tol)
+    mask = (jnp.abs(denom) > tol * jnp.maximum(len_a, len_b)) & inside
     pts = a + s[..., None] * da
     return pts.reshape(16, 2), mask.reshape(16)
 
@@ -337,13 +344,13 @@ def contact_geometry(vehicle1, state1, vehicle2, state2) -> Contact2D:
     solid = area > area_tol
     xy = jnp.where(solid, centroid, _manifold_point(c1, c2, n_sat, len_tol))
 
-    pts, mask = outline_crossings(c1, c2)
+    pts, mask = outline_crossings(c1, c2, len_tol)
     two = _first_two(pts, mask)
     chord = two[1] - two[0]
     chord_len = la.safe_norm(chord)
     crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(area_tol))
     n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
-    toward1 = state1.position[:2] - state2.position[:2]  # CG 2 -> CG 1
+    toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
     side = jnp.where(n_line @ toward1 != 0, n_line @ toward1, n_line @ n_sat)
     n_line = jnp.where(side < 0, -n_line, n_line)
     n2 = jnp.where(crossing_ok, n_line, n_sat)

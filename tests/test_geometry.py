@@ -474,3 +474,53 @@ def test_never_touching_case_reads_as_such(tmp_path):
         else:
             assert f"none within {G.HORIZON:g} s of free motion" in out and "o'clock" not in out
             assert out.count("undefined (no impulse)") == 2
+
+
+def _turned(row, degrees):
+    """The case ``row`` (vehicles at st(...) positions, both yaws) turned about the origin by ``degrees``."""
+    v1, s1, v2, s2, c, pitch = row
+    a = math.radians(degrees)
+    rot = jnp.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    turn = lambda s: s._replace(position=rot @ s.position, velocity=rot @ s.velocity, yaw=s.yaw + a)  # noqa: E731
+    return v1, turn(s1), v2, turn(s2), c, pitch
+
+
+def test_inline_crashes_of_equal_widths_in_a_turned_scene():
+    """Equal widths put the two boxes' sides on one line, where MODEL.md section 5 takes the axis of
+    least penetration. Turned by any angle the sides miss each other by ~1e-16 m of rounding, which
+    must not count as two crossings (their line is the overlap's diagonal: a normal 36 deg off the
+    axis and a yaw from a symmetric head-on): the results turn with the scene (section 3).
+    By hand: rear-end, gap 7.75 - 2.25 = 5.5 m closing at 10 m/s, 0.3 m deep after 0.03 s: centroid
+    x = 10.8, crush 0.15 each, n = +x; head-on, gap 5.5 m closing at 20 m/s, 0.6 m deep: x = 5.0,
+    crush 0.3 each, n = -x (from 2 into 1)."""
+    rear = (VS, st(10.0, 0.0, 0, 5.0), VS, st(0.0, 0.0, 0, 15.0), con(0.03), 0.0)
+    head_on = (VS, st(0.0, 0.0, 0, 10.0), VS, st(10.0, 0.0, 180, 10.0), con(0.03), 0.0)
+    angles = [0.0, 30.0, 45.0, 90.0, 135.0, 210.0, -90.0, 17.3]
+    rows = [_turned(r, a) for r in (rear, head_on) for a in angles]
+    out = run(rows)
+    for k, (r, a) in enumerate(zip(out, angles * 2)):
+        x, sign, crush = (10.8, 1.0, 0.15) if k < len(angles) else (5.0, -1.0, 0.3)
+        c, s = math.cos(math.radians(a)), math.sin(math.radians(a))
+        where = f"{'rear' if k < len(angles) else 'head-on'} turned {a} deg"
+        assert r.contact.status == OK, where
+        np.testing.assert_allclose(r.contact.normal, [sign * c, sign * s, 0.0], atol=1e-12, err_msg=where)
+        np.testing.assert_allclose(r.contact.point, [x * c, x * s, 0.7], atol=LEN_TOL, err_msg=where)
+        np.testing.assert_allclose([v.crush for v in r.vehicles], [crush, crush], atol=LEN_TOL, err_msg=where)
+        np.testing.assert_allclose([v.delta_yaw_rate for v in r.vehicles], [0.0, 0.0], atol=1e-9, err_msg=where)
+
+
+def test_normal_sign_with_the_cgs_at_the_touching_faces():
+    """Each CG 0.2 m from the face that touches (a CG may be anywhere along its box): 0.5 m into the
+    rear-end, CG 2 (x = 15.15) is ahead of CG 1 (15.05), yet vehicle 2 is behind. The normal still
+    points from vehicle 2 into vehicle 1 (+x) and the exchange is the hand one: gap 9.8 - 0.2 = 9.6 m
+    at 10 m/s, t_i = 0.96 s; at 1.01 s the overlap is x in [14.85, 15.35], crush 0.25 each."""
+    lead = veh(length=4.6, width=1.8, height=1.4, cg_to_front=4.4)
+    follower = veh(length=4.8, width=1.9, height=1.5, cg_to_front=0.2, mass=1800.0)
+    row = (lead, st(10.0, 0.0, 0, 5.0), follower, st(0.0, 0.0, 0, 15.0), con(0.05), 0.0)
+    (r,) = run([row])
+    assert r.contact.status == OK
+    assert abs(r.contact.time - 0.96) < TIME_TOL
+    np.testing.assert_allclose(r.contact.normal, [1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(r.contact.point, [15.1, 0.0, 0.7], atol=LEN_TOL)
+    np.testing.assert_allclose([v.crush for v in r.vehicles], [0.25, 0.25], atol=LEN_TOL)
+    assert_same_exchange(r, second_formulation(row, 1.01, [15.1, 0.0, 0.7], [1.0, 0.0, 0.0]))
