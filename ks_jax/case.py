@@ -474,7 +474,8 @@ def get_input(inputs: CaseInputs, path: str):
 
 
 def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
-    """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable)."""
+    """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable). A
+    product of inertia (``inertia[i][j]``, i != j) sets [j][i] too: the tensor stays symmetric."""
     group, vi, name, idx = _input_leaf(path)
     try:
         dtype = None if value is None else jnp.result_type(value)
@@ -486,6 +487,8 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     holder = inputs.vehicles[vi] if group == "vehicles" else inputs.contact
     leaf = getattr(holder, name)
     new = jnp.asarray(leaf).at[idx].set(value) if idx else value
+    if name == "inertia" and len(idx) == 2 and idx[0] != idx[1]:
+        new = new.at[idx[::-1]].set(value)
     holder = holder._replace(**{name: new})
     if group == "vehicles":
         vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))

@@ -289,6 +289,13 @@ def sweep_view(result, output=None, ax=None, contours=True):
     axes = [(p, *U.US_DISPLAY[input_kind(p)], np.asarray(v)) for p, v in result.axes.items()]
     thinned = any(k > 1 for k in result.strides)
     note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
+    if result.mode != "zip" and len(axes) == 2 and min(a[3].size for a in axes) == 1:
+        # an input with one value is no axis (a map one cell wide draws nothing): a line over the other
+        keep = 0 if axes[0][3].size > 1 or axes[1][3].size == 1 else 1
+        path, xs, xunit, x = axes[1 - keep]
+        note.append(f"{path} = {float(x[0]) / xs:.6g}{_bracket(xunit)}")
+        axes = [axes[keep]]
+        shown = shown.reshape(-1)
     if missing:
         how = "left out" if result.mode == "zip" else "gaps" if len(result.axes) == 1 else "grey"
         note.append(f"{missing} of {shown.size} points without a result ({how})")

@@ -82,7 +82,7 @@ DEFAULT_OUTPUTS = (
 )
 # rows per device and chunk, as in exchange's vmap rule: cache-resident (1.4-2x faster than 1 << 16 here)
 DEFAULT_CHUNK = CHUNK_ROWS
-PROGRESS_MIN_POINTS = 1 << 20
+PROGRESS_DELAY = 2.0  # s: with progress=None a sweep that runs longer than this shows a bar
 
 
 @dataclass
@@ -323,8 +323,11 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
 
 
 class _Progress:
-    def __init__(self, total, enabled):
-        self.total, self.enabled, self.done = total, enabled, 0
+    """A bar on stderr (tqdm if installed, else a line) that appears once ``delay`` seconds have gone
+    by, so that only long sweeps show one."""
+
+    def __init__(self, total, enabled, delay=0.0):
+        self.total, self.enabled, self.done, self.delay = total, enabled, 0, delay
         self.bar = None
         self.t0 = time.perf_counter()
         self.last = 0.0
@@ -332,7 +335,8 @@ class _Progress:
             try:
                 from tqdm.auto import tqdm
 
-                self.bar = tqdm(total=total, unit="pt", unit_scale=True, desc="ks-jax sweep", file=sys.stderr)
+                self.bar = tqdm(total=total, unit="pt", unit_scale=True, desc="ks-jax sweep", file=sys.stderr,
+                                delay=delay)
             except ImportError:
                 self.bar = None
 
@@ -344,6 +348,8 @@ class _Progress:
             self.bar.update(n)
             return
         now = time.perf_counter()
+        if now - self.t0 < self.delay:
+            return
         if now - self.last > 1.0 or self.done >= self.total:
             self.last = now
             rate = self.done / max(now - self.t0, 1e-9)
@@ -383,8 +389,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
-    progress: None (a bar for >= 2^20 points), True or False; tqdm if installed, else a line on
-    stderr. devices: the devices to shard every chunk over (default ``jax.devices()``).
+    progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
+    (from the start) or False; tqdm if installed, else a line on stderr. devices: the devices to shard every chunk over (default ``jax.devices()``).
     output_dtype: dtype of the stored float results (default: the compute dtype).
     on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
     NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
@@ -401,6 +407,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     if not isinstance(over, Mapping) or not over:
         raise CaseError("sweep needs at least one input path to vary: over={path: values}")
     paths = tuple(over)
+    _check_distinct(paths, "sweep over")
     for p in paths:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
         if name:
@@ -453,8 +460,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         store["status"] = np.empty(n_points, dtype=np.int8)
     counts = np.zeros(256, dtype=np.int64)
 
-    show = (n_points >= PROGRESS_MIN_POINTS) if progress is None else bool(progress)
-    bar = _Progress(n_points, show)
+    show = n_points > n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
+    bar = _Progress(n_points, show, PROGRESS_DELAY if progress is None else 0.0)
     t0 = time.perf_counter()
 
     def launch(start):
@@ -466,7 +473,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     def collect(item):
         start, out = item
         n = min(n_rows, hi - start)
-        chunk = {k: np.asarray(v)[:n] for k, v in out.items()}
+        chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
         counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
         a, b = start - lo, start - lo + n
         if keep:
@@ -547,8 +554,9 @@ class Draws(NamedTuple):
 
 def parse_over(text):
     """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values); 'PATH=uniform:LO:HI' or
-    'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``. A grid's values within 2 ulp
-    of a 15-digit decimal are that decimal (linspace's rounding undone: 0.05, not 0.049999999999999996)."""
+    'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``. A grid typed in plain SI numbers
+    has its values within 2 ulp of a 15-digit decimal made that decimal (linspace's rounding undone: 0.05,
+    not 0.049999999999999996)."""
     from .units import UnitError, parse_quantity
 
     if "=" not in text:
@@ -590,16 +598,28 @@ def parse_over(text):
         for name, part, value in zip(("START", "STOP"), parts, ends):
             if not math.isfinite(value):
                 raise CaseError(f"--over {path}: {name} = {part.strip()!r} must be a finite number")
-        return path, _typed_back(np.linspace(*ends, n))  # 0:0.3:7 gives 0.05, not 0.049999999999999996
+        grid = np.linspace(*ends, n)
+        return path, _typed_back(grid) if all(_plain(t) == v for t, v in zip(parts, ends)) else grid
     if len(parts) == 1:
         return path, np.array([q(v) for v in spec.split(",") if v.strip()])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")
+
+
+def _plain(text):
+    """The number a bare numeral means (None for anything with a unit): a grid typed in SI numbers is
+    snapped to its decimals (0:0.3:7 gives 0.05, not 0.049999999999999996); one converted from mph or
+    deg is left as converted (the file in US units types it back)."""
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def draw_over(specs, mode, samples, seed):
     """({path: SI values}, mode) from ``parse_over``'s (path, values or Draws): the draws made with
     ``numpy.random.default_rng(seed)``, ``samples`` each, in the order given (zip mode). Values given as
     numbers stay as they are."""
+    _check_distinct([p for p, _ in specs], "--over")
     draws = [p for p, v in specs if isinstance(v, Draws)]
     if not draws:
         if samples is not None:
@@ -611,6 +631,20 @@ def draw_over(specs, mode, samples, seed):
         raise CaseError(f"--over {draws[0]}=...: random values are samples, swept together (--mode zip), not a grid")
     rng = np.random.default_rng(seed)
     return {p: v.draw(samples, rng) if isinstance(v, Draws) else v for p, v in specs}, "zip"
+
+
+def _check_distinct(paths, what):
+    """Refuse two paths that name one input ("vehicles[0].yaw_rate" is "vehicles[0].angular_velocity[2]";
+    spaces do not count): the later would override the earlier, under the earlier's name."""
+    seen = {}
+    for p in paths:
+        group, vi, name, idx = _input_leaf(p)
+        key = (group, vi, name, tuple(sorted(idx)) if name == "inertia" else idx)  # [0][1] is [1][0]
+        if key in seen:
+            same = "twice" if seen[key] == p else f"and '{seen[key]}'"
+            raise CaseError(f"{what} '{p}' {same}: both name the same input, so one would override the other; "
+                            "give it once")
+        seen[key] = p
 
 
 def _shape(sizes, mode):

@@ -5,11 +5,13 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -465,6 +467,8 @@ def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
     assert np.linspace(0, 0.3, 7)[1] != 0.05
     np.testing.assert_array_equal(parse_over("contact.restitution=0:0.3:7")[1], [0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3])
     np.testing.assert_allclose(parse_over("vehicles[1].speed=3:60:7")[1], np.linspace(3, 60, 7), rtol=5e-16, atol=0)
+    # converted from a unit (deg/s here): solved as converted, and the US file types it back
+    np.testing.assert_array_equal(parse_over("vehicles[0].yaw_rate=-30:30:3")[1], np.radians([-30.0, 0.0, 30.0]))
     miles, feet = np.linspace(10 * U.MPH, 30 * U.MPH, 5) / U.MPH, np.linspace(1 * U.FT, 3 * U.FT, 7) / U.FT
     assert miles[3] != 25.0 and feet[3] != 2.0  # what plain conversion gives
     table, npz = read_table(tmp_path / "us.csv"), np.load(tmp_path / "us.npz")
@@ -616,3 +620,69 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
     assert "Traceback" not in err
     assert out.read_text() == "earlier results\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
+
+
+def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
+    """progress=None: a bar on stderr once the sweep has run PROGRESS_DELAY seconds (any size: an
+    automatic-contact million points runs for a minute), none before; progress=False: never."""
+    import ks_jax.sweeps as sweeps_module
+
+    case = ks_jax.load_case(SEED1)
+    over = {"vehicles[1].speed": np.linspace(2, 30, 40)}
+    monkeypatch.setattr(sweeps_module, "PROGRESS_DELAY", 3600.0)
+    sweep(case, over, chunk_size=8)
+    assert "ks-jax sweep" not in capsys.readouterr().err
+    monkeypatch.setattr(sweeps_module, "PROGRESS_DELAY", 0.0)
+    sweep(case, over, chunk_size=8)
+    err = capsys.readouterr().err
+    assert "ks-jax sweep" in err and ("40.0/40.0" in err or "40/40" in err)  # tqdm, or the plain line
+    sweep(case, over, chunk_size=8, progress=False)
+    assert capsys.readouterr().err == ""
+
+
+def test_one_input_named_twice_is_refused(tmp_path, capsys):
+    """yaw_rate is angular_velocity[2], inertia[0][1] is inertia[1][0], a space changes nothing, and a
+    path given twice is one input: the later would override the earlier under the earlier's name."""
+    case = ks_jax.load_case(SEED1)
+    for over, words in (({"vehicles[0].yaw_rate": [0, 1], "vehicles[0].angular_velocity[2]": [0, 1]},
+                         "'vehicles[0].angular_velocity[2]' and 'vehicles[0].yaw_rate'"),
+                        ({"vehicles[1].speed": [1.0], "vehicles[1]. speed": [2.0]},
+                         "'vehicles[1]. speed' and 'vehicles[1].speed'"),
+                        ({"vehicles[0].inertia[0][1]": [0.0], "vehicles[0].inertia[1][0]": [1.0]},
+                         "'vehicles[0].inertia[1][0]' and 'vehicles[0].inertia[0][1]'")):
+        with pytest.raises(CaseError, match=re.escape(words + ": both name the same input")):
+            sweep(case, over)
+    code = main(["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:3", "--over", "vehicles[1].speed=1,2",
+                 "--out", str(tmp_path / "x.csv")])
+    assert code == 2 and "--over 'vehicles[1].speed' twice: both name the same input" in capsys.readouterr().err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_a_product_of_inertia_keeps_the_tensor_symmetric():
+    """Sweeping inertia[0][1] sets [1][0] too (a product of inertia is one number of a symmetric
+    tensor): the rows are solved, and equal single solves of the case with both entries set."""
+    case = ks_jax.load_case(SEED1)
+    values = [0.0, 10.0, 100.0]
+    r = sweep(case, {"vehicles[0].inertia[0][1]": values}, outputs=["vehicles[0].delta_yaw_rate", "contact.impulse[1]"])
+    assert r["status"].tolist() == [0, 0, 0]
+    for k, v in enumerate(values):
+        inputs = as_arrays(case.inputs)
+        inertia = jnp.asarray(inputs.vehicles[0].inertia).at[0, 1].set(v).at[1, 0].set(v)
+        one = ks_jax.solve_inputs(inputs._replace(vehicles=(inputs.vehicles[0]._replace(inertia=inertia),
+                                                            inputs.vehicles[1])))
+        for p in ("vehicles[0].delta_yaw_rate", "contact.impulse[1]"):
+            np.testing.assert_allclose(r[p][k], get_output(one, p), rtol=RTOL, atol=1e-12, err_msg=f"{p} at {v}")
+
+
+def test_file_columns_follow_the_outputs_asked(tmp_path, capsys):
+    """The command writes the outputs in the order of --output, as write_results does for the same
+    sweep (the compiled program returns them sorted by name)."""
+    outs = ["vehicles[1].pdof", "contact.energy_loss", "vehicles[0].delta_v[1]"]
+    args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:3", *sum((["--output", o] for o in outs), []),
+            "--out", str(tmp_path / "cli.csv")]
+    assert main(args) == 0
+    capsys.readouterr()
+    write_results(sweep(ks_jax.load_case(SEED1), {"vehicles[1].speed": np.linspace(10, 30, 3) * U.MPH}, outputs=outs),
+                  tmp_path / "kept.csv")
+    cli, kept = (list(csv.reader((tmp_path / n).read_text().splitlines()))[0] for n in ("cli.csv", "kept.csv"))
+    assert cli == kept == ["vehicles[1].speed", *outs, "status", "status_text"]

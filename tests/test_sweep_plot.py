@@ -88,6 +88,23 @@ def test_line_for_one_input_and_histogram_for_samples(case):
     assert median.get_xdata()[0] == pytest.approx(np.median(z[DV1][7:]) / MPH, rel=1e-12)
 
 
+def test_a_grid_axis_of_one_value_is_drawn_as_a_line(case):
+    """Two swept inputs, one of them with a single value: a line over the other, the fixed value in
+    the title (a map one cell wide draws nothing); both single: one point."""
+    eps = np.linspace(0, 0.3, 7)
+    for over, x in (({"vehicles[1].speed": [20 * MPH], "contact.restitution": eps}, eps),
+                    ({"contact.restitution": eps, "vehicles[1].speed": [20 * MPH]}, eps),
+                    ({"vehicles[1].speed": [20 * MPH], "contact.restitution": [0.1]}, np.array([20.0]))):
+        r = sweep(case, over, outputs=[DV1])
+        ax = draw(r)
+        (line,) = ax.get_lines()
+        assert not [c for c in ax.collections if isinstance(c, QuadMesh)]
+        np.testing.assert_allclose(line.get_xdata(), x, rtol=1e-12)
+        np.testing.assert_allclose(line.get_ydata(), np.ravel(r[DV1]) / MPH, rtol=1e-12)
+        fixed = "contact.restitution = 0.1" if x.size == 1 else "vehicles[1].speed = 20 [mph]"
+        assert fixed in ax.get_title()
+
+
 def test_sliding_is_drawn_as_stick_or_slide(case):
     r = sweep(case, {"contact.friction": np.linspace(0, 1, 6), "vehicles[1].course": np.radians([0, 20, 40, 60])},
               outputs=["contact.sliding"])
