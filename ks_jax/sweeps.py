@@ -390,7 +390,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
     progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
-    (from the start) or False; tqdm if installed, else a line on stderr. devices: the devices to shard every chunk over (default ``jax.devices()``).
+    (from the start) or False; tqdm if installed, else a line on stderr.
+    devices: the devices to shard every chunk over (default ``jax.devices()``).
     output_dtype: dtype of the stored float results (default: the compute dtype).
     on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
     NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
