@@ -524,3 +524,73 @@ def test_normal_sign_with_the_cgs_at_the_touching_faces():
     np.testing.assert_allclose(r.contact.point, [15.1, 0.0, 0.7], atol=LEN_TOL)
     np.testing.assert_allclose([v.crush for v in r.vehicles], [0.25, 0.25], atol=LEN_TOL)
     assert_same_exchange(r, second_formulation(row, 1.01, [15.1, 0.0, 0.7], [1.0, 0.0, 0.0]))
+
+
+# ---------------------------------------------------------------------------------------
+# where a vehicle rotates: the scan covers only the window in which the footprints can reach
+
+
+def _graze_row(dur, yaw_rate):
+    """VS parked at the origin (turning at ``yaw_rate``) and VS passing at (-20, -10) m/s: its rear-left
+    corner crosses vehicle 1's front-right one. x-ranges start to overlap at t0 = 0.3911 s, y-ranges
+    stop at t0 + dur: a graze of ``dur`` s. At t0 + dur/4 the overlap is the rectangle
+    x in [2.25 - 20 dur/4, 2.25], y in [-0.9, -0.9 + 10 * 3 dur/4]."""
+    t0, vx, vy = 0.3911, 20.0, 10.0
+    s2 = ks_jax.State.create([4.5 + vx * t0, vy * (t0 + dur) - 1.8], 0.0, velocity=[-vx, -vy], cg_height=0.55)
+    s1 = st(0.0, 0.0, yaw_rate=yaw_rate)
+    return (VS, s1, VS, s2, con(dur / 4), 0.0), t0
+
+
+def test_short_graze_of_a_rotating_vehicle_is_found():
+    """Grazes of 1 ms and 0.2 ms, shorter than the 5 ms a scan of the whole 10 s horizon would step:
+    the scan covers only the window in which the circles of reach about the CGs overlap (here about
+    0.43 s), so its 2000 steps are about 0.2 ms apart. Vehicle 1 turns at 1e-9 rad/s (the scan; a
+    corner moves ~1e-9 m), so the hand geometry of the translating pair holds."""
+    out = run([_graze_row(dur, w)[0] for dur in (1e-3, 2e-4) for w in (1e-9, 0.0)])
+    for r, (dur, w) in zip(out, [(d, w) for d in (1e-3, 2e-4) for w in (1e-9, 0.0)]):
+        where = f"graze of {dur} s, yaw rate {w}"
+        assert r.contact.status == OK, where
+        assert abs(r.contact.time - 0.3911) < TIME_TOL, where
+        dx, dy = 20.0 * dur / 4, 10.0 * 3 * dur / 4
+        np.testing.assert_allclose(r.contact.point, [2.25 - dx / 2, -0.9 + dy / 2, 0.7], atol=1e-8, err_msg=where)
+        # perpendicular to the overlap's diagonal (the outlines cross at its other two corners); the
+        # turn of 4e-10 rad moves a corner ~1e-9 m, up to 1e-5 of the overlap's size
+        np.testing.assert_allclose(r.contact.normal, np.array([-dy, dx, 0.0]) / math.hypot(dx, dy),
+                                   atol=1e-5 if w else 1e-12, err_msg=where)
+
+
+def _first_touch_of_a_spinning_car(w, u, face0):
+    """Independent of the kernel: VS (corners at radius R, angles +-phi and pi +- phi) spins at w about
+    the origin; a wall x = face0 - u t comes towards it. The first t at which a corner reaches the wall:
+    a scan every 1e-5 s, then bisection."""
+    R, phi = math.hypot(2.25, 0.9), math.atan2(0.9, 2.25)
+    g = lambda t: R * max(math.cos(a + w * t) for a in (phi, -phi, math.pi + phi, math.pi - phi)) + u * t - face0  # noqa: E731
+    t = 0.0
+    while g(t + 1e-5) < 0:
+        t += 1e-5
+    lo, hi = t, t + 1e-5
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if g(mid) >= 0 else (mid, hi)
+    return hi
+
+
+def test_spinning_car_reached_late_and_out_of_reach():
+    """A spinning car at the origin, reached by the 1.9 m wide face of a 10 m long vehicle turned across
+    its path: from 24.05 m at 3 m/s it comes within reach after ~7.2 s; the touching time against an
+    independent corner-against-wall calculation. Starting from 44.05 m it would arrive after 10 s
+    (the horizon): no contact. A spinning car passing 5 m beside another, parallel and at the same
+    speed, never comes within reach: no contact, and nothing NaN."""
+    wall = veh(length=10.0, width=1.9, height=1.5, cg_to_front=5.0, mass=1800.0)
+    w, u = 2.0, 3.0
+    rows = [(VS, st(0.0, 0.0, yaw_rate=w), wall,
+             ks_jax.State.create([face + 0.95, 0.0], math.pi / 2, velocity=[-u, 0.0], cg_height=0.55), con(0.0), 0.0)
+            for face in (24.05, 44.05)]
+    rows.append((VS, st(0.0, 0.0, 0, 5.0, yaw_rate=1.0), VS, st(0.0, 5.0, 0, 5.0), con(0.02), 0.0))
+    late, too_late, beside = run(rows)
+    want = _first_touch_of_a_spinning_car(w, u, 24.05)
+    assert 7.0 < want < 10.0
+    assert late.contact.status == OK and abs(late.contact.time - want) < 1e-9
+    for r in (too_late, beside):
+        assert r.contact.status == NO_CONTACT and r.contact.time == G.HORIZON
+        assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
