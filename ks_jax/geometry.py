@@ -466,20 +466,41 @@ def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, stat
     Returns ``ks_jax.exchange``'s result at t_i + penetration_time with ``contact.time`` = t_i
     (s); status "no_contact" and no NaN when the footprints do not touch within HORIZON.
     Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
-    """
-    status = input_status(vehicle1, state1, vehicle2, state2, contact)
-    ok = status == OK
-    bv1, bs1, bv2, bs2, bc = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
-    normal_pitch = jnp.where(ok & jnp.isfinite(normal_pitch), normal_pitch, 0.0)
-    auto = automatic_contact(bv1, bs1, bv2, bs2, bc, normal_pitch, auto_point=auto_point, auto_normal=auto_normal)
 
+    It is ``exchange_at_contact(automatic_stage(input_status(...)))``. A batched caller on CPU
+    may run the three as separate jitted calls (``ks_jax.sweep`` does): in one program XLA's
+    fusion re-derives the status from every input inside each loop that reads a stand-in input
+    (2x slower where no vehicle turns; benchmarks/RESULTS.md).
+    """
+    args = (vehicle1, state1, vehicle2, state2, contact)
+    status = input_status(*args)
+    auto = automatic_stage(*args, normal_pitch, status, auto_point=auto_point, auto_normal=auto_normal)
+    return exchange_at_contact(*args, status, auto, smoothing)
+
+
+def automatic_stage(vehicle1, state1, vehicle2, state2, contact, normal_pitch, status, *, auto_point,
+                    auto_normal) -> AutoContact:
+    """``automatic_contact`` of a row whose ``input_status`` is ``status`` (() int32), run on harmless
+    stand-in inputs where that is not OK. Its ``geometry`` is None (the exchange does not need it)."""
+    ok = status == OK
+    benign = _benign((vehicle1, state1, vehicle2, state2, contact), ok)
+    normal_pitch = jnp.where(ok & jnp.isfinite(normal_pitch), normal_pitch, 0.0)
+    auto = automatic_contact(*benign, normal_pitch, auto_point=auto_point, auto_normal=auto_normal)
+    return auto._replace(geometry=None)
+
+
+def exchange_at_contact(vehicle1, state1, vehicle2, state2, contact, status, auto: AutoContact,
+                        smoothing=0.0) -> ExchangeResult:
+    """The exchange at ``auto`` (``automatic_stage`` of the same inputs and ``status``), with the
+    results of a row that never touches set as the module docstring says."""
+    ok = status == OK
     pick = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, old)  # noqa: E731
     result = exchange(vehicle1, pick(auto.state1, state1), vehicle2, pick(auto.state2, state2),
                       pick(auto.contact, contact), smoothing)
 
     none = ok & ~auto.found
     c = result.contact
-    towards1 = bs1.position - bs2.position
+    towards1 = jnp.where(ok, state1.position - state2.position, 0.0)
     towards1 = towards1.at[2].set(0.0)
     length = la.safe_norm(towards1)
     x_axis = jnp.zeros(3, towards1.dtype).at[0].set(1.0)

@@ -32,6 +32,12 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
                                     auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
     else:
         result = exchange(v1, s1, v2, s2, contact, smoothing)
+    return with_speed_status(inputs, result)
+
+
+def with_speed_status(inputs: CaseInputs, result: ExchangeResult) -> ExchangeResult:
+    """``result`` of ``inputs`` with ``case.speed_status`` applied: that status and NaN results
+    where a negative speed makes the row invalid."""
     status = speed_status(inputs, result.contact.status)
     result = mask_invalid(result, status == result.contact.status)  # NaN where the speed made it invalid
     return result._replace(contact=result.contact._replace(status=status))

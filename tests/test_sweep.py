@@ -100,8 +100,8 @@ def test_chunk_boundaries_do_not_change_results(case):
 
 
 def test_automatic_contact_case_matches_single_solves():
-    """A case with automatic contact goes through the geometry in its sweep (``solve_inputs``), not the
-    three-call explicit path: the same values as solving a point alone, across chunk boundaries."""
+    """A case with automatic contact goes through the geometry in its sweep (three calls: status, contact,
+    exchange): the same values as solving a point alone, across chunk boundaries."""
     auto = ks_jax.load_case(CASES / "auto_tbone.json")
     assert auto.auto_point and auto.auto_normal
     speeds = np.array([11.0, 13.4112, 16.0])  # the pickup (its case speed: 30 mph)
@@ -116,6 +116,37 @@ def test_automatic_contact_case_matches_single_solves():
         for path in outputs:
             np.testing.assert_allclose(r[path][i, j], get_output(res, path), rtol=RTOL, atol=1e-9, err_msg=path)
     assert len(set(np.round(r["contact.time"][:, 0], 12))) == 3  # the time to contact depends on the speed
+
+
+def test_automatic_contact_sweep_with_bad_missed_and_turning_rows():
+    """Every point of an automatic-contact grid against ``solve_inputs`` alone: a negative speed and a
+    restitution of 1.5 (invalid: their status, NaN), the sedan 80 ft ahead (no contact), a turning sedan
+    (the first contact searched), in chunks of 5."""
+    auto = ks_jax.load_case(CASES / "auto_tbone.json")
+    over = {"vehicles[1].speed": np.array([-2.0, 11.0, 16.0]), "contact.restitution": np.array([0.1, 1.5]),
+            "vehicles[0].yaw_rate": np.radians([0.0, 40.0]), "vehicles[0].position[0]": np.array([0.0, 80 * U.FT])}
+    outputs = ["contact.time", "contact.impulse_magnitude", "contact.normal[1]", "vehicles[0].pdof",
+               "vehicles[1].crush", "contact.sliding"]
+    r = sweep(auto, over, outputs=outputs, chunk_size=5)
+    paths = list(over)
+    seen = set()
+    for index in np.ndindex(r.shape):
+        inputs = auto.inputs
+        for p, k in zip(paths, index):
+            inputs = set_input(inputs, p, over[p][k])
+        res = _SOLVE(as_arrays(inputs), True, True)
+        status = int(res.contact.status)
+        seen.add(ks_jax.status_text(status))
+        assert r["status"][index] == status, index
+        for path in outputs:
+            want = np.asarray(get_output(res, path), float)
+            got = np.asarray(r[path][index], float)
+            if path == "contact.sliding" and status >= ks_jax.types.INVALID_NONFINITE:
+                continue
+            np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-9, err_msg=f"{path} at {index}")
+    assert {"ok", "no_contact", "invalid: contact.restitution must be in [-1, 1]",
+            "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)"} <= seen
+    assert r.status_counts["ok"] == 4  # 11 and 16 m/s, eps 0.1, the sedan at 0 ft, turning or not
 
 
 def test_default_outputs_and_status(case):
@@ -150,7 +181,8 @@ def test_bad_rows_get_their_status_others_match(case):
 
 def test_negative_speeds_get_their_status_others_match(case):
     """A case file refuses a negative speed; a sampled one gets the status, NaN results, and the other
-    rows are solved. (An automatic-contact sweep solves its rows by ``solve_inputs``, checked last.)"""
+    rows are solved. (``solve_inputs`` of one point, as an automatic-contact sweep's rows are finished,
+    checked last.)"""
     speeds = np.array([-3.0, 0.0, 4.0, -0.5, 9.0])
     r = sweep(case, {"vehicles[1].speed": speeds}, outputs=OUTPUTS, chunk_size=2)
     bad = speeds < 0
