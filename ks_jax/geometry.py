@@ -17,15 +17,18 @@ Choices where MODEL.md is silent
   (``ks_jax.exchange``) time is 0: the exchange is at the case state.
 - First contact is searched in [0, HORIZON] = [0, 10] s. Where neither vehicle rotates it is
   exact (closed form: the separating-axis test swept along the relative translation is a set
-  of 8 linear inequalities in t). Where one rotates, the separating-axis function
-  s(t) = max over the 4 edge normals of the gap between the projections (> 0 apart, <= 0
-  touching) is sampled at SCAN_STEPS = 2000 even steps and the first sign change is refined
-  by BISECTION_STEPS bisections (to far below 1e-6 s). The steps cover only the reach window
+  of 8 linear inequalities in t). Where one rotates, the search keeps to the reach window
   (``reach_window``): the times at which the circles about the CGs that hold each footprint
-  at any yaw overlap, which the CGs' straight paths give in closed form. Outside it the
-  footprints cannot touch, so vehicles that never come within reach are "no_contact" without
-  a scan, and the steps are (window length) / 2000: at most 5 ms, and about 0.2 ms where two
-  cars pass at 20 m/s. A graze shorter than one step can be missed.
+  at any yaw overlap, which the CGs' straight paths give in closed form; outside it the
+  footprints cannot touch, and vehicles that never come within reach are "no_contact"
+  without a search. Inside it, the separating-axis function s(t) = max over the 4 edge
+  normals of the gap between the projections (> 0 apart, <= 0 touching) is advanced
+  conservatively: s(t) is at most the distance between the footprints, which shrinks at most
+  at |v_1 - v_2| + |w_1| R_1 + |w_2| R_2, so no touch comes before t + s(t) / that bound.
+  Each step is that long but at least (window length) / SCAN_STEPS: 5 ms at most, and about
+  0.2 ms where two cars pass at 20 m/s. Only a graze shorter than that least step, and only
+  once the footprints are within a step's travel of each other, can be missed. The step that
+  lands on s <= 0 is refined by BISECTION_STEPS bisections (to far below 1e-6 s).
 - Gradients of t_i are those of the touching condition s(t_i, theta) = 0 (implicit function
   theorem, applied as one Newton step from a stop_gradient root), so they see speeds,
   headings, positions and yaw rates in both cases; 0 when the vehicles overlap at t = 0.
@@ -68,7 +71,7 @@ from .exchange import _benign, exchange, input_status
 from .types import NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
 
 HORIZON = 10.0  # s, search horizon for the first contact
-SCAN_STEPS = 2000  # coarse samples of the reach window where a vehicle rotates (<= 5 ms apart)
+SCAN_STEPS = 2000  # the least step where a vehicle rotates: the reach window / SCAN_STEPS (<= 5 ms)
 BISECTION_STEPS = 48
 MAX_VERTICES = 8  # two convex quadrilaterals overlap in at most an octagon
 

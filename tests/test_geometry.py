@@ -543,8 +543,8 @@ def _graze_row(dur, yaw_rate):
 
 def test_short_graze_of_a_rotating_vehicle_is_found():
     """Grazes of 1 ms and 0.2 ms, shorter than the 5 ms a scan of the whole 10 s horizon would step:
-    the scan covers only the window in which the circles of reach about the CGs overlap (here about
-    0.43 s), so its 2000 steps are about 0.2 ms apart. Vehicle 1 turns at 1e-9 rad/s (the scan; a
+    the search keeps to the window in which the circles of reach about the CGs overlap (here 0.29 s),
+    so its least step is 0.29 s / 2000 = 0.14 ms. Vehicle 1 turns at 1e-9 rad/s (the scan; a
     corner moves ~1e-9 m), so the hand geometry of the translating pair holds."""
     out = run([_graze_row(dur, w)[0] for dur in (1e-3, 2e-4) for w in (1e-9, 0.0)])
     for r, (dur, w) in zip(out, [(d, w) for d in (1e-3, 2e-4) for w in (1e-9, 0.0)]):

@@ -655,8 +655,8 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
 
 
 def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
-    """progress=None: a bar on stderr once the sweep has run PROGRESS_DELAY seconds (any size: an
-    automatic-contact million points runs for a minute), none before; progress=False: never."""
+    """progress=None: a bar on stderr once the sweep has run PROGRESS_DELAY seconds (any size: a million
+    points with automatic contact run for 5-15 s), none before; progress=False: never."""
     import ks_jax.sweeps as sweeps_module
 
     case = ks_jax.load_case(SEED1)
