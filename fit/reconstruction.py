@@ -438,8 +438,45 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         if monte_carlo:
             r.monte_carlo = _monte_carlo(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
                                          smoothing, dtype, progress, chunk)
+            r.notes += _linearisation_notes(r)
         results.append(r)
     return results
+
+
+MC_CHECK_SAMPLES = 32  # fewer refits say too little about the spread to contradict the standard error
+MC_SPREAD_RATIO = 1.6  # Monte Carlo 5-95% spread over 2 x 1.645 sigma: outside [1/1.6, 1.6] is a note
+MC_MEDIAN_SHIFT = 0.5  # |Monte Carlo median - estimate| in sigmas above which it is a note
+
+
+def _linearisation_notes(result: FitResult) -> list:
+    """Where the Monte Carlo refits contradict the linearised (Laplace) standard error of a determined
+    unknown: a 5-95% spread more than MC_SPREAD_RATIO times wider or narrower than +/- 1.645 sigma, or
+    a median more than MC_MEDIAN_SHIFT sigma from the estimate. Then the results are not linear in
+    that unknown over its uncertainty (or a bound cuts the refits off), and the standard error
+    misleads."""
+    from ks_jax.case import input_kind
+
+    from .uncertainty import fmt
+
+    mc = result.monte_carlo
+    if mc is None or mc["samples"] < MC_CHECK_SAMPLES:
+        return []
+    notes = []
+    for u in result.unknowns:
+        s = result.std[u.path]
+        if u.path in result.not_determined or not (math.isfinite(s) and s > 0):
+            continue
+        p5, p50, p95 = (mc["percentiles"][q][u.path] for q in ("5", "50", "95"))
+        ratio = (p95 - p5) / (2 * 1.645 * s)
+        shift = (p50 - result.estimate[u.path]) / s
+        if 1 / MC_SPREAD_RATIO <= ratio <= MC_SPREAD_RATIO and abs(shift) <= MC_MEDIAN_SHIFT:
+            continue
+        kind = input_kind(u.path)
+        notes.append(f"{u.path}: the Monte Carlo refits spread {fmt(p5, kind)} to {fmt(p95, kind)} (5-95%), median "
+                     f"{fmt(p50, kind)}, where the standard error gives {fmt(result.estimate[u.path] - 1.645 * s, kind)} "
+                     f"to {fmt(result.estimate[u.path] + 1.645 * s, kind)}: the results are not linear in it over its "
+                     f"uncertainty, or a bound cuts the refits off; read the Monte Carlo percentiles")
+    return notes
 
 
 def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,

@@ -153,6 +153,22 @@ def test_seed_001_monte_carlo_agrees_with_laplace():
     assert (p95 - p5) / (2 * 1.645) == pytest.approx(r.std["vehicles[1].speed"], rel=0.35)
     assert mc["converged_fraction"] > 0.9
     assert "monte_carlo" in r.to_dict()
+    assert not any("Monte Carlo refits spread" in n for n in r.notes)  # they agree: no note
+
+
+def test_monte_carlo_cut_off_by_a_bound_is_noted():
+    """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
+    the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
+    half of the standard error's +/- 1.645 sigma. The report says so and points to the percentiles."""
+    r = fit.reconstruct(load_case(FIT_SEED), {"vehicles[1].speed": {"bounds": ["0 mph", "20.02 mph"]}},
+                        monte_carlo=64, seed=3)
+    p5, p95 = (r.monte_carlo["percentiles"][q]["vehicles[1].speed"] for q in ("5", "95"))
+    assert p95 == pytest.approx(20.02 * U.MPH, rel=1e-9)  # cut off by the bound
+    s = r.std["vehicles[1].speed"]
+    assert 0 < s and r.estimate["vehicles[1].speed"] < 20.02 * U.MPH and r.at_bound == []
+    assert (p95 - p5) / (2 * 1.645 * s) < 1 / fit.reconstruction.MC_SPREAD_RATIO
+    (note,) = [n for n in r.notes if "Monte Carlo refits spread" in n]
+    assert note.startswith("vehicles[1].speed:") and "20.02 mph" in note and "read the Monte Carlo percentiles" in note
 
 
 SEED_EVIDENCE = [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6.47 mph", "sigma": "0.3 mph"},
