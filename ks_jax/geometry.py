@@ -473,7 +473,7 @@ def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, stat
     It is ``exchange_at_contact(automatic_stage(input_status(...)))``. A batched caller on CPU
     may run the three as separate jitted calls (``ks_jax.sweep`` does): in one program XLA's
     fusion re-derives the status from every input inside each loop that reads a stand-in input
-    (2x slower where no vehicle turns; benchmarks/RESULTS.md).
+    (a sweep where no vehicle turns took 3x the time per point; benchmarks/RESULTS.md).
     """
     args = (vehicle1, state1, vehicle2, state2, contact)
     status = input_status(*args)

@@ -24,7 +24,11 @@ How it scales
   impulse and what the results derive from (``exchange.impulse_stage``), then the results
   (``exchange.results_stage``). In one program XLA's CPU loop fusion re-evaluates shared values
   (the ~100 input checks, the scalar float64 sines/cosines, the 3x3 algebra) in every loop that
-  reads them: the three calls take half the time per row (benchmarks/RESULTS.md).
+  reads them: the three calls take half the time per row (benchmarks/RESULTS.md). An
+  automatic-contact chunk is solved in three calls too: the status (``exchange.input_status``),
+  the contact (``geometry.automatic_stage``: first contact, free motion, overlap) and the
+  exchange there (``geometry.exchange_at_contact``); a third of the time per row where no
+  vehicle turns.
 
 Devices
 -------
@@ -273,7 +277,7 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
     rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-    split = auto_point or auto_normal  # automatic contact: the geometry computes its own status
+    split = auto_point or auto_normal  # automatic contact: status, contact, exchange
 
     def values(start, axes, total):
         vals = _chunk_values(start, axes, mode, sizes, n_rows, total)
