@@ -43,16 +43,52 @@ def with_speed_status(inputs: CaseInputs, result: ExchangeResult) -> ExchangeRes
     return result._replace(contact=result.contact._replace(status=status))
 
 
-@partial(jax.jit, static_argnames=("smoothing", "auto_point", "auto_normal"))
-def _solve_batch(inputs, smoothing, auto_point, auto_normal):
-    solve_row = lambda x: solve_inputs(x, auto_point, auto_normal, smoothing)  # noqa: E731
-    if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
-        # one case, unbatched: XLA compiles the vmapped program for a batch of one 3-4x slower
-        # than for two rows or for no batch axis (6.1 against 1.5 s explicit, 17.5 against 5.9 s
-        # automatic)
-        row = solve_row(jax.tree_util.tree_map(lambda x: x[0], inputs))
+def _rows(fn, *args):
+    """``fn`` over the leading axis of ``args``. One case unbatched: XLA compiles the vmapped program
+    for a batch of one 3-4x slower than for two rows or for no batch axis (6.1 against 1.5 s
+    explicit, 17.5 against 5.9 s automatic, 2026-11-22)."""
+    if jax.tree_util.tree_leaves(args)[0].shape[0] == 1:
+        row = fn(*jax.tree_util.tree_map(lambda x: x[0], args))
         return jax.tree_util.tree_map(lambda x: x[None], row)
-    return jax.vmap(solve_row)(inputs)
+    return jax.vmap(fn)(*args)
+
+
+@partial(jax.jit, static_argnames=("smoothing",))
+def _solve_explicit(inputs, smoothing):
+    return _rows(lambda x: solve_inputs(x, False, False, smoothing), inputs)
+
+
+@jax.jit
+def _auto_status(inputs):
+    from .exchange import input_status
+
+    return _rows(lambda x: input_status(*to_pytrees(x)), inputs)
+
+
+@partial(jax.jit, static_argnames=("auto_point", "auto_normal"))
+def _auto_contact(inputs, status, auto_point, auto_normal):
+    from .geometry import automatic_stage
+
+    return _rows(lambda x, st: automatic_stage(*to_pytrees(x), x.contact.normal_pitch, st, auto_point=auto_point,
+                                               auto_normal=auto_normal), inputs, status)
+
+
+@partial(jax.jit, static_argnames=("smoothing",))
+def _auto_exchange(inputs, status, auto, smoothing):
+    from .geometry import exchange_at_contact
+
+    return _rows(lambda x, st, a: with_speed_status(x, exchange_at_contact(*to_pytrees(x), st, a, smoothing)),
+                 inputs, status, auto)
+
+
+def _solve_batch(inputs, smoothing, auto_point, auto_normal):
+    """``solve_inputs`` of every row. Automatic contact runs as three compiled calls, status, contact
+    and exchange (``geometry.automatic_exchange`` says why): one program took 5.7 s to compile,
+    the three 2.5 s (benchmarks/RESULTS.md)."""
+    if not (auto_point or auto_normal):
+        return _solve_explicit(inputs, smoothing)
+    status = _auto_status(inputs)
+    return _auto_exchange(inputs, status, _auto_contact(inputs, status, auto_point, auto_normal), smoothing)
 
 
 @dataclass
