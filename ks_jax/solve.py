@@ -58,27 +58,35 @@ def _solve_explicit(inputs, smoothing):
     return _rows(lambda x: solve_inputs(x, False, False, smoothing), inputs)
 
 
-@jax.jit
-def _auto_status(inputs):
+def auto_status(inputs: CaseInputs):
+    """() int32: the first stage of automatic contact, ``exchange.input_status`` of one row."""
     from .exchange import input_status
 
-    return _rows(lambda x: input_status(*to_pytrees(x)), inputs)
+    return input_status(*to_pytrees(inputs))
 
 
-@partial(jax.jit, static_argnames=("auto_point", "auto_normal"))
-def _auto_contact(inputs, status, auto_point, auto_normal):
+def auto_contact(inputs: CaseInputs, status, auto_point: bool, auto_normal: bool):
+    """The second stage: ``geometry.automatic_stage`` of one row, given its ``auto_status``."""
     from .geometry import automatic_stage
 
-    return _rows(lambda x, st: automatic_stage(*to_pytrees(x), x.contact.normal_pitch, st, auto_point=auto_point,
-                                               auto_normal=auto_normal), inputs, status)
+    return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, status, auto_point=auto_point,
+                           auto_normal=auto_normal)
 
 
-@partial(jax.jit, static_argnames=("smoothing",))
-def _auto_exchange(inputs, status, auto, smoothing):
+def auto_exchange(inputs: CaseInputs, status, auto, smoothing=0.0) -> ExchangeResult:
+    """The third stage: the exchange at ``auto`` (``auto_contact``), as ``solve_inputs`` returns it.
+    The three in one program are ``solve_inputs`` with automatic contact; run as three compiled calls
+    (``_solve_batch``, ``ks_jax.sweep``) they compile and run faster (``geometry.automatic_exchange``)."""
     from .geometry import exchange_at_contact
 
-    return _rows(lambda x, st, a: with_speed_status(x, exchange_at_contact(*to_pytrees(x), st, a, smoothing)),
-                 inputs, status, auto)
+    return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
+
+
+_auto_status = jax.jit(lambda inputs: _rows(auto_status, inputs))
+_auto_contact = jax.jit(lambda inputs, status, auto_point, auto_normal: _rows(
+    lambda x, st: auto_contact(x, st, auto_point, auto_normal), inputs, status), static_argnums=(2, 3))
+_auto_exchange = jax.jit(lambda inputs, status, auto, smoothing: _rows(
+    lambda x, st, a: auto_exchange(x, st, a, smoothing), inputs, status, auto), static_argnums=(3,))
 
 
 def _solve_batch(inputs, smoothing, auto_point, auto_normal):

@@ -265,14 +265,12 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
     (``exchange.results_stage``). Each call's outputs are stored once per row; in one program
     XLA's CPU fusion would re-derive them inside every loop that reads them (2x slower here).
     The first call also returns the chunk's swept values, which the other two read, and adds a
-    negative speed to the status (``case.speed_status``). For automatic contact the three are the
-    status (``exchange.input_status``), the contact (``geometry.automatic_stage``) and the
-    exchange there (``geometry.exchange_at_contact``), with the speed status added last, as
-    ``solve.solve_inputs`` does.
+    negative speed to the status (``case.speed_status``). For automatic contact the three are
+    ``solve.auto_status``, ``solve.auto_contact`` and ``solve.auto_exchange`` (the speed status
+    added last, as ``solve.solve_inputs`` does).
     """
-    from .exchange import impulse_stage, input_status, prepare, results_stage
-    from .geometry import automatic_stage, exchange_at_contact
-    from .solve import with_speed_status
+    from .exchange import impulse_stage, prepare, results_stage
+    from .solve import auto_contact, auto_exchange, auto_status
 
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
     rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
@@ -286,8 +284,7 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
     def status_fn(start, axes, total, base):  # the chunk's swept values, made once, and their status
         vals = values(start, axes, total)
         if split:
-            return vals, (jax.vmap(lambda *v: input_status(*to_pytrees(_row_inputs(base, paths, v, ties))))(*vals),
-                          None)
+            return vals, (jax.vmap(lambda *v: auto_status(_row_inputs(base, paths, v, ties)))(*vals), None)
 
         def one(*v):
             inputs = _row_inputs(base, paths, v, ties)
@@ -299,12 +296,8 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
     def impulse_fn(base, vals, prepared):
         status, trig = prepared
         if split:
-            def auto(st, *v):
-                inputs = _row_inputs(base, paths, v, ties)
-                return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, st, auto_point=auto_point,
-                                       auto_normal=auto_normal)
-
-            return jax.vmap(auto)(status, *vals)
+            return jax.vmap(lambda st, *v: auto_contact(_row_inputs(base, paths, v, ties), st, auto_point,
+                                                        auto_normal))(status, *vals)
         return jax.vmap(lambda st, tr, *v: impulse_stage(*to_pytrees(_row_inputs(base, paths, v, ties)), smoothing,
                                                          st, tr, for_gradients=False))(status, trig, *vals)
 
@@ -314,7 +307,7 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
         def one(st, stg, *v):
             inputs = _row_inputs(base, paths, v, ties)
             if split:
-                res = with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), st, stg, smoothing))
+                res = auto_exchange(inputs, st, stg, smoothing)
             else:
                 res = results_stage(*to_pytrees(inputs), st, stg)
             out = {}
