@@ -11,6 +11,7 @@ Unit strings in case files ("21 mph", "3496.531 lbf", "2300 lbf*ft*s^2") are par
 from __future__ import annotations
 
 import math
+import re
 from functools import lru_cache
 
 # exact definitions
@@ -98,10 +99,47 @@ def _registry():
     return ureg
 
 
+_NUMBER = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
+_QUANTITY = re.compile(rf"^({_NUMBER})\s*(.*)$")
+_EXPONENT = re.compile(r"(?:\^|\*\*)\s*\(?\s*[+-]?\d+(?:\.\d+)?\s*\)?")
+_UNIT_TEXT = re.compile(r"^[^\W\d]*(?:[^\W\d]|[\s*/()·²³¹⁰⁻])*$")
+_HYPHEN = re.compile(r"(?<=[^\W\d])-(?=[^\W\d])")  # ft-lbf, lbf-s: a product, as the trade writes it
+_FORM = ("write one number, then its unit (no thousands separator, a decimal point rather than a comma, "
+         "nothing after the unit)")
+
+
+def _split(text):
+    """(number, unit) of a '<number> <unit>' string, the unit made ready for pint ('ft-lbf' -> 'ft*lbf');
+    UnitError for anything else, so that "1 500 kg", "4,5 m" or "30 mph 2" are refused rather than read
+    as pint would read them (500 kg, 45 m, 60 mph)."""
+    m = _QUANTITY.match(text)
+    if not m:
+        raise UnitError(f"'{text}' is not a '<number> <unit>' quantity: {_FORM}")
+    number, unit = m.groups()
+    unit = _HYPHEN.sub("*", unit)
+    bare = _EXPONENT.sub("", re.sub(r"^1\s*/", "/", unit))  # exponents and a leading "1/" hold the only digits
+    if not _UNIT_TEXT.match(bare):
+        raise UnitError(f"'{text}' is not a '<number> <unit>' quantity: {_FORM}")
+    return number, unit
+
+
+def _names_an_angle(ureg, q):
+    """Whether a rate's unit holds an angle (deg/s, rad/s, rpm, turn/min), not only a time (1/s, Hz)."""
+    for name, _ in q.unit_items():
+        unit = ureg.Quantity(1, name)
+        if (unit.dimensionless and not unit.unitless) or "revolution" in name:
+            return True
+    return False
+
+
 def parse_quantity(value, kind: str) -> float:
     """A number (SI, or degrees / deg/s for angles and rates) or a "<number> <unit>" string,
     returned as a float in the SI unit of ``kind`` (see ``SI_UNITS``).
 
+    The string is one number and its unit: "21 mph", "3496.531 lbf", "2300 lbf*ft*s^2", "14117.71 ft-lbf"
+    (a hyphen between unit names is a product). Refused: anything after or inside the number ("1 500 kg",
+    "4,5 m", "30 mph 2"), a unit of another dimension, an angle unit on a plain number (restitution,
+    friction), and a rate without an angle ("1 Hz", "2 1/s": write deg/s, rad/s or rpm).
     Raises UnitError with the rule that failed.
     """
     if kind not in SI_UNITS:
@@ -118,19 +156,28 @@ def parse_quantity(value, kind: str) -> float:
         return float(text) * BARE_NUMBER_SCALE.get(kind, 1.0)
     except ValueError:
         pass
+    number, unit = _split(text)
+    if not unit:
+        return float(number) * BARE_NUMBER_SCALE.get(kind, 1.0)
     ureg = _registry()
     import pint
 
     try:
-        q = ureg.Quantity(text)
+        q = ureg.Quantity(float(number), unit)
     except (pint.errors.UndefinedUnitError, pint.errors.DefinitionSyntaxError) as err:
         raise UnitError(f"'{text}': unknown unit ({err})") from None
     except Exception as err:  # pint raises several kinds for malformed text
         raise UnitError(f"'{text}' is not a '<number> <unit>' quantity ({err})") from None
-    if not isinstance(q, ureg.Quantity):  # a bare number inside a string, e.g. "3"
-        return float(q) * BARE_NUMBER_SCALE.get(kind, 1.0)
-    if kind in ("angle", "dimensionless", "angular_velocity") and q.dimensionless and kind != "angular_velocity":
-        return float(q.to(SI_UNITS[kind]).magnitude) if kind == "angle" else float(q.to("").magnitude)
+    if kind == "dimensionless":
+        if not q.unitless:
+            raise UnitError(f"'{text}': a {kind} number takes no unit (give a plain number)")
+        return float(q.to("").magnitude)
+    if kind == "angle" and q.dimensionless:
+        return float(q.to(SI_UNITS[kind]).magnitude)
+    if kind == "angular_velocity" and q.dimensionality == ureg.Quantity(1, "1/s").dimensionality \
+            and not _names_an_angle(ureg, q):
+        raise UnitError(f"'{text}': an angular velocity needs an angle in its unit (deg/s, rad/s, rpm); "
+                        f"'{unit}' does not say whether it counts radians or turns")
     try:
         return float(q.to(SI_UNITS[kind]).magnitude)
     except pint.errors.DimensionalityError:

@@ -82,6 +82,30 @@ def test_parse_quantity_rules():
         U.parse_quantity("21 furlongs_per_blink", "velocity")
 
 
+def test_unit_strings_read_one_number_and_its_unit():
+    """A thousands separator, a decimal comma, a second number or an expression is refused, where pint
+    alone would read "1 500 kg" as 500 kg, "4,5 m" as 45 m and "30 mph 2" as 60 mph. A hyphen between
+    unit names is a product, as US reports write energies and impulses; a rate needs an angle in its unit
+    (Hz or 1/s could count radians or turns); restitution and friction take no unit (pint would take an
+    angle: "30 deg" as 0.52)."""
+    for text, kind in [("1 500 kg", "mass"), ("3 000 kg", "mass"), ("4,5 m", "length"), ("12,5 km/h", "velocity"),
+                       ("0,1", "dimensionless"), ("30 mph 2", "velocity"), ("0.1 0.2", "dimensionless"),
+                       ("5 kg + 3 kg", "mass"), ("1 250 mm", "length"), ("a", "velocity"), ("mph", "velocity")]:
+        with pytest.raises(U.UnitError, match="one number, then its unit"):
+            U.parse_quantity(text, kind)
+    # the seed chapter's energy and impulse as its US panel writes them (MODEL.md section 7)
+    assert U.parse_quantity("14117.71 ft-lbf", "energy") == pytest.approx(14117.71 * 0.3048 * 4.4482216152605, rel=1e-12)
+    assert U.parse_quantity("1336.904 lbf-s", "impulse") == pytest.approx(5946.847, abs=2e-3)
+    assert U.parse_quantity("2300 lbf-ft-s^2", "inertia") == U.parse_quantity("2300 lbf*ft*s^2", "inertia")
+    assert U.parse_quantity("60 rpm", "angular_velocity") == pytest.approx(2 * math.pi)
+    assert U.parse_quantity("2 rad/s", "angular_velocity") == 2.0
+    for text in ("1 Hz", "2 1/s"):
+        with pytest.raises(U.UnitError, match="needs an angle"):
+            U.parse_quantity(text, "angular_velocity")
+    with pytest.raises(U.UnitError, match="takes no unit"):
+        U.parse_quantity("30 deg", "dimensionless")
+
+
 def test_seed_case_files_json_and_toml(capsys):
     # the manual's panel for chapter 000 and the hand calculation of chapter 001, through the CLI
     from importlib import resources
