@@ -14,7 +14,7 @@ import math
 import sys
 
 from ks_jax.case import CaseError, input_kind, load_cases
-from ks_jax.cli import smoothing_option
+from ks_jax.cli import seed_option, smoothing_option
 
 from .uncertainty import fmt
 
@@ -25,7 +25,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--starts", type=int, default=8, help="multi-start count (default 8)")
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
                         help="refit N copies of the evidence perturbed by its sigmas; report 5/50/95 percentiles")
-    parser.add_argument("--seed", type=int, default=0, help="random seed for the starts and Monte Carlo")
+    parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts and Monte Carlo")
     parser.add_argument("--smoothing", type=smoothing_option, default=1e-3,
                         help="smooth friction cone tau (> 0 keeps the fit differentiable; default 1e-3)")
     parser.add_argument("--solver", choices=("lm", "lbfgs", "adam"), default="lm",

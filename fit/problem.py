@@ -201,6 +201,10 @@ def evidence_kind(case: Case, path: str):
     if field in NOT_FITTABLE:
         raise CaseError(f"case '{case.name}': evidence: {path}: {field} is {NOT_FITTABLE[field]} and cannot be "
                         "fitted (it has no gradient)")
+    if (group, field) == ("contact", "time") and not (case.auto_point or case.auto_normal):
+        raise CaseError(f"case '{case.name}': evidence: {path}: the first-contact time exists with automatic "
+                        "contact only (a case without contact.point or contact.normal); with an explicit contact "
+                        "the exchange is at the case state")
     return True, (360.0 if field in CIRCULAR_DEGREES else 0.0)
 
 

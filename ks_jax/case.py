@@ -27,7 +27,8 @@ import numpy as np
 
 from . import linalg as la
 from . import units as U
-from .types import INVALID_NONFINITE, INVALID_SPEED_1, INVALID_SPEED_2, OK, Contact, State, Vehicle, normal_from_angles
+from .types import INVALID_NONFINITE, INVALID_SPEED_1, INVALID_SPEED_2, NO_CONTACT, OK, Contact, State, Vehicle
+from .types import normal_from_angles
 
 
 class CaseError(ValueError):
@@ -324,9 +325,25 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
         raise CaseError(f"case '{name}': contact: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
     contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
+    if "reference" in d:
+        _check_reference(d["reference"], name)
     inputs = CaseInputs(veh, contact)
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
     return Case(name, inputs, auto_point, auto_normal, names, None, d, source)
+
+
+def _check_reference(reference, case_name):
+    """``reference``: reported results to print beside ks-jax's (an output path -> its value, e.g. the
+    manual's panel); checked when the case is read, so that a bad entry costs its case only."""
+    if not isinstance(reference, dict):
+        raise CaseError(f"{_where(case_name, 'reference')} = {reference!r}: must map output paths to reported "
+                        "values, e.g. {\"contact.impulse_magnitude\": \"1336.904 lbf*s\"}")
+    for path, value in reference.items():
+        try:
+            check_output_path(path)
+        except CaseError as err:
+            raise CaseError(f"{_where(case_name, 'reference')}: {err}") from None
+        parse_output_value(value, path, case_name, f"reference.{path}")
 
 
 def _read(path: Path):
@@ -563,6 +580,37 @@ def get_output(result, path: str):
     group, vi, name, idx = check_output_path(path)
     leaf = getattr(result.vehicles[vi] if group == "vehicles" else result.contact, name)
     return leaf[(..., *idx)] if idx else leaf
+
+
+# results that MODEL.md section 4 leaves undefined in some solved rows, and why
+_IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
+UNDEFINED_REASONS = {
+    "direction": "no impulse was exchanged (separating, no contact, restitution -1): it has no direction",
+    "time": "the vehicles never touch within the search horizon",
+    "ees": "both crushes are 0 (the centroid lies inside neither box) or the energy loss is negative",
+}
+
+
+def undefined_kind(path: str) -> str | None:
+    """Which ``UNDEFINED_REASONS`` can leave the result at ``path`` undefined in a solved row; None: never."""
+    group, _, name, _ = parse_path(path)
+    return ("direction" if name in _IMPULSE_DIRECTIONS else "time" if (group, name) == ("contact", "time")
+            else "ees" if name == "ees" else None)
+
+
+def defined_output(result, path: str):
+    """``get_output``, NaN where the result is undefined though the row is solved: a direction of the
+    impulse (pdof, pdof_clock, impulse_azimuth, impulse_elevation) where none was exchanged, and the
+    first-contact time where the vehicles never touch. The exchange carries stand-in numbers there (a
+    PDOF of 0 would read as a frontal impact), so that it never returns NaN and its gradients stay
+    finite; the JSON of ``ks-jax solve`` writes them null. EES is NaN already where undefined."""
+    x = get_output(result, path)
+    kind = undefined_kind(path)
+    if kind == "direction":
+        return jnp.where(result.contact.impulse_magnitude > 0, x, jnp.nan)
+    if kind == "time":
+        return jnp.where(result.contact.status == NO_CONTACT, jnp.nan, x)
+    return x
 
 
 def output_kind(path: str) -> str:

@@ -51,6 +51,33 @@ def smoothing_option(text: str) -> float:
     return tau
 
 
+def seed_option(text: str) -> int:
+    """``--seed``: a whole number >= 0 (NumPy's generators take no negative seed)."""
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"{text}: a seed must be 0 or more")
+    return seed
+
+
+def check_output_file(path, option: str):
+    """Raise CaseError unless ``path`` can be written: its folder exists and it is not a folder itself.
+    Called before anything is solved, so that a bad name loses no work."""
+    from pathlib import Path
+
+    from .case import CaseError
+
+    target = Path(path)
+    folder = target.parent
+    if target.is_dir():
+        raise CaseError(f"{option} {path}: is a folder; give a file name")
+    if not folder.is_dir():
+        why = "is a file, not a folder" if folder.exists() else "does not exist"
+        raise CaseError(f"{option} {path}: the folder '{folder}' {why}")
+
+
 def _cmd_solve(args) -> int:
     from .case import load_cases
     from .report import solution_dict, text_report

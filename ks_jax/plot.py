@@ -203,6 +203,9 @@ def check_picture_path(path, option="--plot"):
     suffix = Path(path).suffix
     if suffix.lower() not in PICTURE_TYPES:
         raise CaseError(f"{option} {path}: unknown picture type '{suffix}' (use .png, .pdf or .svg)")
+    from .cli import check_output_file
+
+    check_output_file(path, option)
 
 
 def save_top_view(solutions, path):

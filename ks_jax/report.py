@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import units as U
-from .case import parse_output_value
+from .case import defined_output, parse_output_value, undefined_kind
 from .types import ContactResult, VehicleResult
 
 
@@ -29,22 +29,21 @@ def _no_impulse(sol):
 def solution_dict(sol) -> dict:
     """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, keys of MODEL.md section 4,
     status as words, NaN as null. An invalid case has only its status. What is not defined is
-    null too: ``pdof`` and ``pdof_clock`` where no impulse was exchanged, ``time`` where the
-    vehicles never touch (the exchange carries stand-in numbers there, never NaN)."""
+    null too (``case.defined_output``; the exchange carries stand-in numbers there, never NaN):
+    ``pdof``, ``pdof_clock``, ``impulse_azimuth`` and ``impulse_elevation`` where no impulse was
+    exchanged, ``time`` where the vehicles never touch."""
     if sol.result is None or sol.status.startswith("invalid"):
         return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
-    c = sol.result.contact
-    contact = {k: _plain(getattr(c, k)) for k in ContactResult._fields if k != "status"}
+    r = sol.result
+    contact = {k: _plain(defined_output(r, f"contact.{k}") if undefined_kind(f"contact.{k}") else getattr(r.contact, k))
+               for k in ContactResult._fields if k != "status"}
     contact["status"] = sol.status
-    if sol.status == "no_contact":
-        contact["time"] = None
     vehicles = []
-    for name, v in zip(sol.case.vehicle_names, sol.result.vehicles):
+    for i, (name, v) in enumerate(zip(sol.case.vehicle_names, r.vehicles)):
         d = {"name": name}
-        d.update({k: _plain(getattr(v, k)) for k in VehicleResult._fields})
+        d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}") if undefined_kind(f"vehicles[{i}].{k}")
+                            else getattr(v, k)) for k in VehicleResult._fields})
         d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
-        if _no_impulse(sol):
-            d["pdof"] = d["pdof_clock"] = None
         vehicles.append(d)
     return {"name": sol.case.name, "contact": contact, "vehicles": vehicles}
 
@@ -83,11 +82,29 @@ def text_report(sol, reference: bool = True) -> str:
         return "\n".join(lines)
     c = sol.result.contact
     v1, v2 = sol.result.vehicles
-    lines += [
-        "",
-        "  contact",
-        _row("status", sol.status),
-        *_timing_rows(sol),
+    lines += ["", "  contact", _row("status", sol.status), *_timing_rows(sol)]
+    if sol.status == "no_contact":  # no centroid, normal or closing speed: the exchange's are stand-ins
+        lines.append(_row("impulse", "none (no contact)"))
+    else:
+        lines += _contact_rows(sol, c)
+    lines += _vehicle_rows(sol, v1, v2)
+    if sol.status == "no_contact":
+        from .geometry import HORIZON
+
+        lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
+                     "(the search horizon): no exchange.")
+    elif not (v1.crush + v2.crush > 0):
+        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
+    elif not np.isfinite(v1.ees):
+        lines.append("\n  note: EES is undefined: the energy loss is negative.")
+    ref = sol.case.raw.get("reference") if reference else None
+    if ref:
+        lines += ["", reference_table(sol, ref)]
+    return "\n".join(lines)
+
+
+def _contact_rows(sol, c):
+    return [
         _row("impulse centroid (x, y, z)", " ".join(_fmt(p) for p in c.point) + " m",
              " ".join(_fmt(p / U.FT) for p in c.point) + " ft"),
         _row("normal (azimuth, pitch)", f"{_fmt(math.degrees(math.atan2(c.normal[1], c.normal[0])) % 360, 1)} deg, "
@@ -95,7 +112,8 @@ def text_report(sol, reference: bool = True) -> str:
         _row("impulse", f"{_fmt(c.impulse_magnitude)} N s", f"{_fmt(c.impulse_magnitude / U.LBF_S)} lbf s"),
         _row("  normal / tangential", f"{_fmt(c.impulse_normal)} / {_fmt(c.impulse_tangential)} N s",
              f"{_fmt(c.impulse_normal / U.LBF_S)} / {_fmt(c.impulse_tangential / U.LBF_S)} lbf s"),
-        _row("  azimuth / elevation", f"{_fmt(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
+        _row("  azimuth / elevation", "undefined (no impulse)" if _no_impulse(sol)
+             else f"{_fmt(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
         _row("deformation energy (loss)", f"{_fmt(c.energy_loss)} J", f"{_fmt(c.energy_loss / U.FT_LBF, 2)} ft lbf"),
         _row("sliding at separation", "no impulse" if _no_impulse(sol) else "yes" if bool(c.sliding) else "no"),
         _row("closing speed at centroid", f"{_fmt(np.linalg.norm(c.closing_velocity))} m/s",
@@ -103,6 +121,10 @@ def text_report(sol, reference: bool = True) -> str:
         _row("separation speed at centroid", f"{_fmt(np.linalg.norm(c.separation_velocity))} m/s",
              f"{_fmt(np.linalg.norm(c.separation_velocity) / U.MPH, 2)} mph"),
     ]
+
+
+def _vehicle_rows(sol, v1, v2):
+    lines = []
     for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
         lines += [
             "",
@@ -120,37 +142,27 @@ def text_report(sol, reference: bool = True) -> str:
             _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
-    if sol.status == "no_contact":
-        from .geometry import HORIZON
-
-        lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
-                     "(the search horizon): no exchange.")
-    elif not (v1.crush + v2.crush > 0):
-        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
-    elif not np.isfinite(v1.ees):
-        lines.append("\n  note: EES is undefined: the energy loss is negative.")
-    ref = sol.case.raw.get("reference") if reference else None
-    if ref:
-        lines += ["", reference_table(sol, ref)]
-    return "\n".join(lines)
-
-
-def _output(result, path):
-    from .case import get_output
-
-    return float(np.asarray(get_output(result, path)))
+    return lines
 
 
 def reference_table(sol, reference: dict) -> str:
-    """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units."""
+    """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units; the difference
+    in percent, or in degrees for a direction (on the circle: 359 against 1 is 2 degrees apart)."""
+    from .case import parse_path
+
     lines = ["  reference                              reported            ks-jax              difference"]
     for path, value in reference.items():
         want_si = parse_output_value(value, path, sol.case.name, f"reference.{path}")
-        got_si = _output(sol.result, path)
-        unit = value.split(None, 1)[1] if isinstance(value, str) and len(value.split(None, 1)) == 2 else ""
-        scale = want_si / float(value.split()[0]) if unit and float(value.split()[0]) != 0 else 1.0
-        got = got_si / scale
-        want = want_si / scale
-        lines.append(f"  {path:<38} {_fmt(want, 3) + ' ' + unit:<19} {_fmt(got, 3) + ' ' + unit:<19} "
-                     f"{(got - want) / want * 100 if want else got - want:+.4f}{' %' if want else ''}")
+        got_si = float(np.asarray(defined_output(sol.result, path)))
+        parts = value.split(None, 1) if isinstance(value, str) else []
+        unit = parts[1] if len(parts) == 2 else ""
+        scale = want_si / float(parts[0]) if unit and float(parts[0]) != 0 else 1.0
+        got, want = got_si / scale, want_si / scale
+        if not math.isfinite(got):
+            diff = "undefined"
+        elif parse_path(path)[2] in ("pdof", "impulse_azimuth", "course_after"):
+            diff = f"{(got_si - want_si + 180.0) % 360.0 - 180.0:+.4f} deg"
+        else:
+            diff = f"{(got - want) / want * 100:+.4f} %" if want else f"{got - want:+.4f}"
+        lines.append(f"  {path:<38} {_fmt(want, 3) + ' ' + unit:<19} {_fmt(got, 3) + ' ' + unit:<19} {diff}")
     return "\n".join(lines)

@@ -68,8 +68,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import units as U
-from .case import Case, CaseError, _input_leaf, as_arrays, check_output_path, get_output, input_kind, output_kind
-from .case import automatic_part, course_ties, set_input, speed_status, to_pytrees
+from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
+from .case import automatic_part, course_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
+from .case import undefined_kind
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
@@ -97,6 +98,9 @@ class SweepResult(Mapping):
     axes: path -> the values (SI) swept along each grid axis (zip: the samples).
     shape: the result shape. mode: "grid" or "zip". points: number of points solved.
     status_counts: status text -> number of points. seconds: wall time of the sweep.
+    undefined: output path -> the number of solved points (status not "invalid") where it is NaN
+    because MODEL.md leaves it undefined there (``case.defined_output``: a PDOF or impulse direction
+    without an impulse, the time of a contact that never happens, EES without crush); ``summary`` says why.
     index_range: the flat indices solved (all of them unless ``index_range`` was given).
     strides: () for every point solved; (k0, k1, ...) for a thinned copy that holds every k-th
     value along each axis (``thinned``, ``SweepSample``: what a picture needs of a large sweep).
@@ -112,6 +116,7 @@ class SweepResult(Mapping):
     index_range: tuple = (0, 0)
     output_paths: tuple = field(default=())
     strides: tuple = ()
+    undefined: dict = field(default_factory=dict)
 
     def __getitem__(self, key):
         return self.outputs[key]
@@ -147,8 +152,10 @@ class SweepResult(Mapping):
     def summary(self) -> str:
         counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
         rate = self.points / self.seconds if self.seconds > 0 else float("inf")
-        return (f"{self.points} points ({self.mode}, shape {self.shape}) in {self.seconds:.3g} s "
+        text = (f"{self.points} points ({self.mode}, shape {self.shape}) in {self.seconds:.3g} s "
                 f"({rate:.3g} points/s); status: {counts}")
+        return text + "".join(f"\n  undefined (NaN) at {n} solved point{'s' * (n != 1)}: {p}, where "
+                              f"{UNDEFINED_REASONS[undefined_kind(p)]}" for p, n in self.undefined.items() if n)
 
 
 # at most this many values per axis of what a picture of a sweep shows (1 or 2 grid axes; zip: samples)
@@ -312,7 +319,7 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
                 res = results_stage(*to_pytrees(inputs), st, stg)
             out = {}
             for p in outputs:
-                x = get_output(res, p)
+                x = defined_output(res, p)  # NaN where undefined: no stand-in number in a file
                 out[p] = x if x.dtype == jnp.bool_ else x.astype(out_dtype)
             out["status"] = res.contact.status.astype(jnp.int8)
             return out
@@ -468,6 +475,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
             store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else out_dtype)
         store["status"] = np.empty(n_points, dtype=np.int8)
     counts = np.zeros(256, dtype=np.int64)
+    undefined = {p: 0 for p in outputs if undefined_kind(p)}
 
     show = n_points > n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
     bar = _Progress(n_points, show, PROGRESS_DELAY if progress is None else 0.0)
@@ -484,6 +492,10 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         n = min(n_rows, hi - start)
         chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
         counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
+        if undefined:
+            solved = ~_invalid_rows(chunk["status"])
+            for p in undefined:
+                undefined[p] += int(np.count_nonzero(np.isnan(chunk[p]) & solved))
         a, b = start - lo, start - lo + n
         if keep:
             for k, v in chunk.items():
@@ -509,7 +521,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     if keep:
         store = {k: v.reshape(result_shape) for k, v in store.items()}
     status_counts = {STATUS_TEXT.get(c, status_text(c)): int(counts[c]) for c in np.flatnonzero(counts)}
-    return SweepResult(store, axes, result_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs)
+    return SweepResult(store, axes, result_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs,
+                       undefined=undefined)
 
 
 # ---------------------------------------------------------------------------------------
@@ -517,7 +530,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 
 
 def add_arguments(parser):
-    parser.add_argument("file", help="a case file (JSON or TOML) holding one case")
+    parser.add_argument("file", help="a case file (JSON or TOML): one case, or several with --case K")
     parser.add_argument("--over", action="append", required=True, metavar="PATH=START:STOP:N",
                         help="an input path and its values: START:STOP:N (N evenly spaced values), "
                              "V1,V2,..., or random values uniform:LO:HI or normal:MEAN:SD (with --samples); "
@@ -530,12 +543,12 @@ def add_arguments(parser):
                              "(the default with random values)")
     parser.add_argument("--samples", type=int, default=None, metavar="N",
                         help="number of random values of each PATH=uniform:LO:HI or PATH=normal:MEAN:SD (Monte Carlo)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random values (default 0)")
+    from .cli import seed_option, smoothing_option
+
+    parser.add_argument("--seed", type=seed_option, default=0, help="seed of the random values (default 0)")
     parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
     parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
     parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
-    from .cli import smoothing_option
-
     parser.add_argument("--smoothing", type=smoothing_option, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")
     parser.add_argument("--units", choices=("si", "us"), default="si",
@@ -607,10 +620,17 @@ def parse_over(text):
         for name, part, value in zip(("START", "STOP"), parts, ends):
             if not math.isfinite(value):
                 raise CaseError(f"--over {path}: {name} = {part.strip()!r} must be a finite number")
+        if n == 1 and ends[0] != ends[1]:
+            raise CaseError(f"--over {path}={spec}: N = 1 would solve START alone and leave STOP out: give N >= 2, "
+                            "or one value (PATH=V)")
         grid = np.linspace(*ends, n)
         return path, _typed_back(grid) if all(_plain(t) == v for t, v in zip(parts, ends)) else grid
     if len(parts) == 1:
-        return path, np.array([q(v) for v in spec.split(",") if v.strip()])
+        values = [(v.strip(), q(v)) for v in spec.split(",") if v.strip()]
+        for text, value in values:
+            if not math.isfinite(value):
+                raise CaseError(f"--over {path}: {text!r} must be a finite number")
+        return path, np.array([value for _, value in values])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")
 
 
@@ -808,6 +828,9 @@ class ResultWriter:
         self.kind = self.out.suffix.lower()
         if self.kind not in (".csv", ".npz", ".parquet"):
             raise CaseError(f"--out {out}: unknown file type '{self.out.suffix}' (use .csv, .npz or .parquet)")
+        from .cli import check_output_file
+
+        check_output_file(out, "--out")
         if self.kind == ".parquet":
             try:
                 import pyarrow  # noqa: F401

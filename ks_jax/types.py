@@ -252,7 +252,7 @@ STATUS_TEXT = {
     INVALID_SPEED_1: "invalid: vehicles[0].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SPEED_2: "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
-    INVALID_OVERFLOW: "invalid: the results overflow (an input is far too large)",
+    INVALID_OVERFLOW: "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)",
 }
 
 

@@ -182,7 +182,8 @@ def parse_quantity(value, kind: str) -> float:
         return float(q.to(SI_UNITS[kind]).magnitude)
     except pint.errors.DimensionalityError:
         raise UnitError(
-            f"'{text}' has the dimension {q.dimensionality}, not that of a {kind.replace('_', ' ')}"
+            f"'{text}' has the dimension {q.dimensionality}, not that of {'an' if kind[0] in 'aeiou' else 'a'} "
+            f"{kind.replace('_', ' ')}"
             f" ({SI_UNITS[kind] or 'dimensionless'})"
         ) from None
 

@@ -312,8 +312,10 @@ def test_no_impulse_has_no_pdof(tmp_path, capsys):
     res = json.loads(out)["cases"][0]
     assert code == 0 and res["contact"]["status"] == "separating" and res["contact"]["impulse_magnitude"] == 0.0
     assert all(v["pdof"] is None and v["pdof_clock"] is None for v in res["vehicles"])
+    assert res["contact"]["impulse_azimuth"] is None and res["contact"]["impulse_elevation"] is None
     code, out, _ = run_cli(capsys, "solve", str(path))
-    assert out.count("undefined (no impulse)") == 2 and "no impulse" in out.split("sliding at separation")[1][:40]
+    assert out.count("undefined (no impulse)") == 3 and "no impulse" in out.split("sliding at separation")[1][:40]
+    assert "undefined (no impulse)" in out.split("azimuth / elevation")[1][:40]
 
 
 def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
@@ -325,8 +327,8 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     assert code == 1 and "status: invalid: the results overflow" in out and "undefined" not in out
     assert "not solved" in err and (tmp_path / "huge.png").read_bytes()[:4] == b"\x89PNG"
     code, out, _ = run_cli(capsys, "solve", str(path), "--json")
-    assert json.loads(out)["cases"][0] == {"name": "units check", "vehicles": [],
-                                           "contact": {"status": "invalid: the results overflow (an input is far too large)"}}
+    status = "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)"
+    assert json.loads(out)["cases"][0] == {"name": "units check", "vehicles": [], "contact": {"status": status}}
 
 
 def test_state_needs_a_height_for_a_2d_position():
@@ -436,3 +438,48 @@ def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names[:2] + ["notes-cache"])
     assert prune_cache(tmp_path, 0) == 2
     assert [p.name for p in tmp_path.iterdir()] == ["notes-cache"]
+
+
+def test_a_bad_reference_costs_its_case_only(tmp_path, capsys):
+    """``reference`` (reported values printed beside ks-jax's) is read with its case: a bad entry makes that
+    case invalid, naming it, and the other cases are solved and printed, with or without --json."""
+    good = copy.deepcopy(US_CASE)
+    good["reference"] = {"contact.impulse_magnitude": "1000 lbf*s", "vehicles[0].pdof": 359}
+    bads = [{"vehicles[0].bogus": 5}, [1, 2], {"contact.impulse_magnitude": "5,946.847 N*s"},
+            {"contact.status": "ok"}]
+    cases = [good] + [dict(copy.deepcopy(US_CASE), name=f"bad {k}", reference=ref) for k, ref in enumerate(bads)]
+    path = tmp_path / "refs.json"
+    path.write_text(json.dumps({"cases": cases}))
+    for flags in ((), ("--json",)):
+        code, out, err = run_cli(capsys, "solve", str(path), *flags)
+        assert code == 1 and "Traceback" not in err
+        for k in range(len(bads)):
+            line = next(t for t in err.splitlines() if f"'bad {k}'" in t)
+            assert "invalid: case" in line and "reference" in line, line
+    res = json.loads(run_cli(capsys, "solve", str(path), "--json")[1])["cases"]
+    assert res[0]["contact"]["status"] == "ok" and all(r["contact"]["status"].startswith("invalid") for r in res[1:])
+    out = run_cli(capsys, "solve", str(path))[1]
+    # a PDOF is compared on the circle: the hand value, in degrees, from the JSON
+    pdof = res[0]["vehicles"][0]["pdof"]
+    assert f"{(pdof - 359 + 180) % 360 - 180:+.4f} deg" in out.split("vehicles[0].pdof")[1].splitlines()[0]
+
+
+def test_pictures_and_files_in_a_missing_folder_are_refused_before_solving(tmp_path, capsys):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(US_CASE))
+    a_file = tmp_path / "a.csv"
+    a_file.write_text("x\n")
+    for target, why in ((tmp_path / "nowhere" / "p.png", "does not exist"), (a_file / "p.png", "is a file")):
+        code, out, err = run_cli(capsys, "solve", str(path), "--plot", str(target))
+        assert code == 2 and out == "" and f"--plot {target}: the folder '{target.parent}' {why}" in err
+        code, out, err = run_cli(capsys, "sweep", str(path), "--over", "contact.restitution=0:0.2:3",
+                                 "--out", str(target.with_suffix(".csv")))
+        assert code == 2 and out == "" and f"--out {target.with_suffix('.csv')}: the folder" in err
+        assert "Traceback" not in err and "partial" not in err
+    code, _, err = run_cli(capsys, "sweep", str(path), "--over", "contact.restitution=0:0.2:3", "--out", str(tmp_path))
+    assert code == 2 and "unknown file type" in err
+    for argv in (["sweep", str(path), "--over", "contact.restitution=uniform:0:0.2", "--samples", "3", "--seed", "-1",
+                  "--out", str(tmp_path / "r.csv")], ["fit", str(path), "--seed", "-1"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2 and "a seed must be 0 or more" in capsys.readouterr().err

@@ -44,7 +44,20 @@ def single(case, point, path):
         if p.endswith(".yaw"):  # the seed cases give no course: it follows the yaw (MODEL.md section 2)
             inputs = set_input(inputs, p.replace(".yaw", ".course"), v)
     res = _SOLVE(as_arrays(inputs), case.auto_point, case.auto_normal)
-    return np.asarray(get_output(res, path)), int(res.contact.status)
+    return expected(res, path), int(res.contact.status)
+
+
+def expected(res, path):
+    """What a sweep holds at ``path`` for the point solved alone as ``res``: its number, NaN where the JSON of
+    ``ks-jax solve`` writes null although the point is solved (a direction of the impulse where none was
+    exchanged, the time of a contact that never happens)."""
+    x = np.asarray(get_output(res, path), float)
+    no_impulse = not float(res.contact.impulse_magnitude) > 0
+    if path.split(".")[-1] in ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation") and no_impulse:
+        return np.full_like(x, np.nan)
+    if path == "contact.time" and int(res.contact.status) == ks_jax.types.NO_CONTACT:
+        return np.full_like(x, np.nan)
+    return x
 
 
 _SOLVE = jax.jit(ks_jax.solve_inputs, static_argnums=(1, 2))  # one compile per contact mode
@@ -139,7 +152,7 @@ def test_automatic_contact_sweep_with_bad_missed_and_turning_rows():
         seen.add(ks_jax.status_text(status))
         assert r["status"][index] == status, index
         for path in outputs:
-            want = np.asarray(get_output(res, path), float)
+            want = expected(res, path)
             got = np.asarray(r[path][index], float)
             if path == "contact.sliding" and status >= ks_jax.types.INVALID_NONFINITE:
                 continue
@@ -281,7 +294,7 @@ def test_parse_over_units():
         parse_over("vehicles[0].yaw")
     with pytest.raises(CaseError, match=r"vehicles\[1\].speed: START = 'nan' must be a finite number"):
         parse_over("vehicles[1].speed=nan:60mph:5")  # linspace would make every point but the last NaN
-    with pytest.raises(CaseError, match="STOP = '-inf mph' must be a finite number"):
+    with pytest.raises(CaseError, match="'-inf mph' is not a '<number> <unit>' quantity"):
         parse_over("vehicles[1].speed=10mph:-inf mph:5")
 
 
@@ -718,3 +731,38 @@ def test_file_columns_follow_the_outputs_asked(tmp_path, capsys):
                   tmp_path / "kept.csv")
     cli, kept = (list(csv.reader((tmp_path / n).read_text().splitlines()))[0] for n in ("cli.csv", "kept.csv"))
     assert cli == kept == ["vehicles[1].speed", *outs, "status", "status_text"]
+
+
+def test_undefined_results_are_nan_and_named(case, tmp_path, capsys):
+    """Where a solved point has no impulse (restitution -1: (1 + eps) J_c = 0 by hand), its PDOF and impulse
+    direction are undefined: NaN in the sweep, not the stand-in 0 (a frontal impact), as null in the JSON of
+    ``ks-jax solve``; with the centroid 10 ft up, above both boxes, both crushes are 0 and EES is undefined
+    (MODEL.md section 4). The summary counts them and says why."""
+    over = {"contact.restitution": np.array([-1.0, 0.1]), "contact.point[2]": np.array([0.54, 10 * U.FT])}
+    outs = ["vehicles[0].pdof", "vehicles[1].pdof_clock", "contact.impulse_azimuth", "vehicles[0].ees",
+            "contact.impulse_magnitude"]
+    r = sweep(case, over, outputs=outs)
+    assert r.status_counts == {"ok": 4}
+    assert np.all(r["contact.impulse_magnitude"][0] == 0) and np.all(r["contact.impulse_magnitude"][1] > 0)
+    for p in outs[:3]:
+        assert np.isnan(r[p][0]).all() and np.isfinite(r[p][1]).all(), p
+    np.testing.assert_allclose(r["vehicles[0].pdof"][1], 180.0, atol=5.0)  # struck from behind
+    assert np.isnan(r["vehicles[0].ees"][:, 1]).all() and np.isfinite(r["vehicles[0].ees"][:, 0]).all()
+    assert r.undefined == {"vehicles[0].pdof": 2, "vehicles[1].pdof_clock": 2, "contact.impulse_azimuth": 2,
+                           "vehicles[0].ees": 2}
+    text = r.summary()
+    assert "undefined (NaN) at 2 solved points: vehicles[0].pdof, where no impulse was exchanged" in text
+    assert "undefined (NaN) at 2 solved points: vehicles[0].ees, where both crushes are 0" in text
+    code = main(["sweep", str(SEED0), "--over", "contact.restitution=-1,0.1", "--output", "vehicles[0].pdof",
+                 "--out", str(tmp_path / "u.csv")])
+    out = capsys.readouterr().out
+    assert code == 0 and "undefined (NaN) at 1 solved point: vehicles[0].pdof, where no impulse" in out
+
+
+def test_cli_over_refuses_a_dropped_stop_and_non_finite_values():
+    with pytest.raises(CaseError, match="N = 1 would solve START alone and leave STOP out"):
+        parse_over("vehicles[1].speed=60mph:10mph:1")
+    assert parse_over("vehicles[1].speed=10mph:10mph:1")[1].tolist() == [10 * U.MPH]
+    for spec in ("contact.restitution=0.1,nan", "contact.restitution=inf,0.2"):
+        with pytest.raises(CaseError, match="must be a finite number"):
+            parse_over(spec)
