@@ -161,7 +161,7 @@ def test_monte_carlo_cut_off_by_a_bound_is_noted():
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
     half of the standard error's +/- 1.645 sigma. The report says so and points to the percentiles."""
     r = fit.reconstruct(load_case(FIT_SEED), {"vehicles[1].speed": {"bounds": ["0 mph", "20.02 mph"]}},
-                        monte_carlo=64, seed=3)
+                        monte_carlo=fit.reconstruction.MC_CHECK_SAMPLES, seed=3)
     p5, p95 = (r.monte_carlo["percentiles"][q]["vehicles[1].speed"] for q in ("5", "95"))
     assert p95 == pytest.approx(20.02 * U.MPH, rel=1e-9)  # cut off by the bound
     s = r.std["vehicles[1].speed"]
@@ -400,3 +400,57 @@ def test_missing_bounds_are_the_inputs_own_limits_and_reports_read_plainly():
 
     assert fmt(1.3e-16, "velocity") == "0 mph" and fmt(121750.0, "energy") == "89,798 ft lbf"
     assert fmt(20.0 * U.MPH, "velocity", si=True) == "20 mph (8.941 m/s)"
+
+
+def test_a_fit_that_never_reaches_a_collision_says_so():
+    """The Kia (20 mph by the evidence) started at 3 mph, slower than the Lucid's 5 mph: the vehicles
+    separate, no unknown moves the evidence there, and the solver's gradient test passes trivially. That
+    start is not converged, nothing is called undetermined by the evidence, and the sentence says why. With
+    an open upper bound and the case's 0 mph, the default starts now spread 10 m/s and reach 20 mph."""
+    case = load_case(FIT_SEED)
+    r = fit.reconstruct(case, {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"], "start": "3 mph"}}, starts=1)
+    assert r.status == "separating" and not r.converged and r.starts_converged == 0
+    (words,) = r.unidentified
+    assert words.startswith("nothing is determined: the fit ended where the exchange is 'separating'")
+    assert "0 of 1 starts reached an exchange" in words and "says nothing about the evidence" in words
+    assert not any("disagrees" in n for n in r.notes)
+    d = json.loads(case.source and Path(case.source).read_text())
+    d["vehicles"][1]["speed"] = "0 mph"
+    r = fit.reconstruct(case_from_dict(d), {"vehicles[1].speed": {}})
+    assert r.converged and r.status == "ok" and r.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.1)
+
+
+def test_chi2_beyond_its_99th_percentile_is_a_note():
+    """The seed's delta-Vs moved apart by 2.5 sigma each: no speed explains both (one unknown, two
+    evidence: 1 degree of freedom). chi^2 is then about 12 > 6.63, the exact 99% quantile of chi^2 with
+    one degree of freedom; unmoved (chi^2 = 0.03) there is no note."""
+    case = load_case(FIT_SEED)
+    assert not any(n.startswith("chi^2") for n in fit.reconstruct(case).notes)
+    moved = [{"quantity": "vehicles[0].delta_v_magnitude", "value": f"{6.47 + 0.75} mph", "sigma": "0.3 mph"},
+             {"quantity": "vehicles[1].delta_v_magnitude", "value": f"{10.03 - 0.75} mph", "sigma": "0.3 mph"}]
+    r = fit.reconstruct(case, evidence=moved)
+    assert r.chi2 == pytest.approx(sum(v * v for v in r.residuals.values()), rel=1e-9) and r.chi2 > 6.63
+    (note,) = [n for n in r.notes if n.startswith("chi^2")]
+    assert f"chi^2 = {r.chi2:.3g} for 1 degree of freedom" in note and "disagrees" in note
+    assert fit.reconstruction.chi2_quantile(1, 2.326) == pytest.approx(6.635, rel=0.01)
+    assert fit.reconstruction.chi2_quantile(10, 2.326) == pytest.approx(23.209, rel=0.01)
+
+
+def test_a_prior_on_the_friction_of_a_sticking_contact_fixes_it():
+    """The sticking T-bone of the test above with a prior of 0.5 +/- 0.1 on friction: the evidence still
+    bounds it below only, and the prior alone fixes it: its standard error is the prior's 0.1."""
+    case = load_case(CASES / "auto_tbone.json")
+    paths = ["vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude"]
+    evidence = _evidence_of(case, paths, [0.45, 0.45])
+    unknowns = {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]},
+                "contact.friction": {"bounds": [0.1, 1.0], "prior": {"mean": 0.5, "sigma": 0.1}}}
+    r = fit.reconstruct(case, unknowns, evidence)
+    assert r.std["contact.friction"] == pytest.approx(0.1) and "contact.friction" not in r.not_determined
+    (words,) = [s for s in r.unidentified if "friction" in s]
+    assert "bounded below only" in words and "Only the prior on contact.friction fixes it" in words
+
+
+def test_contact_time_is_evidence_for_automatic_contact_only():
+    case = load_case(FIT_SEED)
+    with pytest.raises(CaseError, match="the first-contact time exists with automatic contact only"):
+        fit.reconstruct(case, evidence=[{"quantity": "contact.time", "value": 0.1, "sigma": 0.01}])
