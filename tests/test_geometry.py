@@ -652,3 +652,20 @@ def test_first_contact_of_turning_vehicles_against_dense_sampling():
         else:
             assert r.contact.status == NO_CONTACT, (k, float(r.contact.time))
     assert touched >= 10  # (14 here)
+
+
+def test_refine_ends_on_the_touching_side_within_its_tolerance():
+    """``geometry._refine`` against roots known by hand: a curved function (root 0.3, slope -1.9 there), a
+    kink just before the root (the larger of two lines, 1e-7 s apart), a triple root (slope 0: only the
+    tolerance on s can end it), and a row with nothing to refine, which keeps hi."""
+    tol = 1e-13
+    fns = [lambda t: (0.3 - t) * (1.0 + 3.0 * t),
+           lambda t: jnp.maximum(2.0 * (0.4 - t), 0.5 * (0.4 + 1e-7 - t)),
+           lambda t: (0.25 - t) ** 3]
+    roots, slopes = [0.3, 0.4 + 1e-7, 0.25], [1.9, 0.5, None]
+    for f, root, slope in zip(fns, roots, slopes):
+        lo, hi = jnp.float64(0.0), jnp.float64(0.6)
+        t = float(jax.jit(lambda lo, hi: G._refine(f, lo, hi, f(lo), f(hi), tol, True))(lo, hi))
+        assert -tol <= float(f(t)) <= 0.0, (root, t, float(f(t)))
+        assert t >= root - 1e-15 and (slope is None or t - root <= tol / slope + 1e-15), (root, t)
+        assert float(G._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
