@@ -301,9 +301,13 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
             notes.append(f"evidence {k} is an input that no unknown changes: it only adds a constant to chi^2")
     if status != "ok":
         notes.append(f"the exchange at the estimate has status '{status}'")
-    if "contact.friction" in paths and status == "ok" and not bool(row["sliding"]):
+    if "contact.friction" in paths and status == "ok":
         j = paths.index("contact.friction")
-        _friction_bounded_below(info, j, float(row["stick_ratio"]), unknowns[j].prior)
+        mu, s, threshold = float(row["x"][j]), float(info["std"][j]), float(row.get("stick_threshold", np.nan))
+        if not bool(row["sliding"]):
+            _friction_bounded_below(info, j, float(row["stick_ratio"]), unknowns[j].prior)
+        elif math.isfinite(s) and math.isfinite(threshold) and mu + NEAR_STICK * s >= threshold:
+            _friction_bounded_below(info, j, threshold, unknowns[j].prior, sliding=(mu, s))
     corr = {p: {q: float(info["corr"][i, j]) for j, q in enumerate(paths)} for i, p in enumerate(paths)}
     return FitResult(
         case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
@@ -323,16 +327,41 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     )
 
 
-def _friction_bounded_below(info, j, least, prior=None):
+def _stick_threshold(problem, arrays, x, smoothing, dtype) -> float:
+    """The least friction at which the exchange at ``x`` would stick: |J_t| / J_n of the stick impulse,
+    from the exchange with that friction raised to STICKING_FRICTION (NaN where the stick impulse pulls)."""
+    x = np.array(x, np.float64)
+    x[problem.unknowns.index("contact.friction")] = STICKING_FRICTION
+    inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
+    _, (status, sliding, ratio) = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
+    return float(ratio) if int(status) == OK and not bool(sliding) else float("nan")
+
+
+STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
+_predict = jax.jit(predict, static_argnums=0)
+
+
+def _friction_bounded_below(info, j, least, prior=None, sliding=None):
     """A contact that sticks at the estimate: friction only has to exceed ``least`` (|J_t| / J_n); any
     value above gives the same exchange (to the smoothing), so the evidence sets no estimate of it.
     Marks unknown ``j`` not determined in ``info`` (``analyse``'s dict) and says so; with a prior
-    (mean, sigma) on it, the prior alone fixes it: its standard error is the prior's sigma."""
+    (mean, sigma) on it, the prior alone fixes it: its standard error is the prior's sigma.
+    ``sliding`` = (estimate, standard error): the contact slides at the estimate, but would stick from
+    ``least`` on, within NEAR_STICK standard errors: above ``least`` the fit is as flat, so the
+    standard error says nothing of how high friction can be; the evidence gives a lower limit only."""
     info["poorly"][j] = False
     info["corr"][j, :] = info["corr"][:, j] = np.nan
     info["cov"][j, :] = info["cov"][:, j] = np.inf
-    text = (f"contact.friction is bounded below only: the contact sticks at the estimate, which needs a friction of "
-            f"at least {least:.3g}; any friction above that gives the same exchange, so the evidence sets no value")
+    if sliding is None:
+        text = (f"contact.friction is bounded below only: the contact sticks at the estimate, which needs a friction "
+                f"of at least {least:.3g}; any friction above that gives the same exchange, so the evidence sets no "
+                "value")
+    else:
+        mu, s = sliding
+        text = (f"contact.friction is bounded below only: the contact slides at the estimate ({mu:.3g} +/- {s:.2g} "
+                f"by the linearisation), but from {least:.3g}, within {NEAR_STICK:g} standard errors, it would stick, "
+                f"and every friction above that gives the same exchange; the evidence puts friction above about "
+                f"{max(mu - NEAR_STICK * s, 0.0):.3g} and sets no value")
     if prior is None:
         info["std"][j] = np.inf
         info["undetermined"][j] = True
@@ -345,6 +374,7 @@ def _friction_bounded_below(info, j, least, prior=None):
     info["statements"] = [s for s in info["statements"] if not s.startswith("contact.friction is ")] + [text]
 
 
+NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
 CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quantile is a note
 
 
@@ -370,7 +400,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     status says which evidence cannot be computed there, and why where that is known; every number is
     NaN (nothing was fitted, and nothing is blamed on the evidence's information)."""
     inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
-    pred, _ = jax.jit(predict, static_argnums=0)(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
+    pred, _ = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
     pred = np.asarray(pred, np.float64)
     keys = _keys(evidence)
     bad = [k for k, v in zip(keys, pred) if not np.isfinite(v)]
@@ -491,6 +521,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         best = _best(out["cost"][i], out["converged"][i])
         row = {k: v[i, best] for k, v in out.items()}
         row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i])
+        if "contact.friction" in problem.unknowns and row["status"] == OK and bool(row["sliding"]):
+            row["stick_threshold"] = _stick_threshold(problem, a, row["x"], smoothing, dtype)
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
             r.monte_carlo = _monte_carlo(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
