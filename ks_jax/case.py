@@ -357,7 +357,10 @@ def _read(path: Path):
             return tomllib.loads(text)
         return json.loads(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
-        raise CaseError(f"{path}: cannot be read as {path.suffix.lstrip('.').upper() or 'JSON'}: {err}") from None
+        kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
+        other = "" if path.suffix.lower() in (".json", ".toml") else \
+            f" (case files are JSON or TOML; a '{path.suffix}' file is read as JSON)"
+        raise CaseError(f"{path}: cannot be read as {kind}{other}: {err}") from None
 
 
 def cases_from_data(data, source=None) -> list[Case]:
