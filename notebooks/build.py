@@ -619,8 +619,8 @@ of mph, and `unidentified` says why, in words:
 - **SUV speed and restitution**: the contact slides, so the impulse is set by the normal closing speed times
   (1 + eps); the SUV's speed and the restitution trade off along the red line above. The delta-V fixes only
   their combination.
-- **Sedan speed** (which even ends at its bound of 0 mph; the restitution ends at its bound of 0.5, and
-  `fu.at_bound` says so for both): the sedan moves along the contact plane. In a sliding contact the
+- **Sedan speed** (which even ends at its bound of 0 mph, and `fu.at_bound` says so; the restitution ends
+  wherever the starts led along the red line, here about 0.27): the sedan moves along the contact plane. In a sliding contact the
   tangential impulse is mu times the normal one whatever the sliding speed, so its speed hardly changes the
   delta-V at all: the evidence leaves it practically free ("poorly determined").
 
