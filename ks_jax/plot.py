@@ -283,7 +283,8 @@ def sweep_view(result, output=None, ax=None, contours=True):
     if categorical:
         codes, names = _categories(output, values)
         shown = np.ma.masked_array(np.searchsorted(codes, values.astype(int)).astype(float),
-                                   mask=(status >= 2) if output != "status" else np.zeros(values.shape, bool))
+                                   # a flag means nothing without an exchange (separating, no contact, invalid)
+                                   mask=(status != 0) if output != "status" else np.zeros(values.shape, bool))
         scale, unit = 1.0, ""
     else:
         scale, unit = U.US_DISPLAY[output_kind(output)]

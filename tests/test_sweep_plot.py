@@ -182,3 +182,16 @@ def test_cli_draws_the_sweep_and_refuses_before_solving(tmp_path, capsys):
         assert main(argv) == 2
         assert words in capsys.readouterr().err
     assert not (tmp_path / "h.csv").exists() and not (tmp_path / "h.png").exists()
+
+
+def test_separating_points_have_no_stick_or_slide(case):
+    """The pickup slower than the Saturn (0 and 1 m/s against 2.24 m/s): separating, no exchange, so neither
+    stick nor slide: masked (grey) in the map, as invalid points are, and counted in the title."""
+    r = sweep(case, {"vehicles[1].speed": np.array([0.0, 1.0, 5.0, 9.0]), "contact.friction": np.array([0.1, 0.9])},
+              outputs=["contact.sliding"])
+    separating = r["status"] == 1
+    assert separating[:2].all() and not separating[2:].any()
+    ax = draw(r, "contact.sliding")
+    shown = mesh_of(ax).get_array()
+    np.testing.assert_array_equal(np.ma.getmaskarray(shown).reshape(r.shape), separating)
+    assert "4 of 8 points without a result (grey)" in ax.get_title()
