@@ -37,7 +37,7 @@ from ks_jax.case import (
     PathError,
     automatic_part,
     check_output_path,
-    course_ties,
+    input_ties,
     get_input,
     get_output,
     input_kind,
@@ -321,7 +321,7 @@ def parse_evidence(case: Case, spec) -> list[Evidence]:
 def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) -> Problem:
     if not case.valid:
         raise CaseError(case.error)
-    ties = course_ties(case, [u.path for u in unknowns])
+    ties = input_ties(case, [u.path for u in unknowns])
     ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
     return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal))
 

@@ -535,23 +535,30 @@ def automatic_part(case: "Case", path) -> str | None:
     return name if (name == "point" and case.auto_point or name == "normal" and case.auto_normal) else None
 
 
-def course_ties(case: "Case", paths) -> tuple:
-    """((k, "vehicles[i].course"), ...): the course that follows ``paths[k]`` = ``vehicles[i].yaw``
-    when the inputs at ``paths`` are varied (a sweep, a fit). MODEL.md section 2: a vehicle's course
-    defaults to its yaw, so where the case gives neither ``course`` nor ``velocity`` for vehicle i
-    and ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its travel too, as
-    re-solving the case file with another yaw would."""
+def input_ties(case: "Case", paths) -> tuple:
+    """((k, path), ...): the inputs that follow ``paths[k]`` when the inputs at ``paths`` are varied (a
+    sweep, a fit), as re-solving the case file with the new value would move them (MODEL.md section 2):
+    - a vehicle's course defaults to its yaw: where the case gives neither ``course`` nor ``velocity``
+      for vehicle i and ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its
+      travel too;
+    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position and
+      neither ``vehicles[i].position[2]`` nor ``vehicles[i].position`` is among ``paths``, a new
+      ``cg_height`` moves the CG to it."""
     paths = list(paths)
     ties = []
+    vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
     for k, path in enumerate(paths):
         group, vi, name, _ = parse_path(path)
-        if group != "vehicles" or name != "yaw":
+        if group != "vehicles" or name not in ("yaw", "cg_height"):
             continue
-        vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
         raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) else {}
         raw = raw if isinstance(raw, dict) else {}
-        if "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths:
+        if name == "yaw" and "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths:
             ties.append((k, f"vehicles[{vi}].course"))
+        position = raw.get("position")
+        if name == "cg_height" and isinstance(position, list) and len(position) == 2 \
+                and not {f"vehicles[{vi}].position[2]", f"vehicles[{vi}].position"} & set(paths):
+            ties.append((k, f"vehicles[{vi}].position[2]"))
     return tuple(ties)
 
 

@@ -69,7 +69,7 @@ import numpy as np
 
 from . import units as U
 from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
-from .case import automatic_part, course_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
+from .case import automatic_part, input_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
 from .case import undefined_kind
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
@@ -239,7 +239,7 @@ class SweepSample:
 
 
 def _row_inputs(base, paths, values, ties=()):
-    """``base`` with ``values`` at ``paths``, and at each tied path (``case.course_ties``) the value of
+    """``base`` with ``values`` at ``paths``, and at each tied path (``case.input_ties``) the value of
     the path it follows."""
     inputs = base
     for p, v in zip(paths, values):
@@ -460,7 +460,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     base = as_arrays(case.inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
-    status_jit, impulse_jit, solve_jit = _compiled(paths, course_ties(case, paths), outputs, mode, sizes, n_rows,
+    status_jit, impulse_jit, solve_jit = _compiled(paths, input_ties(case, paths), outputs, mode, sizes, n_rows,
                                                    case.auto_point, case.auto_normal, float(smoothing), out_dtype,
                                                    devices)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32

@@ -237,6 +237,25 @@ def test_yaw_turns_the_course_where_the_case_gives_none(case):
     np.testing.assert_allclose(r2["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"], rtol=RTOL)
 
 
+def test_cg_height_moves_the_cg_where_the_case_gives_a_2d_position(case):
+    """A 2-D position puts the CG at z = cg_height (MODEL.md section 2): sweeping cg_height gives what
+    solving the file with that cg_height gives (the Saturn's CG 0.24 m lower than the centroid: a pitch
+    rate after); with the CG's z swept too, it stays where it is swept to."""
+    heights = np.array([0.30, 0.54])
+    outs = OUTPUTS + ["vehicles[0].angular_velocity_after[1]"]
+    r = sweep(case, {"vehicles[0].cg_height": heights}, outputs=outs)
+    raw = json.loads(SEED0.read_text())
+    assert len(raw["vehicles"][0]["position"]) == 2
+    for k, h in enumerate(heights):
+        raw["vehicles"][0]["cg_height"] = f"{float(h)!r} m"
+        want = ks_jax.solve(ks_jax.case.case_from_dict(raw)).result
+        for path in outs:
+            np.testing.assert_allclose(r[path][k], get_output(want, path), rtol=RTOL, atol=1e-9, err_msg=path)
+    assert abs(r["vehicles[0].angular_velocity_after[1]"][0]) > 0.1
+    held = sweep(case, {"vehicles[0].cg_height": heights, "vehicles[0].position[2]": [0.54]}, outputs=outs)
+    np.testing.assert_allclose(held["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"][1], rtol=RTOL)
+
+
 def test_automatic_parts_and_swept_outputs_are_refused(case):
     auto = ks_jax.load_case(CASES / "auto_seed_000.json")
     for path in ("contact.point[0]", "contact.normal"):
