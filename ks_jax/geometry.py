@@ -55,6 +55,10 @@ Choices where MODEL.md is silent
   the penetration is half a box long. Where the outlines do not cross in exactly two points more
   than ~1e-12 m inside both edges (collinear edges, also when rounding parts them by 1e-16 m;
   containment; a degenerate overlap) n is the axis of least penetration.
+- Coordinates: the search and the geometry work about the CGs' midpoint, and the tolerances above
+  (~1e3 machine epsilons of the vehicles' size) grow with the scene's distance from the origin, so
+  that a scene given in survey coordinates (1e4-1e6 m) gives the contact of the same scene near the
+  origin: its edges collinear within the input's own rounding stay collinear.
 - Never touching within the horizon: status "no_contact" and no NaN anywhere: zero impulse,
   zero delta-V, velocity_after = velocity, crush and EES 0, ``time`` = HORIZON, point the
   midpoint of the CGs and normal the horizontal direction from CG 2 to CG 1, both at t = 0.
@@ -401,10 +405,13 @@ def _manifold_point(corners1, corners2, n, tol):
     return 0.5 * (lo1 + hi2) * n + 0.5 * (lo + hi) * t
 
 
-def contact_geometry(vehicle1, state1, vehicle2, state2) -> Contact2D:
+def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Contact2D:
     """The automatic contact of MODEL.md section 5 for the vehicles as they are in the given
     states (no motion): centroid of the footprints' overlap (z: middle of the vertical
-    overlap) and the horizontal normal from vehicle 2 into vehicle 1."""
+    overlap) and the horizontal normal from vehicle 2 into vehicle 1. ``coordinates`` () m: how
+    far from the origin the scene was given (``automatic_contact`` passes the states moved to
+    the CGs' midpoint): the tolerances grow with it, so that edges the input's own rounding
+    parts are still collinear."""
     dtype = state1.position.dtype
     c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
@@ -413,8 +420,8 @@ def contact_geometry(vehicle1, state1, vehicle2, state2) -> Contact2D:
 
     scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
     eps = jnp.finfo(dtype).eps
-    area_tol = 1e3 * eps * scale2
-    len_tol = 1e3 * eps * jnp.sqrt(scale2)
+    len_tol = 1e3 * eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    area_tol = len_tol * jnp.sqrt(scale2)
 
     poly, count = overlap_polygon(c1, c2)
     area, centroid = polygon_area_centroid(poly, count)
@@ -470,10 +477,16 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     False, ``contact.normal`` (3,) where ``auto_normal`` is False; ``normal_pitch`` () rad tilts
     the automatic normal. Returns an ``AutoContact``; where ``found`` is False the contact is a
     harmless separating one at t = 0 (see the module docstring)."""
-    t_i, found = first_contact(vehicle1, state1, vehicle2, state2)
+    # the geometry about the CGs' midpoint: its tolerances (~1e-12 m) are below the rounding of
+    # coordinates of 1e4 m and more, where the same scene gave another centroid and normal
+    origin = (0.5 * (state1.position + state2.position)).at[2].set(0.0)
+    near1, near2 = (s._replace(position=s.position - origin) for s in (state1, state2))
+    t_i, found = first_contact(vehicle1, near1, vehicle2, near2)
     t_x = jnp.where(found, t_i + contact.penetration_time, 0.0)
     a1, a2 = advance(state1, t_x), advance(state2, t_x)
-    geo = contact_geometry(vehicle1, a1, vehicle2, a2)
+    geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin))
+    geo = geo._replace(point=geo.point + origin, polygon=geo.polygon + origin[:2],
+                       crossings=geo.crossings + origin[:2])
     point = jnp.where(auto_point, geo.point, contact.point)
     normal = jnp.where(auto_normal, tilt(geo.normal, normal_pitch), contact.normal)
 
