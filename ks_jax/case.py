@@ -185,7 +185,31 @@ def _inertia(value, path, case_name):
 
 
 class CaseWarning(UserWarning):
-    """Something in a case file that is ignored (an unknown field); the case is still solved."""
+    """Something in a case that is ignored (an unknown field) or that costs precision; it is still solved."""
+
+
+FAR_IN_FLOAT32 = 1e3  # m: a scene this far from the origin loses precision in float32 (crush, EES)
+
+
+def warn_far_from_origin(inputs: CaseInputs, extra=(), what="the scene"):
+    """Warn (CaseWarning) where JAX computes in float32 (its default) and a CG or the impulse centroid lies
+    more than FAR_IN_FLOAT32 from the origin: float32 keeps about 7 digits, so survey coordinates leave
+    centimetres to metres of a vehicle's position (crush and EES 0.5% off at 10 km, 30-70% at 4000 km).
+    ``extra``: more x, y values (a sweep's positions)."""
+    import jax.numpy as jnp
+
+    if jnp.result_type(float) != jnp.float32:
+        return
+    xy = [np.abs(np.asarray(v.position, np.float64)[..., :2]).max() for v in inputs.vehicles]
+    xy.append(np.abs(np.asarray(inputs.contact.point, np.float64)[..., :2]).max())
+    xy += [np.abs(np.asarray(e, np.float64)).max() for e in extra]
+    far = max(xy)
+    if far > FAR_IN_FLOAT32:
+        warnings.warn(f"{what} lies {far:.3g} m from the origin and JAX computes in float32 (its default): about 7 "
+                      "digits, so positions lose up to "
+                      f"{far * 6e-8:.2g} m and crush and EES lose precision (0.5% at 10 km). Enable float64 "
+                      "(jax.config.update('jax_enable_x64', True), as ks-jax's command line does) or put the "
+                      "origin near the collision", CaseWarning, stacklevel=3)
 
 
 def _check_keys(d, allowed, path, case_name):

@@ -8,7 +8,7 @@ from functools import partial
 import jax
 import numpy as np
 
-from .case import Case, CaseInputs, as_arrays, speed_status, to_pytrees
+from .case import Case, CaseInputs, as_arrays, speed_status, to_pytrees, warn_far_from_origin
 from .derived import mask_invalid
 from .exchange import exchange
 from .types import ExchangeResult, status_text
@@ -135,6 +135,7 @@ def solve(cases, smoothing: float = 0.0):
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
     for (auto_point, auto_normal), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
+        warn_far_from_origin(stacked, what="a case")
         res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
         res = jax.tree_util.tree_map(np.asarray, res)
         for k, i in enumerate(idx):

@@ -70,7 +70,7 @@ import numpy as np
 from . import units as U
 from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
 from .case import automatic_part, input_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
-from .case import undefined_kind
+from .case import parse_path, undefined_kind, warn_far_from_origin
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
@@ -457,6 +457,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     n_rows = per_device * len(devices)
     n_rows = min(n_rows, -(-max(n_points, 1) // len(devices)) * len(devices))  # small sweeps: one short chunk
 
+    positions = [v for p, v in axes.items() if parse_path(p)[2] in ("position", "point") and parse_path(p)[3][:1] != (2,)]
+    warn_far_from_origin(case.inputs, positions, what="the swept scene")
     base = as_arrays(case.inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
