@@ -197,7 +197,7 @@ def _benign(tree, ok):
 
     # stand-ins of the inputs' dtypes (a float64 constant would promote float32 inputs under x64)
     def veh(v):
-        inertia = jnp.ones_like(v.inertia) if v.inertia.ndim == 1 else jnp.eye(3, dtype=v.inertia.dtype)
+        inertia = jnp.ones_like(v.inertia) if v.inertia.ndim == 1 else jnp.eye(3, dtype=jnp.result_type(v.inertia))
         good = Vehicle(1.0, inertia, 4.0, 2.0, 1.5, 2.0, 0.5)
         return jax.tree_util.tree_map(lambda x, g: jnp.where(ok, x, g), v, good)
 

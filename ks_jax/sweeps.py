@@ -132,13 +132,16 @@ class SweepResult(Mapping):
         return _grid_inputs(self.axes, self.mode, *self.index_range)
 
     def table(self, units="si"):
-        """Flat columns (one row per point): the inputs, the outputs, the status code, as a .csv of
-        ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame): a flag
-        (``contact.sliding``) of an invalid row is None (an object column where there is one).
+        """Flat columns (one row per point): the inputs, the outputs, the status code and its text, as a
+        .csv of ``write_results`` holds them (``pandas.DataFrame(result.table())`` makes a data frame): a
+        flag (``contact.sliding``) of an invalid row is None (an object column where there is one).
         units: "si", or "us" (mph, ft, lbf s, ft lbf, deg, deg/s, lb; the unit in each name)."""
         _check_units(units, "units")
-        return _missing_flags(_columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
-                                       _outputs_in_units(self.outputs, units)))
+        check_kept(self)
+        cols = _columns(_axes_in_units(self.axes, units), self.mode, *self.index_range,
+                        _outputs_in_units(self.outputs, units))
+        cols["status_text"] = _status_texts(cols["status"])
+        return _missing_flags(cols)
 
     def thinned(self, limit=None):
         """This result with at most ``limit`` values along each axis (default: ``PLOT_LIMITS``,
@@ -400,7 +403,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     ``.yaw``, ``.speed``, ``.course``, ``.yaw_rate``, ``contact.point[k]``, ``contact.normal``
     (azimuth), ``contact.restitution``, ``contact.friction``, ...).
     outputs: output paths of MODEL.md section 4 (components by index, e.g.
-    ``vehicles[0].delta_v[0]``); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
+    ``vehicles[0].delta_v[0]``; one path may be a plain string); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
     mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
@@ -431,7 +434,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
                             f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
                             "to vary it")
     axes = {p: _check_values(p, over[p]) for p in paths}
-    outputs = tuple(DEFAULT_OUTPUTS if outputs is None else outputs)
+    outputs = tuple(DEFAULT_OUTPUTS if outputs is None else [outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if p != "status":
             check_output_path(p)

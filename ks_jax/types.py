@@ -103,6 +103,11 @@ class State(NamedTuple):
             z = _f(cg_height)
             position = jnp.concatenate([position, jnp.broadcast_to(z, position.shape[:-1])[..., None]], -1)
         yaw = _f(yaw)
+        for given, other, this in ((velocity, speed, "speed"), (velocity, course, "course"),
+                                   (angular_velocity, yaw_rate, "yaw_rate")):
+            if given is not None and other is not None:
+                name = "velocity" if this != "yaw_rate" else "angular_velocity"
+                raise ValueError(f"State.create: give {name} or {this}, not both ({this} would be ignored)")
         if velocity is None:
             if speed is None:
                 raise ValueError("State.create needs velocity or speed")
@@ -145,6 +150,8 @@ class Contact(NamedTuple):
     def create(cls, point, normal=None, restitution=0.0, friction=0.5, *, azimuth=None, normal_pitch=0.0,
                penetration_time=0.0):
         """Contact from SI values: give ``normal`` as a vector or ``azimuth`` (rad) and ``normal_pitch`` (rad)."""
+        if normal is not None and azimuth is not None:
+            raise ValueError("Contact.create: give normal (a vector) or azimuth, not both (azimuth would be ignored)")
         if normal is None:
             if azimuth is None:
                 raise ValueError("Contact.create needs normal or azimuth")
@@ -159,7 +166,9 @@ class ContactResult(NamedTuple):
 
     point (3,) m; normal (3,) unit; time () s (0 for an explicit contact: the exchange is at
     the case state); impulse (3,) N s on vehicle 1; impulse_magnitude, impulse_normal (n.J),
-    impulse_tangential () N s; impulse_azimuth () deg in [0, 360); impulse_elevation () deg;
+    impulse_tangential () N s; impulse_azimuth () deg in [0, 360); impulse_elevation () deg (both a
+    stand-in 0 where no impulse was exchanged, impulse_magnitude 0: mask them, as ``case.defined_output``
+    and ``ks-jax solve --json`` do);
     sliding () bool; closing_velocity (3,) m/s, u at P before; separation_velocity (3,) m/s,
     u' at P after; energy_loss () J; status () int32 code (``ks_jax.status_text`` gives the words).
     """
@@ -186,7 +195,9 @@ class VehicleResult(NamedTuple):
     delta_v (3,) m/s; delta_v_magnitude () m/s = |J|/m; delta_v_body (3,) m/s (longitudinal,
     lateral left +, vertical); delta_yaw_rate () rad/s; velocity_after (3,) m/s; speed_after ()
     m/s (|velocity_after|); course_after () deg in [0, 360); angular_velocity_after (3,) rad/s;
-    yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12;
+    yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12 (both a stand-in
+    0 and 12, which would read as frontal, where no impulse was exchanged: the contact's impulse_magnitude
+    is 0; mask them, as ``case.defined_output``, sweeps and ``ks-jax solve --json`` do);
     crush () m; ees () m/s (NaN when both crushes are 0: undefined).
     """
 

@@ -470,3 +470,16 @@ def test_results_that_overflow_get_a_status(kit, random_cases):
     for k in (0, 2):
         one = kit.solve([cases[k]])
         np.testing.assert_array_equal(eng["contact"]["impulse"][k], one["contact"]["impulse"][0])
+
+
+def test_create_refuses_two_ways_of_giving_one_thing():
+    """State.create with velocity and speed (or course), or yaw_rate and angular_velocity, and Contact.create
+    with normal and azimuth: one of them would be ignored without a word; refused instead."""
+    for kwargs, words in (({"velocity": [1.0, 0.0], "speed": 5.0}, "velocity or speed"),
+                          ({"velocity": [1.0, 0.0], "course": 0.3}, "velocity or course"),
+                          ({"speed": 5.0, "yaw_rate": 1.0, "angular_velocity": [0.0, 0.0, 2.0]},
+                           "angular_velocity or yaw_rate")):
+        with pytest.raises(ValueError, match=words):
+            ks_jax.State.create([0.0, 0.0, 0.5], 0.0, **kwargs)
+    with pytest.raises(ValueError, match="normal \\(a vector\\) or azimuth, not both"):
+        ks_jax.Contact.create([0.0, 0.0, 0.5], normal=[1.0, 0.0, 0.0], azimuth=1.0)
