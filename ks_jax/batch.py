@@ -182,6 +182,7 @@ def sum_over_rows(fn, in_axes=0, chunk: int = DEFAULT_CHUNK):
         return jnp.sum(row_values(args))
 
     def rule(primals, tangents):
+        primals = jax.tree_util.tree_map(jnp.asarray, primals)  # a Python number has no dtype
         axes = axes_of(primals)
         leaves, treedef = jax.tree_util.tree_flatten(primals)
         batched = [a == 0 for a, arg in zip(axes, primals) for _ in jax.tree_util.tree_leaves(arg)]

@@ -378,3 +378,13 @@ def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
         ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, None))(*args, 3.0)
     with pytest.raises(TypeError, match=r"fn returns shape \(3,\) per row; it must return a scalar"):
         ks_jax.sum_over_rows(lambda *a: ks_jax.exchange(*a).vehicles[0].delta_v)(*args)
+
+
+def test_sum_over_rows_forward_mode_with_a_python_number():
+    """jvp and jacfwd with a Python float as the shared argument (as docs/sweeps.md passes a measured value):
+    d/dt sum_k (x_k - t)^2 = -2 sum_k (x_k - t), by hand."""
+    loss = ks_jax.sum_over_rows(lambda x, t: (x - t) ** 2, in_axes=(0, None))
+    x = jnp.arange(5.0)
+    value, slope = jax.jvp(lambda t: loss(x, t), (3.0,), (1.0,))
+    assert float(value) == 15.0 and float(slope) == 10.0
+    assert float(jax.jacfwd(lambda t: loss(x, t))(3.0)) == 10.0 == float(jax.grad(lambda t: loss(x, t))(3.0))
