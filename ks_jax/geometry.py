@@ -59,6 +59,9 @@ Choices where MODEL.md is silent
   (~1e3 machine epsilons of the vehicles' size) grow with the scene's distance from the origin, so
   that a scene given in survey coordinates (1e4-1e6 m) gives the contact of the same scene near the
   origin: its edges collinear within the input's own rounding stay collinear.
+- Touched, then parted: where the footprints no longer overlap at t_i + penetration_time (a
+  glancing touch shorter than the penetration time), there is no overlap to put the centroid in:
+  status INVALID_PARTED ("penetration_time is too long"), NaN results, as for other bad input.
 - Never touching within the horizon: status "no_contact" and no NaN anywhere: zero impulse,
   zero delta-V, velocity_after = velocity, crush and EES 0, ``time`` = HORIZON, point the
   midpoint of the CGs and normal the horizontal direction from CG 2 to CG 1, both at t = 0.
@@ -76,7 +79,8 @@ import jax.numpy as jnp
 
 from . import linalg as la
 from .exchange import _benign, exchange, input_status
-from .types import NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
+from .derived import mask_invalid
+from .types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
 
 HORIZON = 10.0  # s, search horizon for the first contact
 SCAN_STEPS = 2000  # the least step where a vehicle rotates: the reach window / SCAN_STEPS (<= 5 ms)
@@ -459,8 +463,9 @@ def tilt(normal, pitch):
 
 class AutoContact(NamedTuple):
     """Everything automatic contact decides before the exchange (for plots and checks):
-    time t_i () s, found () bool, states at the exchange instant, the contact used and the
-    overlap geometry (``Contact2D``) at that instant."""
+    time t_i () s, found () bool, states at the exchange instant, the contact used, the
+    overlap geometry (``Contact2D``) at that instant, and parted () bool: the footprints touched
+    but are apart again at the exchange instant (a penetration_time longer than the touch)."""
 
     time: jnp.ndarray
     found: jnp.ndarray
@@ -468,6 +473,7 @@ class AutoContact(NamedTuple):
     state2: State
     contact: Contact
     geometry: Contact2D
+    parted: jnp.ndarray
 
 
 def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch, *, auto_point, auto_normal):
@@ -498,7 +504,10 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     x_axis = jnp.zeros(3, u.dtype).at[0].set(1.0)
     n_sep = jnp.where(u_len > 0, u / jnp.where(u_len > 0, u_len, 1.0), x_axis)
     contact = contact._replace(point=jnp.where(found, point, mid), normal=jnp.where(found, normal, n_sep))
-    return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo)
+    gap = separation(vehicle1, near1, vehicle2, near2, t_x)  # <= 0 at t_i itself, to rounding
+    gap_tol = 1e3 * jnp.finfo(gap.dtype).eps * (_reach(vehicle1) + _reach(vehicle2) + la.safe_norm(origin))
+    parted = found & (contact.penetration_time > 0) & (gap > gap_tol)
+    return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo, parted)
 
 
 def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
@@ -560,4 +569,7 @@ def exchange_at_contact(vehicle1, state1, vehicle2, state2, contact, status, aut
     )
     vehicles = tuple(v._replace(crush=jnp.where(none, 0.0, v.crush), ees=jnp.where(none, 0.0, v.ees))
                      for v in result.vehicles)
-    return ExchangeResult(c, vehicles)
+    parted = ok & auto.found & auto.parted
+    result = mask_invalid(ExchangeResult(c, vehicles), ~parted)
+    return result._replace(contact=result.contact._replace(
+        status=jnp.where(parted, jnp.int32(INVALID_PARTED), result.contact.status)))

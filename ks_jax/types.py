@@ -242,6 +242,7 @@ INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see 
 INVALID_SPEED_2 = 22
 INVALID_SMOOTHING = 23  # an array ``smoothing`` (a Python number is refused by a ValueError)
 INVALID_OVERFLOW = 24  # finite inputs whose results are not (say a speed of 1e300 m/s)
+INVALID_PARTED = 25  # automatic contact: the footprints touched, then parted before t_i + penetration_time
 
 STATUS_TEXT = {
     OK: "ok",
@@ -263,6 +264,8 @@ STATUS_TEXT = {
     INVALID_SPEED_1: "invalid: vehicles[0].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SPEED_2: "invalid: vehicles[1].speed must be >= 0 (reverse the course for backwards travel)",
     INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
+    INVALID_PARTED: ("invalid: contact.penetration_time is too long: the footprints touched but no longer overlap "
+                     "at the exchange (first contact + penetration_time); shorten it"),
     INVALID_OVERFLOW: "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)",
 }
 

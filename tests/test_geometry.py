@@ -697,3 +697,24 @@ def test_a_scene_far_from_the_origin_gives_the_same_contact():
             np.testing.assert_allclose(far.contact.point[:2] - shift, near.contact.point[:2], atol=1e-6)
             np.testing.assert_allclose(far.contact.normal, near.contact.normal, atol=1e-6)
             np.testing.assert_allclose(far.contact.impulse, near.contact.impulse, rtol=1e-6, atol=1e-6)
+
+
+def test_a_touch_that_has_parted_by_the_exchange_is_refused():
+    """A sideswipe by hand: a 4 m car passes a parked one 1 cm inside its side at 10 m/s, from 10 m behind;
+    the footprints overlap from t = 0.6 s (front reaches rear) to 1.4 s. A penetration time of 0.5 s puts the
+    exchange inside the overlap; 1.0 s puts it at 1.6 s, with the cars 2 m apart: no overlap, no centroid, so
+    the row is invalid with a status naming the penetration time, and NaN results (solve and sweep alike)."""
+    def box(xy, speed):
+        return {"mass": 1500, "inertia": [500, 2500, 2700], "length": 4, "width": 2, "height": 1.5, "cg_to_front": 2,
+                "cg_height": 0.5, "position": list(xy), "yaw": 0, "speed": speed}
+
+    d = {"vehicles": [box((0.0, 0.0), 0.0), box((-10.0, 1.99), 10.0)],
+         "contact": {"restitution": 0.1, "friction": 0.3, "penetration_time": 1.0}}
+    parted = ks_jax.solve(ks_jax.case.case_from_dict(d))
+    assert parted.status.startswith("invalid: contact.penetration_time is too long")
+    assert np.isnan(parted.result.contact.impulse_magnitude)
+    d["contact"]["penetration_time"] = 0.5
+    inside = ks_jax.solve(ks_jax.case.case_from_dict(d))
+    assert not inside.status.startswith("invalid") and abs(float(inside.result.contact.time) - 0.6) < TIME_TOL
+    r = ks_jax.sweep(ks_jax.case.case_from_dict(d), {"contact.penetration_time": np.array([0.5, 1.0])})
+    assert [ks_jax.status_text(int(s)) for s in r["status"]] == [inside.status, parted.status]
