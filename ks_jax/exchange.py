@@ -301,7 +301,9 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
     Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
     ``smoothing`` tau >= 0 (dimensionless, < 1): 0 is the exact model; tau > 0 the smooth
     friction-cone limit, O(tau) from it. A row whose inputs break a rule gets that rule's status
-    code and NaN in every numeric result; it never affects other rows.
+    code and NaN in every numeric result; it never affects other rows. (An overflow, INVALID_OVERFLOW,
+    is found from results that are not finite: the row's status says so, its other numbers are left as
+    computed.)
     How the smoothing works and what ``jax.vmap`` of this function does on a CPU are written in the
     docstring of the module ``ks_jax.exchange`` (``ks_jax.exchange`` itself names this function:
     ``help(sys.modules["ks_jax.exchange"])``).
