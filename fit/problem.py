@@ -32,6 +32,7 @@ import numpy as np
 
 from ks_jax import units as U
 from ks_jax.case import (
+    CIRCULAR_OUTPUTS,
     Case,
     CaseError,
     PathError,
@@ -50,8 +51,6 @@ from ks_jax.solve import solve_inputs
 
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
 NOT_FITTABLE = {"sliding": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
-# outputs reported in degrees that are angles on the circle
-CIRCULAR_DEGREES = {"pdof", "impulse_azimuth", "course_after"}
 # inputs that are angles on the circle (radians inside)
 CIRCULAR_INPUTS = {"yaw", "course", "roll", "normal"}
 # physical limits of inputs, checked against the bounds of an unknown: field -> (lo, hi, strict lo)
@@ -205,7 +204,7 @@ def evidence_kind(case: Case, path: str):
         raise CaseError(f"case '{case.name}': evidence: {path}: the first-contact time exists with automatic "
                         "contact only (a case without contact.point or contact.normal); with an explicit contact "
                         "the exchange is at the case state")
-    return True, (360.0 if field in CIRCULAR_DEGREES else 0.0)
+    return True, (360.0 if field in CIRCULAR_OUTPUTS else 0.0)
 
 
 def check_evidence(case: Case, e: Evidence) -> Evidence:

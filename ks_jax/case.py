@@ -616,6 +616,8 @@ def get_output(result, path: str):
     return leaf[(..., *idx)] if idx else leaf
 
 
+# results that are directions in degrees, compared on the circle (359 and 1 are 2 degrees apart)
+CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after"})
 # results that MODEL.md section 4 leaves undefined in some solved rows, and why
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
 UNDEFINED_REASONS = {

@@ -148,7 +148,7 @@ def _vehicle_rows(sol, v1, v2):
 def reference_table(sol, reference: dict) -> str:
     """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units; the difference
     in percent, or in degrees for a direction (on the circle: 359 against 1 is 2 degrees apart)."""
-    from .case import parse_path
+    from .case import CIRCULAR_OUTPUTS, parse_path
 
     lines = ["  reference                              reported            ks-jax              difference"]
     for path, value in reference.items():
@@ -160,7 +160,7 @@ def reference_table(sol, reference: dict) -> str:
         got, want = got_si / scale, want_si / scale
         if not math.isfinite(got):
             diff = "undefined"
-        elif parse_path(path)[2] in ("pdof", "impulse_azimuth", "course_after"):
+        elif parse_path(path)[2] in CIRCULAR_OUTPUTS:
             diff = f"{(got_si - want_si + 180.0) % 360.0 - 180.0:+.4f} deg"
         else:
             diff = f"{(got - want) / want * 100:+.4f} %" if want else f"{got - want:+.4f}"
