@@ -34,8 +34,9 @@ M_tau = (a^p + b^p)^(1/p), p = 1/tau, which is the smooth minimum s*_tau = ((1)^
 of the model. It never leaves the cone (M_tau >= M, so |T| <= mu N) and
 M <= M_tau <= 2^tau M: s* moves by at most a factor 2^-tau, so |J_tau - J_0| <= C tau |J_0|, where
 C = ln 2 * s |dJ/ds| / |J| depends on mu and K, and has no bound of its own: it grows with
-n.K.n / n.K.d(1). Measured exactly on the cone boundary: 1.76 for a planar pair of cars at mu = 1.13,
-6.2 at mu = 3.7 (tests/test_gradients.py), 12.1 for a 3D pair with full inertia tensors at mu = 1.10.
+n.K.n / n.K.d(1). Measured at the cone boundary: 1.73 for a planar pair of cars at mu = 1.13 (tau 1e-3
+and 1e-2), 6.2 at mu = 3.7 (tests/test_gradients.py); an independent check found 12.1 for a 3D pair
+with full inertia tensors at mu = 1.10.
 ``sliding`` always reports the exact criterion |T_c| > mu N_c.
 """
 
