@@ -235,18 +235,33 @@ def _prepare(case: Case, unknowns, evidence):
 
 
 def _arrays(case, unknowns, evidence, dtype):
-    from ks_jax.case import get_input
+    """The fit's arrays, SI, float64. In float32 with a scene more than 1 km from the origin, the scene is
+    fitted about its CGs' midpoint (``ks_jax.case.scene_origin``): ``inputs``, the bounds, priors and
+    evidence values of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
+    from each unknown and each piece of evidence) move the results back. ``current`` (the case's values of
+    the unknowns, for the starts) stays unmoved."""
+    from ks_jax.case import get_input, move_scene, origin_offset, scene_origin
 
     n = len(unknowns)
-    lo = np.array([u.lower for u in unknowns])
-    hi = np.array([u.upper for u in unknowns])
-    pm = np.array([u.prior[0] if u.prior else 0.0 for u in unknowns])
+    origin = scene_origin(case.inputs, dtype=dtype)
+    offsets = lambda paths: np.array([float(origin_offset(p, origin) or 0.0) for p in paths])  # noqa: E731
+    x_offset = offsets([u.path for u in unknowns])
+    e_offset = offsets([e.path for e in evidence])
+    lo = np.array([u.lower for u in unknowns]) - x_offset
+    hi = np.array([u.upper for u in unknowns]) - x_offset
+    pm = np.array([u.prior[0] if u.prior else 0.0 for u in unknowns]) - x_offset
     pw = np.array([1.0 / u.prior[1] if u.prior else 0.0 for u in unknowns])
-    values = np.array([e.value for e in evidence])
+    values = np.array([e.value for e in evidence]) - e_offset
     sigmas = np.array([e.sigma for e in evidence])
     current = np.array([float(get_input(case.inputs, u.path)) for u in unknowns]) if n else np.zeros(0)
-    return {"inputs": case.inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": pm, "pw": pw,
-            "current": current}
+    inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
+    return {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": pm, "pw": pw,
+            "current": current, "x_offset": x_offset, "e_offset": e_offset}
+
+
+def _first_starts(unknowns, arrays, n_starts, rng) -> np.ndarray:
+    """``_starts`` in the fit's coordinates (moved as ``arrays``)."""
+    return _starts(unknowns, arrays["current"], n_starts, rng) - arrays["x_offset"]
 
 
 def _stack(trees):
@@ -268,7 +283,8 @@ def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, 
 def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     paths = [u.path for u in unknowns]
     m = len(evidence)
-    info = analyse(unknowns, row["x"], row["jacobian"], m, arrays["pw"], rtol)
+    x = np.asarray(row["x"], np.float64) + arrays["x_offset"]  # in the case's coordinates (_arrays)
+    info = analyse(unknowns, x, row["jacobian"], m, arrays["pw"], rtol)
     keys = _keys(evidence)
     cost_starts = row["cost_starts"]
     best_cost = float(row["cost"])
@@ -311,10 +327,10 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     corr = {p: {q: float(info["corr"][i, j]) for j, q in enumerate(paths)} for i, p in enumerate(paths)}
     return FitResult(
         case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
-        estimate={p: float(v) for p, v in zip(paths, row["x"])},
+        estimate={p: float(v) for p, v in zip(paths, x)},
         std={p: float(v) for p, v in zip(paths, info["std"])},
         correlation=corr,
-        fitted={k: float(v) for k, v in zip(keys, row["predicted"])},
+        fitted={k: float(v) for k, v in zip(keys, np.asarray(row["predicted"], np.float64) + arrays["e_offset"])},
         residuals={k: float(v) for k, v in zip(keys, res)},
         converged=bool(row["converged"]),
         unidentified=info["statements"], at_bound=info["at_bound"],
@@ -507,7 +523,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                             f"in every case (differs from case '{cases[0].name}')")
     arrays = [_arrays(c, u, e, dtype) for c, (u, e, _) in zip(cases, prepared)]
     rng = np.random.default_rng(seed)
-    x0 = np.stack([_starts(u, a["current"], starts, rng) for (u, _, _), a in zip(prepared, arrays)])
+    x0 = np.stack([_first_starts(u, a, starts, rng) for (u, _, _), a in zip(prepared, arrays)])
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
     stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
     inputs = _stack([a["inputs"] for a in arrays])
@@ -577,7 +593,7 @@ def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples
     n_mc = int(samples)
     noise = rng.standard_normal((n_mc, len(a["values"])))
     values = a["values"] + a["sigmas"] * noise
-    x0 = np.stack([_starts(unknowns, a["current"], starts, rng) for _ in range(n_mc)])
+    x0 = np.stack([_first_starts(unknowns, a, starts, rng) for _ in range(n_mc)])
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
     z0[:, 0] = z_best
     size = min(chunk, n_mc) if progress else n_mc
@@ -597,7 +613,7 @@ def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples
             bar.update(k)
     if bar is not None:
         bar.close()
-    xs = np.concatenate(xs)
+    xs = np.concatenate(xs) + a["x_offset"]
     conv = np.concatenate(conv)
     paths = [u.path for u in unknowns]
     use = xs[conv] if conv.any() else xs

@@ -191,25 +191,80 @@ class CaseWarning(UserWarning):
 FAR_IN_FLOAT32 = 1e3  # m: a scene this far from the origin loses precision in float32 (crush, EES)
 
 
-def warn_far_from_origin(inputs: CaseInputs, extra=(), what="the scene"):
-    """Warn (CaseWarning) where JAX computes in float32 (its default) and a CG or the impulse centroid lies
-    more than FAR_IN_FLOAT32 from the origin: float32 keeps about 7 digits, so survey coordinates leave
-    centimetres to metres of a vehicle's position (crush and EES 0.5% off at 10 km, 30-70% at 4000 km).
-    ``extra``: more x, y values (a sweep's positions)."""
-    import jax.numpy as jnp
+def _computes_in_float32(dtype=None) -> bool:
+    return jnp.dtype(dtype or jnp.result_type(float)) == jnp.float32
 
-    if jnp.result_type(float) != jnp.float32:
+
+def _xy(x):
+    return np.asarray(x, np.float64)[..., :2]
+
+
+def scene_origin(inputs: CaseInputs, extra=(), dtype=None):
+    """Where ``solve`` and ``sweep`` move the origin before computing: None where JAX computes in float64,
+    or where no CG or impulse centroid lies more than FAR_IN_FLOAT32 from the origin; else the CGs'
+    midpoint (x, y), float64, shape (..., 2) (0 for rows of a batch that are near the origin).
+
+    Float32 (JAX's default) keeps about 7 digits: at survey coordinates (5e5 m) a position keeps ~3 cm,
+    and crush and EES come out 30% off. The exchange is the same in a translated scene (MODEL.md
+    section 3), so the scene is moved on the host in float64 (``move_scene``) and ``contact.point`` moved
+    back (``origin_offset``). ``extra``: more x, y values that the scene reaches (a sweep's positions).
+    dtype: the compute dtype (default: JAX's default float)."""
+    if not _computes_in_float32(dtype):
+        return None
+    cg = [_xy(v.position) for v in inputs.vehicles]
+    reach = np.maximum(np.abs(cg[0]).max(-1), np.abs(cg[1]).max(-1))
+    reach = np.maximum(reach, np.abs(_xy(inputs.contact.point)).max(-1))
+    reach = np.maximum(reach, max((np.abs(np.asarray(e, np.float64)).max() for e in extra), default=0.0))
+    far = reach > FAR_IN_FLOAT32
+    if not far.any():
+        return None
+    return np.where(far[..., None], (cg[0] + cg[1]) / 2, 0.0)
+
+
+def move_scene(inputs: CaseInputs, origin, auto_point=False) -> CaseInputs:
+    """``inputs`` with the CG positions and the impulse centroid given about ``origin`` (x, y; float64,
+    on the host): the same scene, translated (``scene_origin``). auto_point: the centroid is automatic
+    (its input a placeholder, left as it is)."""
+    def moved(x):
+        x = np.array(x, np.float64)
+        x[..., :2] -= origin
+        return x
+
+    point = inputs.contact.point if auto_point else moved(inputs.contact.point)
+    return inputs._replace(vehicles=tuple(v._replace(position=moved(v.position)) for v in inputs.vehicles),
+                           contact=inputs.contact._replace(point=point))
+
+
+def xy_index(path: str):
+    """0 or 1 where ``path`` is the x or y of a CG position or of the impulse centroid (an input, or
+    the output contact.point[k]), else None."""
+    _, _, name, idx = parse_path(path)
+    return idx[0] if name in ("position", "point") and idx[:1] in ((0,), (1,)) else None
+
+
+def origin_offset(path: str, origin):
+    """What ``move_scene`` subtracted from the input or output at ``path`` ("vehicles[0].position[0]",
+    "contact.point[1]"): origin[..., k] for an x or y position or centroid, else None."""
+    k = xy_index(path)
+    return None if origin is None or k is None else origin[..., k]
+
+
+def warn_far_from_origin(inputs: CaseInputs, extra=(), what="the scene", about="the origin", auto_point=False):
+    """Warn (CaseWarning) where JAX computes in float32 (its default) and a CG, the impulse centroid (unless
+    ``auto_point``) or an ``extra`` x, y value (a sweep's positions) lies more than FAR_IN_FLOAT32 from
+    ``about`` even after ``move_scene``: vehicles kilometres apart, or a sweep of positions over kilometres."""
+    if not _computes_in_float32():
         return
-    xy = [np.abs(np.asarray(v.position, np.float64)[..., :2]).max() for v in inputs.vehicles]
-    xy.append(np.abs(np.asarray(inputs.contact.point, np.float64)[..., :2]).max())
+    xy = [np.abs(_xy(v.position)).max() for v in inputs.vehicles]
+    if not auto_point:
+        xy.append(np.abs(_xy(inputs.contact.point)).max())
     xy += [np.abs(np.asarray(e, np.float64)).max() for e in extra]
     far = max(xy)
     if far > FAR_IN_FLOAT32:
-        warnings.warn(f"{what} lies {far:.3g} m from the origin and JAX computes in float32 (its default): about 7 "
-                      "digits, so positions lose up to "
-                      f"{far * 6e-8:.2g} m and crush and EES lose precision (0.5% at 10 km). Enable float64 "
-                      "(jax.config.update('jax_enable_x64', True), as ks-jax's command line does) or put the "
-                      "origin near the collision", CaseWarning, stacklevel=3)
+        warnings.warn(f"{what} reaches {far:.3g} m from {about} and JAX computes in float32 (its default): about 7 "
+                      f"digits, so positions lose up to {far * 6e-8:.2g} m and crush and EES lose precision (0.5% "
+                      "at 10 km). Enable float64 (jax.config.update('jax_enable_x64', True), as ks-jax's command "
+                      "line does)", CaseWarning, stacklevel=3)
 
 
 def _check_keys(d, allowed, path, case_name):

@@ -8,7 +8,8 @@ from functools import partial
 import jax
 import numpy as np
 
-from .case import Case, CaseInputs, as_arrays, speed_status, to_pytrees, warn_far_from_origin
+from .case import Case, CaseInputs, as_arrays, move_scene, scene_origin, speed_status, to_pytrees
+from .case import warn_far_from_origin
 from .derived import mask_invalid
 from .exchange import exchange
 from .types import ExchangeResult, status_text
@@ -119,6 +120,8 @@ def solve(cases, smoothing: float = 0.0):
 
     Valid cases are solved together in one vmapped call per contact mode; an invalid case
     (bad input in a multi-case file) gets status "invalid: <reason>" and no numbers.
+    In float32 (JAX's default) a case more than ``case.FAR_IN_FLOAT32`` (1 km) from the origin is solved
+    about its CGs' midpoint (``case.scene_origin``), and its ``contact.point`` is float64.
     """
     single = isinstance(cases, Case)
     cases = [cases] if single else list(cases) if isinstance(cases, (list, tuple)) else None
@@ -135,9 +138,17 @@ def solve(cases, smoothing: float = 0.0):
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
     for (auto_point, auto_normal), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
-        warn_far_from_origin(stacked, what="a case")
+        origin = scene_origin(stacked)  # float32 far from the origin: solved about the CGs' midpoint
+        if origin is not None:
+            stacked = move_scene(stacked, origin, auto_point)
+        warn_far_from_origin(stacked, what="a case", about="the origin" if origin is None else "its CGs' midpoint",
+                             auto_point=auto_point)
         res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
         res = jax.tree_util.tree_map(np.asarray, res)
+        if origin is not None:
+            point = res.contact.point.astype(np.float64)
+            point[:, :2] += origin
+            res = res._replace(contact=res.contact._replace(point=point))
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)
             out[i] = Solution(cases[i], row, status_text(row.contact.status))

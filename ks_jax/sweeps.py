@@ -70,7 +70,7 @@ import numpy as np
 from . import units as U
 from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
 from .case import automatic_part, input_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
-from .case import parse_path, undefined_kind, warn_far_from_origin
+from .case import move_scene, origin_offset, scene_origin, undefined_kind, warn_far_from_origin, xy_index
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
@@ -410,7 +410,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
     (from the start) or False; tqdm if installed, else a line on stderr.
     devices: the devices to shard every chunk over (default ``jax.devices()``).
-    output_dtype: dtype of the stored float results (default: the compute dtype).
+    output_dtype: dtype of the stored float results (default: the compute dtype). In float32, a scene
+    more than 1 km from the origin is solved about its CGs' midpoint (``case.scene_origin``), and its
+    ``contact.point[0]``/``[1]`` outputs are float64.
     on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
     NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
     only status counts are kept; use with ``on_chunk`` for reductions of any size).
@@ -460,9 +462,16 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     n_rows = per_device * len(devices)
     n_rows = min(n_rows, -(-max(n_points, 1) // len(devices)) * len(devices))  # small sweeps: one short chunk
 
-    positions = [v for p, v in axes.items() if parse_path(p)[2] in ("position", "point") and parse_path(p)[3][:1] != (2,)]
-    warn_far_from_origin(case.inputs, positions, what="the swept scene")
-    base = as_arrays(case.inputs)
+    # float32 far from the origin: the scene, swept positions included, is solved about the CGs' midpoint
+    # (case.scene_origin), and contact.point outputs are moved back, in float64
+    origin = scene_origin(case.inputs, [v for p, v in axes.items() if xy_index(p) is not None])
+    moved = {} if origin is None else {p: origin_offset(p, origin) for p in (*paths, *outputs)}
+    moved = {p: float(off) for p, off in moved.items() if off is not None}
+    inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
+    swept = {p: a - moved.get(p, 0.0) for p, a in axes.items()}
+    warn_far_from_origin(inputs, [v for p, v in swept.items() if p in moved], what="the swept scene",
+                         about="the origin" if origin is None else "its CGs' midpoint", auto_point=case.auto_point)
+    base = as_arrays(inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
     status_jit, impulse_jit, solve_jit = _compiled(paths, input_ties(case, paths), outputs, mode, sizes, n_rows,
@@ -471,13 +480,14 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
-    dev_axes = tuple(jnp.asarray(a, dtype=dtype) for a in axes.values())
+    dev_axes = tuple(jnp.asarray(a, dtype=dtype) for a in swept.values())
     total_arr = jnp.asarray(total, dtype=index_dtype)
 
     store = {}
     if keep:
         for p in outputs:
-            store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else out_dtype)
+            store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved
+                                else out_dtype)
         store["status"] = np.empty(n_points, dtype=np.int8)
     counts = np.zeros(256, dtype=np.int64)
     undefined = {p: 0 for p in outputs if undefined_kind(p)}
@@ -496,6 +506,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         start, out = item
         n = min(n_rows, hi - start)
         chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
+        for p in outputs:
+            if p in moved:
+                chunk[p] = chunk[p].astype(np.float64) + moved[p]
         counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
         if undefined:
             solved = ~_invalid_rows(chunk["status"])

@@ -788,3 +788,70 @@ def test_cli_over_refuses_a_dropped_stop_and_non_finite_values():
     for spec in ("contact.restitution=0.1,nan", "contact.restitution=inf,0.2"):
         with pytest.raises(CaseError, match="must be a finite number"):
             parse_over(spec)
+
+
+FAR_SCENES = r"""
+import json, sys, warnings
+import ks_jax
+from ks_jax.case import CaseWarning, case_from_dict
+OUT = ["contact.impulse_magnitude", "contact.energy_loss", "vehicles[0].crush", "vehicles[1].crush",
+       "vehicles[0].ees", "vehicles[1].ees", "contact.point[0]", "contact.point[1]", "contact.time"]
+out = {}
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    for name, d in json.loads(sys.argv[1]).items():
+        case = case_from_dict(d)
+        r = ks_jax.solve(case).result
+        x = float(case.inputs.vehicles[1].position[0])
+        s = ks_jax.sweep(case, {"vehicles[1].position[0]": [x - 0.1, x, x + 0.1], "contact.restitution": [0.0, 0.1]},
+                         outputs=OUT)
+        out[name] = {"solve": {p: float(ks_jax.case.get_output(r, p)) for p in OUT},
+                     "point_dtype": str(r.contact.point.dtype), "sweep": {p: s[p].ravel().tolist() for p in OUT},
+                     "sweep_dtype": [str(s[p].dtype) for p in OUT]}
+    out["warned"] = [str(w.message) for w in caught if w.category is CaseWarning]
+    ks_jax.sweep(case, {"vehicles[1].position[0]": [x, x + 5000.0]})
+    out["warned_wide"] = [str(w.message) for w in caught if w.category is CaseWarning][len(out["warned"]):]
+print(json.dumps(out))
+"""
+
+
+def _moved(d, dx, dy):
+    """Case dict ``d`` (positions in ft strings or SI numbers) with the scene moved by (dx, dy) m."""
+    d = json.loads(json.dumps(d))
+    q = lambda v, k: (ks_jax.units.parse_quantity(v, "length") if isinstance(v, str) else v) + k  # noqa: E731
+    for v in d["vehicles"]:
+        v["position"] = [q(v["position"][0], dx), q(v["position"][1], dy), *v["position"][2:]]
+    if "point" in d["contact"]:
+        p = d["contact"]["point"]
+        d["contact"]["point"] = [q(p[0], dx), q(p[1], dy), p[2]]
+    return d
+
+
+def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
+    """In float32 (JAX's default) a position 512 km out keeps ~3 cm, which once gave the seed chapter's
+    Pontiac an EES of 2.90 mph instead of 2.21. The exchange is the same in a translated scene (MODEL.md
+    section 3): solve and sweep, explicit and automatic contact, give 512 km out what they give at the
+    origin, contact.point moved back (in float64), and no warning; a sweep of positions over 5 km still
+    warns."""
+    scenes = {}
+    for label, path in (("seed", SEED0), ("tbone", CASES / "auto_tbone.json")):
+        d = json.loads(path.read_text())
+        scenes[label], scenes[label + " far"] = _moved(d, 0.0, 0.0), _moved(d, 512064.0, -256032.0)
+    proc = subprocess.run([sys.executable, "-c", FAR_SCENES, json.dumps(scenes)], capture_output=True, text=True,
+                          timeout=600, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["warned"] == []
+    (wide,) = out["warned_wide"]
+    assert "reaches 5e+03 m from its CGs' midpoint" in wide and "jax_enable_x64" in wide
+    shift = {"contact.point[0]": 512064.0, "contact.point[1]": -256032.0}
+    assert out["seed"]["solve"]["vehicles[1].ees"] / U.MPH == pytest.approx(2.213, abs=1e-3)  # the manual
+    for label in ("seed", "tbone"):
+        near, far = out[label], out[label + " far"]
+        assert near["point_dtype"] == "float32" and far["point_dtype"] == "float64"
+        assert far["sweep_dtype"] == ["float64" if p in shift else "float32" for p in near["sweep"]]
+        for kind in ("solve", "sweep"):
+            for p, v in near[kind].items():
+                v, w = np.asarray(v), np.asarray(far[kind][p]) - shift.get(p, 0.0)
+                scale = 1.0 if p.endswith("crush") or "point" in p else np.abs(v).max()  # lengths: 1 m
+                np.testing.assert_allclose(w, v, rtol=0, atol=5e-5 * scale, err_msg=f"{label} {kind} {p}")
