@@ -689,6 +689,12 @@ def undefined_kind(path: str) -> str | None:
             else "ees" if name == "ees" else None)
 
 
+def impulse_exchanged(result):
+    """Whether an impulse was exchanged (not separating, no contact, or eps = -1): where not, the
+    directions of the impulse (``undefined_kind`` "direction") are undefined."""
+    return result.contact.impulse_magnitude > 0
+
+
 def defined_output(result, path: str):
     """``get_output``, NaN where the result is undefined though the row is solved: a direction of the
     impulse (pdof, pdof_clock, impulse_azimuth, impulse_elevation) where none was exchanged, and the
@@ -698,7 +704,7 @@ def defined_output(result, path: str):
     x = get_output(result, path)
     kind = undefined_kind(path)
     if kind == "direction":
-        return jnp.where(result.contact.impulse_magnitude > 0, x, jnp.nan)
+        return jnp.where(impulse_exchanged(result), x, jnp.nan)
     if kind == "time":
         return jnp.where(result.contact.status == NO_CONTACT, jnp.nan, x)
     return x

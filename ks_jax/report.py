@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import units as U
-from .case import defined_output, parse_output_value, undefined_kind
+from .case import defined_output, impulse_exchanged, parse_output_value, undefined_kind
 from .types import ContactResult, VehicleResult
 
 
@@ -22,8 +22,8 @@ def _plain(x):
 
 
 def _no_impulse(sol):
-    """No impulse was exchanged (separating, no contact, eps = -1): a PDOF is then undefined."""
-    return not float(sol.result.contact.impulse_magnitude) > 0
+    """No impulse was exchanged (``case.impulse_exchanged``): a PDOF is then undefined."""
+    return not bool(impulse_exchanged(sol.result))
 
 
 def solution_dict(sol) -> dict:
