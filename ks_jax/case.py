@@ -514,9 +514,14 @@ class PathError(CaseError):
     pass
 
 
+def canonical_path(path: str) -> str:
+    """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
+    return path.strip().replace(" ", "")
+
+
 def parse_path(path: str):
     """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,))."""
-    m = _PATH.match(path.strip().replace(" ", ""))
+    m = _PATH.match(canonical_path(path))
     if not m:
         raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")
     if m.group(1):
@@ -618,12 +623,13 @@ def input_ties(case: "Case", paths) -> tuple:
     """((k, path), ...): the inputs that follow ``paths[k]`` when the inputs at ``paths`` are varied (a
     sweep, a fit), as re-solving the case file with the new value would move them (MODEL.md section 2):
     - a vehicle's course defaults to its yaw: where the case gives neither ``course`` nor ``velocity``
-      for vehicle i and ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its
-      travel too;
-    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position and
-      neither ``vehicles[i].position[2]`` nor ``vehicles[i].position`` is among ``paths``, a new
-      ``cg_height`` moves the CG to it."""
-    paths = list(paths)
+      for vehicle i, its course is still its yaw (not changed since, e.g. by ``set_input``) and
+      ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its travel too;
+    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position, its z
+      is still its ``cg_height`` and neither ``vehicles[i].position[2]`` nor ``vehicles[i].position`` is
+      among ``paths``, a new ``cg_height`` moves the CG to it.
+    So a sweep or fit at the case's own values solves the case as it is."""
+    paths = [canonical_path(p) for p in paths]
     ties = []
     vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
     for k, path in enumerate(paths):
@@ -632,11 +638,14 @@ def input_ties(case: "Case", paths) -> tuple:
             continue
         raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) else {}
         raw = raw if isinstance(raw, dict) else {}
-        if name == "yaw" and "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths:
+        v = case.inputs.vehicles[vi]
+        if name == "yaw" and "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths \
+                and np.array_equal(np.asarray(v.course), np.asarray(v.yaw)):
             ties.append((k, f"vehicles[{vi}].course"))
         position = raw.get("position")
         if name == "cg_height" and isinstance(position, list) and len(position) == 2 \
-                and not {f"vehicles[{vi}].position[2]", f"vehicles[{vi}].position"} & set(paths):
+                and not {f"vehicles[{vi}].position[2]", f"vehicles[{vi}].position"} & set(paths) \
+                and np.array_equal(np.asarray(v.position)[..., 2], np.asarray(v.cg_height)):
             ties.append((k, f"vehicles[{vi}].position[2]"))
     return tuple(ties)
 
@@ -675,18 +684,26 @@ def get_output(result, path: str):
 CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after"})
 # results that MODEL.md section 4 leaves undefined in some solved rows, and why
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
+_CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*
 UNDEFINED_REASONS = {
     "direction": "no impulse was exchanged (separating, no contact, restitution -1): it has no direction",
-    "time": "the vehicles never touch within the search horizon",
-    "ees": "both crushes are 0 (the centroid lies inside neither box) or the energy loss is negative",
+    "contact": "the vehicles never touch within the search horizon: there is no first contact, centroid, "
+               "normal or relative velocity at one",
+    "ees": "both crushes are 0 (the centroid lies inside neither box, or the vehicles never touch) or the "
+           "energy loss is negative",
+    "heading": "the vehicle is at rest after the exchange: it has no direction of travel",
 }
+REST_RATIO = 1e-6  # a horizontal speed after below this fraction of (speed before + delta-V) is rounding: at rest
 
 
 def undefined_kind(path: str) -> str | None:
     """Which ``UNDEFINED_REASONS`` can leave the result at ``path`` undefined in a solved row; None: never."""
     group, _, name, _ = parse_path(path)
-    return ("direction" if name in _IMPULSE_DIRECTIONS else "time" if (group, name) == ("contact", "time")
-            else "ees" if name == "ees" else None)
+    if name in _IMPULSE_DIRECTIONS:
+        return "direction"
+    if group == "contact" and name in _CONTACT_ONLY:
+        return "contact"
+    return "ees" if name == "ees" else "heading" if name == "course_after" else None
 
 
 def impulse_exchanged(result):
@@ -695,19 +712,38 @@ def impulse_exchanged(result):
     return result.contact.impulse_magnitude > 0
 
 
+def at_rest_after(vehicle_result):
+    """Whether the vehicle's horizontal speed after the exchange is rounding (below ``REST_RATIO`` of its
+    horizontal speed before plus its delta-V): then ``course_after`` is undefined."""
+    after = vehicle_result.velocity_after
+    before = after - vehicle_result.delta_v
+    horizontal = lambda v: jnp.sqrt(v[..., 0] ** 2 + v[..., 1] ** 2)  # noqa: E731
+    return horizontal(after) <= REST_RATIO * (horizontal(before) + vehicle_result.delta_v_magnitude)
+
+
 def defined_output(result, path: str):
-    """``get_output``, NaN where the result is undefined though the row is solved: a direction of the
-    impulse (pdof, pdof_clock, impulse_azimuth, impulse_elevation) where none was exchanged, and the
-    first-contact time where the vehicles never touch. The exchange carries stand-in numbers there (a
-    PDOF of 0 would read as a frontal impact), so that it never returns NaN and its gradients stay
-    finite; the JSON of ``ks-jax solve`` writes them null. EES is NaN already where undefined."""
-    x = get_output(result, path)
+    """``get_output``, NaN where the result is undefined though the row is solved (``undefined_kind``):
+    a direction of the impulse (pdof, pdof_clock, impulse_azimuth, impulse_elevation) where none was
+    exchanged; the first-contact time, centroid, normal, closing and separation velocities, and EES,
+    where the vehicles never touch; the course after of a vehicle at rest (``at_rest_after``). The
+    exchange carries stand-in numbers there (a PDOF of 0 would read as a frontal impact), so that it never
+    returns NaN and its gradients stay finite; the JSON of ``ks-jax solve`` writes them null. EES is NaN
+    already where both crushes are 0 or the energy loss is negative. ``path`` may name a whole vector
+    ("contact.point")."""
+    group, vi, name, idx = parse_path(path)
+    x = get_output(result, path) if idx else getattr(result.vehicles[vi] if group == "vehicles" else result.contact,
+                                                     name)
     kind = undefined_kind(path)
     if kind == "direction":
-        return jnp.where(impulse_exchanged(result), x, jnp.nan)
-    if kind == "time":
-        return jnp.where(result.contact.status == NO_CONTACT, jnp.nan, x)
-    return x
+        defined = impulse_exchanged(result)
+    elif kind in ("contact", "ees"):
+        defined = result.contact.status != NO_CONTACT
+    elif kind == "heading":
+        defined = ~at_rest_after(result.vehicles[vi])
+    else:
+        return x
+    defined = jnp.reshape(defined, jnp.shape(defined) + (1,) * (jnp.ndim(x) - jnp.ndim(defined)))
+    return jnp.where(defined, x, jnp.nan)
 
 
 def output_kind(path: str) -> str:

@@ -17,9 +17,9 @@ def pdof_degrees(force_body):
 
 
 def clock(pdof):
-    """Degrees in [0, 360) -> clock position 1..12 (12 = 0 deg, 3 = 90 deg), to the nearest hour
-    (round(pdof / 30) is 0..12 there, and 0 is 12 o'clock)."""
-    hour = jnp.round(pdof / 30.0)
+    """Degrees in [0, 360) -> clock position 1..12 (12 = 0 deg, 3 = 90 deg), to the nearest hour; a half
+    hour goes clockwise to the next (15 deg is 1 o'clock, 45 deg 2 o'clock, 345 deg 12 o'clock)."""
+    hour = jnp.floor(pdof / 30.0 + 0.5)  # 0..12, and 0 is 12 o'clock
     return jnp.where(hour == 0, 12.0, hour)
 
 

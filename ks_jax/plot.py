@@ -133,13 +133,16 @@ def top_view(solution, ax=None):
         ax.add_patch(Wedge(p, 0.3 * extent, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
                            edgecolor="tab:blue", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
         j = np.asarray(c.impulse, float)[:2]
-        j_mag = float(np.linalg.norm(j))
+        j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
+        total = float(c.impulse_magnitude)
         if j_mag > 0:
             k = 0.35 * extent / j_mag  # m per N s
+            shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
+            vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
             for i, sign in enumerate((1.0, -1.0)):
                 _arrow(ax, p + sign * k * j, p, dict(arrowstyle="-|>", color=COLORS[i], lw=2.5))
                 ax.plot([], [], color=COLORS[i], lw=2.5,
-                        label=f"impulse on {names[i]}: {j_mag:,.0f} N s ({j_mag / U.LBF_S:,.0f} lbf s)")
+                        label=f"impulse on {names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
         ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
 
     speeds = []
@@ -263,7 +266,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
     """
     import matplotlib.pyplot as plt
 
-    from .case import CaseError, input_kind, output_kind
+    from .case import CIRCULAR_OUTPUTS, CaseError, input_kind, output_kind, parse_path
     from .sweeps import check_kept
 
     check_kept(result)
@@ -289,6 +292,12 @@ def sweep_view(result, output=None, ax=None, contours=True):
     else:
         scale, unit = U.US_DISPLAY[output_kind(output)]
         shown = np.ma.masked_invalid(values / scale)
+    circular = not categorical and parse_path(output)[2] in CIRCULAR_OUTPUTS
+    wrap = (lambda v: v % 360.0) if circular else (lambda v: v)  # noqa: E731
+    if circular and shown.count():  # a direction: drawn unwrapped about its circular mean, labelled mod 360
+        rad = np.radians(shown.compressed())
+        centre = math.degrees(math.atan2(np.mean(np.sin(rad)), np.mean(np.cos(rad))))
+        shown = centre + (shown - centre + 180.0) % 360.0 - 180.0
     missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
     axes = [(p, *U.US_DISPLAY[input_kind(p)], np.asarray(v)) for p, v in result.axes.items()]
     thinned = any(k > 1 for k in result.strides)
@@ -306,7 +315,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
     finite = shown.compressed()
     flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
     if flat:  # one value everywhere (to rounding): say it, no contours of the rounding
-        note.append(" ".join(filter(None, (f"{float(np.median(finite)):.6g}", unit, "everywhere"))))
+        note.append(" ".join(filter(None, (f"{wrap(float(np.median(finite))):.6g}", unit, "everywhere"))))
 
     if result.mode == "zip":
         data = shown.compressed()
@@ -318,9 +327,12 @@ def sweep_view(result, output=None, ax=None, contours=True):
             ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
             for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
                 x = np.percentile(data, q)
-                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {x:.4g} {unit}".rstrip())
+                text = f"{round(x % 360.0, 2) % 360.0:.2f}" if circular else f"{x:.4g}"
+                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {text} {unit}".rstrip())
             ax.legend(fontsize=8)
         ax.set_xlabel(output + _bracket(unit))
+        if circular:
+            ax.xaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
         ax.set_ylabel(f"samples (of {shown.size})")
     elif len(axes) == 1:
         (path, xs, xunit, x), = axes
@@ -331,6 +343,8 @@ def sweep_view(result, output=None, ax=None, contours=True):
             ax.set_yticks(range(len(codes)), names)
             ax.set_ylim(-0.5, len(codes) - 0.5)
         ax.set_ylabel(output + _bracket(unit))
+        if circular:
+            ax.yaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
         ax.grid(alpha=0.3)
     else:
         (px, xs, xunit, x), (py, ys, yunit, y) = axes
@@ -346,10 +360,13 @@ def sweep_view(result, output=None, ax=None, contours=True):
         else:
             cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
             mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap)
-            ax.figure.colorbar(mesh, ax=ax, label=output + _bracket(unit))
+            bar = ax.figure.colorbar(mesh, ax=ax, label=output + _bracket(unit))
+            if circular:
+                bar.ax.yaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
             if contours and min(X.shape) >= 2 and finite.size and not flat:
-                lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6)
-                ax.clabel(lines, fontsize=7, fmt=lambda v: f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
+                lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6,
+                                   linestyles="solid" if circular else None)  # 358 deg is not negative
+                ax.clabel(lines, fontsize=7, fmt=lambda v: f"{wrap(v):,.0f}" if abs(wrap(v)) >= 100 else f"{wrap(v):.3g}")
         ax.set_xlabel(px + _bracket(xunit))
         ax.set_ylabel(py + _bracket(yunit))
     ax.set_title("\n".join([output + _bracket(unit)] + ([", ".join(note)] if note else [])), fontsize=9)

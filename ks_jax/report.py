@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import units as U
-from .case import defined_output, impulse_exchanged, parse_output_value, undefined_kind
+from .case import at_rest_after, defined_output, impulse_exchanged, parse_output_value, undefined_kind
 from .types import ContactResult, VehicleResult
 
 
@@ -18,6 +18,8 @@ def _plain(x):
     if x.ndim == 0:
         v = float(x)
         return None if not math.isfinite(v) else v
+    if not np.isfinite(x).any():  # an undefined vector (case.defined_output) is null, not a list of nulls
+        return None
     return [_plain(v) for v in x]
 
 
@@ -31,13 +33,17 @@ def solution_dict(sol) -> dict:
     status as words, NaN as null. An invalid case has only its status. What is not defined is
     null too (``case.defined_output``; the exchange carries stand-in numbers there, never NaN):
     ``pdof``, ``pdof_clock``, ``impulse_azimuth`` and ``impulse_elevation`` where no impulse was
-    exchanged, ``time`` where the vehicles never touch."""
+    exchanged; ``time``, ``point``, ``normal``, the closing and separation velocities and EES where
+    the vehicles never touch; ``course_after`` of a vehicle at rest; and ``time`` under an explicit
+    contact (MODEL.md section 4: automatic contact only)."""
     if sol.result is None or sol.status.startswith("invalid"):
         return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
     r = sol.result
     contact = {k: _plain(defined_output(r, f"contact.{k}") if undefined_kind(f"contact.{k}") else getattr(r.contact, k))
                for k in ContactResult._fields if k != "status"}
     contact["status"] = sol.status
+    if not (sol.case.auto_point or sol.case.auto_normal):
+        contact["time"] = None  # no search for a first contact: the exchange is at the case state
     vehicles = []
     for i, (name, v) in enumerate(zip(sol.case.vehicle_names, r.vehicles)):
         d = {"name": name}
@@ -55,6 +61,21 @@ def _fmt(x, digits=3):
     if abs(x) < 0.5 * 10.0**-digits:
         x = 0.0
     return f"{x:,.{digits}f}"
+
+
+def _deg(x, digits=1):
+    """A direction in degrees, in [0, 360) as shown: 359.97 to one digit is 0.0, not 360.0."""
+    x = float(x)
+    return _fmt(round(x % 360.0, digits) % 360.0, digits) if math.isfinite(x) else "undefined"
+
+
+def _quantity(label, x, si_unit, us_scale=None, us_unit="", digits=3, us_digits=None):
+    """A row of one quantity in SI and US units; "undefined" once where it is not a number."""
+    x = float(x)
+    if not math.isfinite(x):
+        return _row(label, "undefined")
+    us = f"{_fmt(x / us_scale, digits if us_digits is None else us_digits)} {us_unit}" if us_scale else ""
+    return _row(label, f"{_fmt(x, digits)} {si_unit}", us)
 
 
 def _row(label, si, us="", width=34):
@@ -93,10 +114,10 @@ def text_report(sol, reference: bool = True) -> str:
 
         lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
                      "(the search horizon): no exchange.")
-    elif not (v1.crush + v2.crush > 0):
-        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
-    elif not np.isfinite(v1.ees):
+    elif not np.isfinite(v1.ees) and c.energy_loss < 0:
         lines.append("\n  note: EES is undefined: the energy loss is negative.")
+    elif not np.isfinite(v1.ees):  # derived.ees_pair: crushes of rounding size count as 0
+        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
     ref = sol.case.raw.get("reference") if reference else None
     if ref:
         lines += ["", reference_table(sol, ref)]
@@ -107,13 +128,13 @@ def _contact_rows(sol, c):
     return [
         _row("impulse centroid (x, y, z)", " ".join(_fmt(p) for p in c.point) + " m",
              " ".join(_fmt(p / U.FT) for p in c.point) + " ft"),
-        _row("normal (azimuth, pitch)", f"{_fmt(math.degrees(math.atan2(c.normal[1], c.normal[0])) % 360, 1)} deg, "
+        _row("normal (azimuth, pitch)", f"{_deg(math.degrees(math.atan2(c.normal[1], c.normal[0])))} deg, "
              f"{_fmt(math.degrees(math.asin(max(-1.0, min(1.0, float(c.normal[2]))))), 1)} deg"),
         _row("impulse", f"{_fmt(c.impulse_magnitude)} N s", f"{_fmt(c.impulse_magnitude / U.LBF_S)} lbf s"),
         _row("  normal / tangential", f"{_fmt(c.impulse_normal)} / {_fmt(c.impulse_tangential)} N s",
              f"{_fmt(c.impulse_normal / U.LBF_S)} / {_fmt(c.impulse_tangential / U.LBF_S)} lbf s"),
         _row("  azimuth / elevation", "undefined (no impulse)" if _no_impulse(sol)
-             else f"{_fmt(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
+             else f"{_deg(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
         _row("deformation energy (loss)", f"{_fmt(c.energy_loss)} J", f"{_fmt(c.energy_loss / U.FT_LBF, 2)} ft lbf"),
         _row("sliding at separation", "no impulse" if _no_impulse(sol) else "yes" if bool(c.sliding) else "no"),
         _row("closing speed at centroid", f"{_fmt(np.linalg.norm(c.closing_velocity))} m/s",
@@ -133,12 +154,12 @@ def _vehicle_rows(sol, v1, v2):
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
             _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
-                 else f"{_fmt(v.pdof, 1)} deg ({int(v.pdof_clock)} o'clock)"),
+                 else f"{_deg(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
             _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
-            _row("EES", f"{_fmt(v.ees)} m/s", f"{_fmt(v.ees / U.MPH)} mph"),
+            _quantity("EES", v.ees if sol.status != "no_contact" else math.nan, "m/s", U.MPH, "mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
-            _row("course after", f"{_fmt(v.course_after, 1)} deg"),
+            _row("course after", "undefined (at rest)" if bool(at_rest_after(v)) else f"{_deg(v.course_after)} deg"),
             _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]

@@ -55,6 +55,8 @@ Two ways, see docs/sweeps.md:
 from __future__ import annotations
 
 import math
+import operator
+import os
 import sys
 import time
 from collections.abc import Mapping
@@ -69,7 +71,8 @@ import numpy as np
 
 from . import units as U
 from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
-from .case import automatic_part, input_ties, input_kind, output_kind, set_input, speed_status, to_pytrees
+from .case import automatic_part, canonical_path, input_ties, input_kind, output_kind, set_input, speed_status
+from .case import to_pytrees
 from .case import move_scene, origin_offset, scene_origin, undefined_kind, warn_far_from_origin, xy_index
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
@@ -185,8 +188,9 @@ def check_kept(result):
 
 def _check_whole(result):
     check_kept(result)
-    whole = (result.mode == "zip" and result.index_range == (0, result.shape[0])) or (
-        result.shape == tuple(len(v) for v in result.axes.values()))
+    sizes = tuple(len(v) for v in result.axes.values())
+    shape = sizes[:1] if result.mode == "zip" else sizes
+    whole = result.shape == shape and tuple(result.index_range) == (0, math.prod(shape))
     if not whole or result.strides:
         raise CaseError(f"this result holds points {result.index_range[0]}..{result.index_range[1] - 1} of a sweep "
                         f"or is thinned already (strides {result.strides}): thin a whole sweep")
@@ -383,7 +387,32 @@ class _Progress:
 # the sweep
 
 
+def _memory_bytes():
+    """This machine's physical memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _check_memory(nbytes, what, advice):
+    """CaseError where ``what`` needs more bytes than the machine has (before numpy's MemoryError)."""
+    memory = _memory_bytes()
+    if memory is not None and nbytes > memory:
+        raise CaseError(f"{what} needs {nbytes / 2**30:.3g} GiB, more than this machine's {memory / 2**30:.3g} GiB: "
+                        f"{advice}")
+
+
+def _whole_number(value, what):
+    try:
+        return operator.index(value)
+    except TypeError:
+        raise CaseError(f"{what} = {value!r}: must be a whole number") from None
+
+
 def _check_values(path, values):
+    if np.asarray(values).dtype == bool:
+        raise CaseError(f"sweep over '{path}': the values are booleans (True, False); give numbers (SI)")
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -425,10 +454,16 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         raise CaseError(case.error)
     if mode not in ("grid", "zip"):
         raise CaseError(f"sweep mode = {mode!r}: mode must be 'grid' or 'zip'")
-    if not isinstance(over, Mapping) or not over:
+    if not isinstance(over, Mapping):
+        raise CaseError(f"sweep over: give a mapping {{path: values}}, got {type(over).__name__}")
+    if not over:
         raise CaseError("sweep needs at least one input path to vary: over={path: values}")
+    for p in over:
+        if not isinstance(p, str):
+            raise CaseError(f"sweep over {p!r}: an input path is a string, e.g. 'vehicles[1].speed'")
+    _check_distinct(tuple(over), "sweep over")
+    over = {canonical_path(p): v for p, v in over.items()}  # "vehicles[0]. yaw" is "vehicles[0].yaw"
     paths = tuple(over)
-    _check_distinct(paths, "sweep over")
     for p in paths:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
         if name:
@@ -438,25 +473,42 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     axes = {p: _check_values(p, over[p]) for p in paths}
     outputs = tuple(DEFAULT_OUTPUTS if outputs is None else [outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
+        if not isinstance(p, str):
+            raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
         if p != "status":
             check_output_path(p)
-    outputs = tuple(dict.fromkeys(p for p in outputs if p != "status"))
+    outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
     for p in outputs:
         if p in axes:
             raise CaseError(f"output '{p}' is also a swept input: its values are the input's column already "
                             "(leave it out of the outputs)")
+    if "contact.time" in outputs and not (case.auto_point or case.auto_normal):
+        raise CaseError("output 'contact.time' is the first-contact time of automatic contact (MODEL.md section 4); "
+                        "this case gives contact.point and contact.normal, so its exchange is at the case state "
+                        "(leave contact.time out)")
     if not 0.0 <= float(smoothing) < 1.0:
         raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
     sizes = tuple(len(a) for a in axes.values())
     shape = _shape(dict(zip(paths, sizes)), mode)
     total = math.prod(shape)
-    lo, hi = (0, total) if index_range is None else (int(index_range[0]), int(index_range[1]))
+    if total > np.iinfo(np.int64).max:
+        raise CaseError(f"the sweep has {total:.3g} points, more than a 64-bit index counts ({np.iinfo(np.int64).max:.3g}): "
+                        "sweep fewer values")
+    if index_range is None:
+        lo, hi = 0, total
+    else:
+        if isinstance(index_range, (str, bytes)) or not hasattr(index_range, "__len__") or len(index_range) != 2:
+            raise CaseError(f"index_range = {index_range!r}: give two whole numbers (lo, hi)")
+        try:
+            lo, hi = (operator.index(v) for v in index_range)
+        except TypeError:
+            raise CaseError(f"index_range = {tuple(index_range)}: lo and hi must be whole numbers") from None
     if not 0 <= lo <= hi <= total:
         raise CaseError(f"index_range = {index_range}: must satisfy 0 <= lo <= hi <= {total}")
     n_points = hi - lo
 
     devices = tuple(jax.devices() if devices is None else devices)
-    per_device = DEFAULT_CHUNK if chunk_size is None else int(chunk_size)
+    per_device = DEFAULT_CHUNK if chunk_size is None else _whole_number(chunk_size, "chunk_size")
     if per_device <= 0:
         raise CaseError(f"chunk_size = {chunk_size}: must be positive")
     n_rows = per_device * len(devices)
@@ -485,6 +537,10 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 
     store = {}
     if keep:
+        itemsize = sum(1 if p.endswith(".sliding") else 8 if p in moved else out_dtype.itemsize for p in outputs)
+        _check_memory(n_points * (itemsize + 1), f"keeping {n_points} points of {len(outputs)} outputs",
+                      "pass keep=False and on_chunk (ks-jax sweep --out writes chunk by chunk), index_range, "
+                      "output_dtype=np.float32 or fewer outputs")
         for p in outputs:
             store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved
                                 else out_dtype)
@@ -634,6 +690,7 @@ def parse_over(text):
             raise CaseError(f"--over {path}: N = {parts[2]!r} must be a whole number") from None
         if n < 1:
             raise CaseError(f"--over {path}: N = {n} must be at least 1")
+        _check_memory(8 * n, f"--over {path}: a grid of N = {n} values", "give fewer values")
         ends = q(parts[0]), q(parts[1])
         for name, part, value in zip(("START", "STOP"), parts, ends):
             if not math.isfinite(value):
@@ -644,7 +701,9 @@ def parse_over(text):
         grid = np.linspace(*ends, n)
         return path, _typed_back(grid) if all(_plain(t) == v for t, v in zip(parts, ends)) else grid
     if len(parts) == 1:
-        values = [(v.strip(), q(v)) for v in spec.split(",") if v.strip()]
+        if any(not v.strip() for v in spec.split(",")):
+            raise CaseError(f"--over {path}={spec}: a value is missing between commas (V1,V2,...)")
+        values = [(v.strip(), q(v)) for v in spec.split(",")]
         for text, value in values:
             if not math.isfinite(value):
                 raise CaseError(f"--over {path}: {text!r} must be a finite number")

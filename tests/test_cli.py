@@ -483,3 +483,67 @@ def test_pictures_and_files_in_a_missing_folder_are_refused_before_solving(tmp_p
         with pytest.raises(SystemExit) as exc:
             main(argv)
         assert exc.value.code == 2 and "a seed must be 0 or more" in capsys.readouterr().err
+
+
+HEAD_ON = {
+    "name": "head-on, inline",
+    "vehicles": [
+        {"mass": 1500, "inertia": [500, 2000, 2200], "length": 4.5, "width": 1.8, "height": 1.4, "cg_to_front": 2.25,
+         "cg_height": 0.5, "position": [0, 0], "yaw": 0, "speed": 10},
+        {"mass": 1800, "inertia": [600, 2400, 2600], "length": 4.5, "width": 1.8, "height": 1.4, "cg_to_front": 2.25,
+         "cg_height": 0.5, "position": [4.5, 0], "yaw": 180, "speed": 10}],
+    "contact": {"point": [2.25, 0, 0.5], "normal": 180, "restitution": 0.1, "friction": 0.5},
+}
+
+
+def test_a_vehicle_brought_to_rest_has_no_course_after(tmp_path, capsys):
+    """Inline head-on, so the stick impulse (MODEL.md section 3, step 6): v' = vc (1 + eps) - eps v with
+    vc = (1500 * 10 - 1800 * 10) / 3300 = -10/11 m/s. Vehicle 2 ends at 0 m/s: at rest, it has no course
+    after (null, "undefined (at rest)", NaN in a sweep); vehicle 1 ends at -2 m/s, course 180 deg. At 9 and
+    11 m/s vehicle 2 ends at +0.5 and -0.5 m/s: courses 0 and 180. An explicit contact has no first-contact
+    time: null in the JSON, and refused as a sweep output."""
+    path = tmp_path / "head_on.json"
+    path.write_text(json.dumps(HEAD_ON))
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    d = json.loads(out)["cases"][0]
+    assert code == 0 and d["contact"]["status"] == "ok" and d["contact"]["time"] is None
+    v1, v2 = d["vehicles"]
+    assert v2["speed_after"] == pytest.approx(0.0, abs=1e-12) and v2["course_after"] is None
+    assert v1["speed_after"] == pytest.approx(2.0, rel=1e-12) and v1["course_after"] == pytest.approx(180.0, abs=1e-9)
+    code, out, _ = run_cli(capsys, "solve", str(path))
+    courses = [line.split("course after")[1].strip() for line in out.splitlines() if "course after" in line]
+    assert courses == ["180.0 deg", "undefined (at rest)"]
+    case = load_case(path)
+    swept = ks_jax.sweep(case, {"vehicles[1].speed": [9.0, 10.0, 11.0]}, outputs=["vehicles[1].course_after"])
+    np.testing.assert_allclose(swept["vehicles[1].course_after"], [0.0, np.nan, 180.0], atol=1e-9)
+    assert swept.undefined == {"vehicles[1].course_after": 1} and "at rest" in swept.summary()
+    with pytest.raises(CaseError, match="'contact.time' is the first-contact time of automatic contact"):
+        ks_jax.sweep(case, {"vehicles[1].speed": [9.0]}, outputs=["contact.time"])
+
+
+def test_directions_are_shown_in_0_to_360_and_clock_halves_go_clockwise():
+    """MODEL.md section 4: directions in [0, 360), so 359.97 shown to one digit is 0.0, not 360.0; and the
+    clock is the nearest hour, a half hour going clockwise (15 deg is 1 o'clock, as 45 deg is 2)."""
+    import jax.numpy as jnp
+
+    from ks_jax.derived import clock
+    from ks_jax.report import _deg
+
+    assert [_deg(x) for x in (359.97, 359.94, 0.04, 180.0, -0.01)] == ["0.0", "359.9", "0.0", "180.0", "0.0"]
+    pdof = [0.0, 14.99, 15.0, 45.0, 75.0, 135.0, 165.0, 255.0, 315.0, 344.99, 345.0, 359.99]
+    assert clock(jnp.array(pdof)).tolist() == [12, 12, 1, 2, 3, 5, 6, 9, 11, 11, 12, 12]
+
+
+def test_ees_note_names_zero_crushes_when_they_are_rounding(tmp_path, capsys):
+    """The shipped T-bone with no depth of penetration: the centroid lies on the boxes' faces, crushes of
+    rounding size, EES undefined because both crushes count as 0 (derived.ees_pair), not because the
+    (positive) energy loss were negative."""
+    d = json.loads((Path(ks_jax.__file__).parent / "cases" / "auto_tbone.json").read_text())
+    d["contact"]["penetration_time"] = "0 s"
+    path = tmp_path / "touch.json"
+    path.write_text(json.dumps(d))
+    code, out, _ = run_cli(capsys, "solve", str(path), "--json")
+    r = json.loads(out)["cases"][0]
+    assert r["contact"]["energy_loss"] > 0 and all(v["ees"] is None and v["crush"] < 1e-9 for v in r["vehicles"])
+    code, out, _ = run_cli(capsys, "solve", str(path))
+    assert "both crushes are 0" in out and "negative" not in out

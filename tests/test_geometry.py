@@ -453,8 +453,9 @@ def test_shipped_automatic_cases_through_the_cli(tmp_path):
 
 
 def test_never_touching_case_reads_as_such(tmp_path):
-    """Through the command line: no first-contact time and no PDOF where nothing was exchanged, in the
-    panel and in the JSON (null), and the panel names the search horizon."""
+    """Through the command line: no first-contact time, PDOF, centroid, normal, relative velocities or EES
+    where nothing was exchanged (the exchange's are stand-ins), in the panel and in the JSON (null), and the
+    panel names the search horizon."""
     from ks_jax.cli import main
 
     raw = json.loads((resources.files("ks_jax.cases") / "auto_seed_000.json").read_text())
@@ -469,11 +470,15 @@ def test_never_touching_case_reads_as_such(tmp_path):
         if flags:
             d = json.loads(out)["cases"][0]
             assert d["contact"]["status"] == "no_contact" and d["contact"]["time"] is None
-            assert all(v["pdof"] is None and v["pdof_clock"] is None for v in d["vehicles"])
-            assert d["contact"]["impulse_magnitude"] == 0.0
+            assert all(v["pdof"] is None and v["pdof_clock"] is None and v["ees"] is None for v in d["vehicles"])
+            assert all(d["contact"][k] is None for k in ("point", "normal", "closing_velocity", "separation_velocity"))
+            assert d["contact"]["impulse_magnitude"] == 0.0 and d["contact"]["energy_loss"] == 0.0
+            assert [v["crush"] for v in d["vehicles"]] == [0.0, 0.0]
         else:
             assert f"none within {G.HORIZON:g} s of free motion" in out and "o'clock" not in out
             assert out.count("undefined (no impulse)") == 2
+            assert [line.split() for line in out.splitlines() if line.strip().startswith("EES")] == [
+                ["EES", "undefined"]] * 2
 
 
 def _turned(row, degrees):

@@ -54,6 +54,12 @@ def test_automatic_tbone_drawing():
     ax = draw(sol)
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert sum("at first contact" in s for s in labels) == 2 and sum("at the exchange" in s for s in labels) == 2
+    # the impulse has a vertical part (centroid above one CG, below the other): the legend gives |J| as the
+    # report does, and the horizontal part the arrow draws
+    j = np.asarray(sol.result.contact.impulse)
+    total, horizontal = f"{np.linalg.norm(j):,.0f}", f"{np.linalg.norm(j[:2]):,.0f}"
+    assert total != horizontal
+    assert f"impulse on Sedan: {total} N s ({np.linalg.norm(j) / U.LBF_S:,.0f} lbf s), horizontal part {horizontal} N s" in labels
     overlap = [p for p in ax.patches if isinstance(p, Polygon) and not isinstance(p, Wedge)]
     assert len(overlap) == 1
     # the pickup's front (6.7 ft wide) 44 ft/s * 0.05 s = 2.2 ft into the sedan's side

@@ -50,13 +50,22 @@ def single(case, point, path):
 def expected(res, path):
     """What a sweep holds at ``path`` for the point solved alone as ``res``: its number, NaN where the JSON of
     ``ks-jax solve`` writes null although the point is solved (a direction of the impulse where none was
-    exchanged, the time of a contact that never happens)."""
+    exchanged; the time, centroid, normal, relative velocities and EES of a contact that never happens; the
+    course of a vehicle at rest after)."""
     x = np.asarray(get_output(res, path), float)
+    name = re.sub(r"\[\d\]$", "", path.split(".")[-1])
     no_impulse = not float(res.contact.impulse_magnitude) > 0
-    if path.split(".")[-1] in ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation") and no_impulse:
+    if name in ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation") and no_impulse:
         return np.full_like(x, np.nan)
-    if path == "contact.time" and int(res.contact.status) == ks_jax.types.NO_CONTACT:
+    never = int(res.contact.status) == ks_jax.types.NO_CONTACT
+    if never and (name == "ees" or path.startswith("contact.") and name in (
+            "time", "point", "normal", "closing_velocity", "separation_velocity")):
         return np.full_like(x, np.nan)
+    if name == "course_after":
+        v = res.vehicles[int(path[9])]
+        after, dv = np.asarray(v.velocity_after, float), np.asarray(v.delta_v, float)
+        if np.hypot(*after[:2]) <= 1e-6 * (np.hypot(*(after - dv)[:2]) + float(v.delta_v_magnitude)):
+            return np.full_like(x, np.nan)
     return x
 
 
@@ -254,6 +263,57 @@ def test_cg_height_moves_the_cg_where_the_case_gives_a_2d_position(case):
     assert abs(r["vehicles[0].angular_velocity_after[1]"][0]) > 0.1
     held = sweep(case, {"vehicles[0].cg_height": heights, "vehicles[0].position[2]": [0.54]}, outputs=outs)
     np.testing.assert_allclose(held["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"][1], rtol=RTOL)
+
+
+def test_ties_follow_the_case_as_it_is_and_paths_with_spaces(case):
+    """A Case whose course (or CG height) was changed with ``set_input`` keeps that value when its yaw (or
+    cg_height) is swept: the sweep at the case's own yaw is ``solve`` of that Case. A path spelled with
+    spaces is the same path: a swept "vehicles[1]. course" is held as "vehicles[1].course" is, and an
+    output "contact.point [0]" is the swept input "contact.point[0]"."""
+    import dataclasses
+
+    turned = dataclasses.replace(case, inputs=set_input(case.inputs, "vehicles[1].course", 0.2))
+    lowered = dataclasses.replace(case, inputs=set_input(case.inputs, "vehicles[0].position[2]", 0.3))
+    for c, path in ((turned, "vehicles[1].yaw"), (lowered, "vehicles[0].cg_height")):
+        want = ks_jax.solve(c).result
+        r = sweep(c, {path: [float(ks_jax.get_input(c.inputs, path))]}, outputs=OUTPUTS)
+        for out in OUTPUTS:
+            np.testing.assert_allclose(r[out][0], get_output(want, out), rtol=RTOL, atol=1e-9, err_msg=f"{path} {out}")
+    yaws = np.radians([0.0, 20.0])
+    spaced = sweep(case, {"vehicles[1].yaw": yaws, " vehicles[1]. course ": [0.3]}, outputs=OUTPUTS)
+    plain = sweep(case, {"vehicles[1].yaw": yaws, "vehicles[1].course": [0.3]}, outputs=OUTPUTS)
+    assert list(spaced.axes) == list(plain.axes)
+    for out in OUTPUTS:
+        np.testing.assert_array_equal(spaced[out], plain[out])
+    with pytest.raises(CaseError, match=r"output 'contact.point\[0\]' is also a swept input"):
+        sweep(case, {"contact.point[0]": [1.0]}, outputs=["contact.point [0]"])
+
+
+def test_bad_sweep_arguments_are_refused_by_name(case):
+    """What is not a sweep is refused with its field and rule, before anything is solved; a sweep too
+    large to keep in memory names the memory and the way round it."""
+    speed = {"vehicles[1].speed": [1.0, 2.0]}
+    for kwargs, message in (
+            (dict(over={3: [1.0]}), "sweep over 3: an input path is a string"),
+            (dict(over=[("vehicles[1].speed", [5.0])]), r"give a mapping \{path: values\}, got list"),
+            (dict(over={"contact.restitution": [True, False]}), "the values are booleans"),
+            (dict(over=speed, index_range=(1,)), r"index_range = \(1,\): give two whole numbers"),
+            (dict(over=speed, index_range=(0.7, 2.9)), r"index_range = \(0.7, 2.9\): lo and hi must be whole"),
+            (dict(over=speed, chunk_size=2.7), "chunk_size = 2.7: must be a whole number"),
+            (dict(over={f"vehicles[{i}].{f}": np.zeros(10**5) for i in (0, 1) for f in ("speed", "mass")}),
+             "1e\\+20 points, more than a 64-bit index counts"),
+            (dict(over={"vehicles[1].speed": np.zeros(10**6), "contact.friction": np.zeros(10**6)}),
+             # 6 float64 outputs + the sliding flag + the status: 50 bytes a point, 5e13 bytes = 4.66e4 GiB
+             r"keeping 1000000000000 points of 7 outputs needs 4.66e\+04 GiB, more than this machine's .*keep=False")):
+        with pytest.raises(CaseError, match=message):
+            sweep(case, outputs=OUTPUTS, **kwargs)
+    with pytest.raises(CaseError, match="a value is missing between commas"):
+        parse_over("vehicles[1].speed=1,,2")
+    with pytest.raises(CaseError, match="a grid of N = 1000000000000 values needs .* GiB"):
+        parse_over("vehicles[1].speed=0:1e9:1000000000000")
+    part = sweep(case, {"vehicles[1].speed": np.linspace(1, 30, 10)}, mode="zip", outputs=OUTPUTS, index_range=(0, 5))
+    with pytest.raises(CaseError, match="this result holds points 0..4 of a sweep"):
+        part.thinned(limit=2)
 
 
 def test_automatic_parts_and_swept_outputs_are_refused(case):
@@ -547,13 +607,12 @@ def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
 def test_files_in_us_units(tmp_path, capsys):
     """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
     column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
-    1 lbf = 4.4482216152605 N, 1 ft = 0.3048 m); dimensionless columns, booleans, times in s and the
+    1 lbf = 4.4482216152605 N, 1 ft = 0.3048 m); dimensionless columns, booleans and the
     status unchanged, in .csv and .npz, and in ``SweepResult.table``."""
     mph, lbf, ft = 0.44704, 4.4482216152605, 0.3048
     outs = {"contact.energy_loss": ("ft lbf", lbf * ft), "contact.impulse_magnitude": ("lbf s", lbf),
             "vehicles[0].delta_v_magnitude": ("mph", mph), "vehicles[0].pdof": ("deg", 1.0),
-            "vehicles[1].yaw_rate_after": ("deg/s", np.pi / 180), "contact.time": ("s", 1.0),
-            "contact.sliding": (None, None)}
+            "vehicles[1].yaw_rate_after": ("deg/s", np.pi / 180), "contact.sliding": (None, None)}
     args = [str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:3", "--over", "contact.normal=0:40:3",
             "--over", "contact.restitution=0.1,1.2", *sum((["--output", o] for o in outs), []), "--no-progress"]
     for units, suffix in (("si", ".csv"), ("us", ".csv"), ("si", ".npz"), ("us", ".npz")):
@@ -795,12 +854,13 @@ import json, sys, warnings
 import ks_jax
 from ks_jax.case import CaseWarning, case_from_dict
 OUT = ["contact.impulse_magnitude", "contact.energy_loss", "vehicles[0].crush", "vehicles[1].crush",
-       "vehicles[0].ees", "vehicles[1].ees", "contact.point[0]", "contact.point[1]", "contact.time"]
+       "vehicles[0].ees", "vehicles[1].ees", "contact.point[0]", "contact.point[1]"]
 out = {}
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     for name, d in json.loads(sys.argv[1]).items():
         case = case_from_dict(d)
+        OUT = OUT[:8] + ["contact.time"] * case.auto_point  # a first-contact time: automatic contact only
         r = ks_jax.solve(case).result
         x = float(case.inputs.vehicles[1].position[0])
         s = ks_jax.sweep(case, {"vehicles[1].position[0]": [x - 0.1, x, x + 0.1], "contact.restitution": [0.0, 0.1]},

@@ -195,3 +195,22 @@ def test_separating_points_have_no_stick_or_slide(case):
     shown = mesh_of(ax).get_array()
     np.testing.assert_array_equal(np.ma.getmaskarray(shown).reshape(r.shape), separating)
     assert "4 of 8 points without a result (grey)" in ax.get_title()
+
+
+def test_directions_are_drawn_on_the_circle(case):
+    """A PDOF spread about 0 deg (the Kia's, with the Lucid's heading drawn about 0): the histogram is one
+    hump unwrapped about the circular mean, not two bars at 0 and 360, and its percentiles are those of
+    the unwrapped samples, labelled in [0, 360)."""
+    yaw = np.radians(np.random.default_rng(5).normal(0.0, 3.0, 300))
+    z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[1].pdof"], mode="zip")
+    pdof = z["vehicles[1].pdof"]
+    assert (pdof > 350).any() and (pdof < 10).any()  # both sides of north
+    unwrapped = (pdof + 180.0) % 360.0 - 180.0
+    ax = draw(z)
+    lines = {ln.get_label().split(" ")[0]: ln for ln in ax.get_lines()}
+    for name, q in (("median", 50), ("5th", 5), ("95th", 95)):
+        x = np.percentile(unwrapped, q)
+        assert lines[name].get_xdata()[0] == pytest.approx(x, abs=1e-9)
+        assert lines[name].get_label().endswith(f" {round(x % 360.0, 2) % 360.0:.2f} deg")
+    assert max(p.get_x() + p.get_width() for p in ax.patches) < 30  # no bar near 360
+    assert ax.xaxis.get_major_formatter()(-1.0, 0) == "359"
