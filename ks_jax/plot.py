@@ -267,6 +267,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
     import matplotlib.pyplot as plt
 
     from .case import CIRCULAR_OUTPUTS, CaseError, input_kind, output_kind, parse_path
+    from .report import _deg
     from .sweeps import check_kept
 
     check_kept(result)
@@ -327,7 +328,7 @@ def sweep_view(result, output=None, ax=None, contours=True):
             ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
             for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
                 x = np.percentile(data, q)
-                text = f"{round(x % 360.0, 2) % 360.0:.2f}" if circular else f"{x:.4g}"
+                text = _deg(x, 2) if circular else f"{x:.4g}"
                 ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {text} {unit}".rstrip())
             ax.legend(fontsize=8)
         ax.set_xlabel(output + _bracket(unit))

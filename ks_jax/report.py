@@ -69,13 +69,12 @@ def _deg(x, digits=1):
     return _fmt(round(x % 360.0, digits) % 360.0, digits) if math.isfinite(x) else "undefined"
 
 
-def _quantity(label, x, si_unit, us_scale=None, us_unit="", digits=3, us_digits=None):
+def _quantity(label, x, si_unit, us_scale, us_unit):
     """A row of one quantity in SI and US units; "undefined" once where it is not a number."""
     x = float(x)
     if not math.isfinite(x):
         return _row(label, "undefined")
-    us = f"{_fmt(x / us_scale, digits if us_digits is None else us_digits)} {us_unit}" if us_scale else ""
-    return _row(label, f"{_fmt(x, digits)} {si_unit}", us)
+    return _row(label, f"{_fmt(x)} {si_unit}", f"{_fmt(x / us_scale)} {us_unit}")
 
 
 def _row(label, si, us="", width=34):
@@ -156,7 +155,7 @@ def _vehicle_rows(sol, v1, v2):
             _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
                  else f"{_deg(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
             _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
-            _quantity("EES", v.ees if sol.status != "no_contact" else math.nan, "m/s", U.MPH, "mph"),
+            _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
             _row("course after", "undefined (at rest)" if bool(at_rest_after(v)) else f"{_deg(v.course_after)} deg"),

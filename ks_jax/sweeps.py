@@ -71,9 +71,8 @@ import numpy as np
 
 from . import units as U
 from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, check_output_path, defined_output
-from .case import automatic_part, canonical_path, input_ties, input_kind, output_kind, set_input, speed_status
-from .case import to_pytrees
-from .case import move_scene, origin_offset, scene_origin, undefined_kind, warn_far_from_origin, xy_index
+from .case import automatic_part, canonical_path, input_ties, input_kind, move_scene, origin_offset, output_kind
+from .case import scene_origin, set_input, speed_status, to_pytrees, undefined_kind, warn_far_from_origin, xy_index
 from .exchange import CHUNK_ROWS
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
