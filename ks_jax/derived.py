@@ -78,14 +78,17 @@ def _vehicle(force, body, point, normal_into, j_mag):
     )
 
 
-def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
+def results(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
     """Assemble the section 4 results from the impulse ``j`` on vehicle 1.
 
+    factors = (size, ratio) of ``exchange.ImpulseStage``: J = size (n + T / N), ratio = |T| / N,
+    from which |J| and |J_t| are computed (with their one-sided derivatives at J = 0 and J_t = 0).
     body_i = (vehicle, state, R, I^-1 global, r = P - x). The energy loss uses
     E = -J.(u + u')/2, which equals the kinetic-energy difference of both bodies (translation
     and rotation) and keeps its precision in float32.
     """
-    j_mag = la.safe_norm(j)
+    size, ratio = factors
+    j_mag = size * jnp.sqrt(1.0 + ratio * ratio)
     v1 = _vehicle(j, body1, p, -n, j_mag)
     v2 = _vehicle(-j, body2, p, n, j_mag)
     r1, r2 = body1[4], body2[4]
@@ -106,7 +109,7 @@ def results(j, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
         impulse=j,
         impulse_magnitude=j_mag,
         impulse_normal=jn,
-        impulse_tangential=la.safe_norm(j - jn * n),
+        impulse_tangential=size * ratio,
         impulse_azimuth=la.degrees_0_360(la.safe_atan2(jy, jx)),
         impulse_elevation=jnp.degrees(la.safe_atan2(jz, la.safe_sqrt(jx * jx + jy * jy))),
         sliding=sliding,

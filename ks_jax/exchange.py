@@ -231,7 +231,8 @@ def impulse(K, u, n, restitution, friction, smoothing=0.0):
     """The KS impulse on vehicle 1 (MODEL.md section 3, steps 3-6).
 
     K: (3, 3) SPD, u: (3,) relative velocity at P, n: (3,) unit normal.
-    Returns (J (3,), sliding (), approaching ()): J = 0 when u.n >= 0.
+    Returns (J (3,), sliding (), approaching (), size (), ratio ()): J = 0 when u.n >= 0;
+    J = size (n + T / N) with size = (1 + eps) N >= 0 and ratio = |T| / N (``ImpulseStage``).
     """
     un = la.dot(n, u)
     approaching = un < 0
@@ -244,9 +245,10 @@ def impulse(K, u, n, restitution, friction, smoothing=0.0):
     d = n + la.safe_div(friction, m) * t_c
     denom = la.dot(n, la.matvec(K, d))
     normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
-    j = (1.0 + restitution) * normal * d
+    size = (1.0 + restitution) * normal
+    j = size * d
     sliding = approaching & (t_norm > a)
-    return j, sliding, approaching
+    return j, sliding, approaching, size, la.safe_div(friction, m) * t_norm
 
 
 def _impulse_c(K, u, n, restitution, friction, smoothing):
@@ -268,10 +270,10 @@ def _impulse_c(K, u, n, restitution, friction, smoothing):
     d = tuple(nk + f * tk for nk, tk in zip(n, t_c))
     denom = la.dot(n, la.matvec_c(K, d))
     normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
-    scale = (1.0 + restitution) * normal
-    j = tuple(scale * dk for dk in d)
+    size = (1.0 + restitution) * normal
+    j = tuple(size * dk for dk in d)
     sliding = approaching & (t_norm > a)
-    return j, sliding, approaching
+    return j, sliding, approaching, size, f * t_norm
 
 
 def _arm_c(r, a):
@@ -565,12 +567,19 @@ def exchange_with_status(vehicle1, state1, vehicle2, state2, contact, smoothing,
 
 class ImpulseStage(NamedTuple):
     """What ``results_stage`` needs from ``impulse_stage``: J on vehicle 1, sliding, approaching,
-    n, u, I^-1 and R of both vehicles, r_i = P - x_i. Vectors as 3-tuples and matrices as rows of
-    3-tuples (``linalg.vec``/``linalg.mat``)."""
+    size and ratio, n, u, I^-1 and R of both vehicles, r_i = P - x_i. Vectors as 3-tuples and
+    matrices as rows of 3-tuples (``linalg.vec``/``linalg.mat``).
+
+    J = size (n + T / N): size = (1 + eps) N, ratio = |T| / N. The magnitudes are computed from
+    them, |J| = size sqrt(1 + ratio^2) and |J_t| = size ratio, not as norms of J: a norm's
+    derivative at 0 is 0, where |J| at eps = -1 and |J_t| at mu = 0 have the one-sided derivatives
+    (1 + eps) and mu times their factors (d|J|/deps = |J_c(s*)|, d|J_t|/dmu = (1 + eps) N)."""
 
     j: tuple
     sliding: jnp.ndarray
     approaching: jnp.ndarray
+    size: jnp.ndarray
+    ratio: jnp.ndarray
     n: tuple
     u: tuple
     a1: tuple
@@ -618,13 +627,14 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
     )
     if for_gradients:
         K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
-        j, sliding, approaching = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
+        j, sliding, approaching, size, ratio = impulse(K, u, n, contact.restitution, contact.friction, smoothing)
     else:
         K = _collision_matrix_c(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
-        j, sliding, approaching = _impulse_c(K, la.vec(u), la.vec(n), contact.restitution, contact.friction, smoothing)
+        j, sliding, approaching, size, ratio = _impulse_c(K, la.vec(u), la.vec(n), contact.restitution,
+                                                          contact.friction, smoothing)
     # components, not (3,) and (3, 3) arrays: stored by a batched caller as one array each, with no
     # concatenate loop to assemble them (XLA's CPU concatenate loops are slow on long expressions)
-    return ImpulseStage(la.vec(j), sliding, approaching, la.vec(n), la.vec(u), la.mat(a1), la.mat(rot1),
+    return ImpulseStage(la.vec(j), sliding, approaching, size, ratio, la.vec(n), la.vec(u), la.mat(a1), la.mat(rot1),
                         la.mat(a2), la.mat(rot2), la.vec(r1), la.vec(r2))
 
 
@@ -649,7 +659,7 @@ def results_stage(vehicle1, state1, vehicle2, state2, contact, status, stage: Im
     stage = stage._replace(j=arr(stage.j), n=arr(stage.n), u=arr(stage.u), a1=rows(stage.a1), rot1=rows(stage.rot1),
                            a2=rows(stage.a2), rot2=rows(stage.rot2), r1=arr(stage.r1), r2=arr(stage.r2))
     result = derived.results(
-        stage.j, stage.n, contact.point, stage.u, stage.sliding, status,
+        stage.j, (stage.size, stage.ratio), stage.n, contact.point, stage.u, stage.sliding, status,
         (vehicle1, state1, stage.rot1, stage.a1, stage.r1),
         (vehicle2, state2, stage.rot2, stage.a2, stage.r2),
     )

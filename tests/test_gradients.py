@@ -201,12 +201,12 @@ def test_gradients_at_separating_contact(kit, random_cases, smoothing):
 
 @pytest.mark.parametrize("smoothing", MODES)
 def test_gradients_at_zero_friction(kit, random_cases, smoothing):
-    """mu = 0 is the edge of its domain: one-sided differences in mu. |J_t| = 0 there, a norm at
-    zero whose one-sided slope in mu AD cannot give, so impulse_tangential is left out."""
+    """mu = 0 is the edge of its domain: one-sided differences in mu. |J_t| = 0 there, and its
+    derivative in mu is the one-sided slope (1 + eps) N, not a norm's 0 at zero."""
     case = copy.deepcopy(random_cases["principal"][5])
     case["contact"]["friction"] = 0.0
-    fd_check(kit, case, smoothing, np.random.default_rng(6), forward=("contact.friction",),
-             skip_outputs=("impulse_tangential",))
+    assert np.linalg.norm(ref.stick_split(case)["t_c"]) > 0  # sliding at mu = 0, so |J_t| grows with mu
+    fd_check(kit, case, smoothing, np.random.default_rng(6), forward=("contact.friction",))
 
 
 def test_gradients_on_the_cone_boundary_smooth_mode(kit):
@@ -268,13 +268,17 @@ def test_head_on_delta_v_derivative_is_analytic(kit, smoothing):
 
 @pytest.mark.parametrize("smoothing", MODES)
 def test_restitution_derivative_at_minus_one(kit, random_cases, smoothing):
-    """J = (1 + eps) J_c(s*): at eps = -1, J = 0 and dJ/deps = J_c(s*) (the reference at eps = 0)."""
+    """J = (1 + eps) J_c(s*): at eps = -1, J = 0 and dJ/deps = J_c(s*) (the reference at eps = 0).
+    The magnitudes have the one-sided derivatives from eps > -1: d|dv_i|/deps = |J_c| / m_i and
+    d|J_t|/deps = |J_c - (n.J_c) n| (a norm of J would give 0 at J = 0)."""
     base = copy.deepcopy(random_cases["principal"][30])
     base["contact"]["restitution"] = -1.0
-    w = np.zeros((3, kit.n_outputs))
-    for k in range(3):
-        w[k, kit.output_slices["impulse"].start + k] = 1.0
-    values, grads = kit.value_and_grad(kit.inputs([base] * 3), w, smoothing)
+    outputs = [("impulse", k) for k in range(3)] + [("delta_v_magnitude_1", 0), ("delta_v_magnitude_2", 0),
+                                                     ("impulse_tangential", 0)]
+    w = np.zeros((len(outputs), kit.n_outputs))
+    for row, (name, k) in enumerate(outputs):
+        w[row, kit.output_slices[name].start + k] = 1.0
+    values, grads = kit.value_and_grad(kit.inputs([base] * len(outputs)), w, smoothing)
     np.testing.assert_array_equal(values, 0.0)
     zero = copy.deepcopy(base)
     zero["contact"]["restitution"] = 0.0
@@ -282,8 +286,14 @@ def test_restitution_derivative_at_minus_one(kit, random_cases, smoothing):
         j_c = ref.solve(zero)["contact"]["impulse"]
     else:  # the smooth J_c(s*_tau): the engine's own impulse at eps = 0
         j_c = kit.batch_exchange(kit.inputs([zero]), smoothing).contact.impulse[0]
-    np.testing.assert_allclose(np.asarray(grads[4].restitution), j_c, rtol=0,
-                               atol=RTOL_ANALYTIC * np.linalg.norm(j_c) * 10)
+    n = np.asarray(base["contact"]["normal"]) / np.linalg.norm(base["contact"]["normal"])
+    masses = [v["mass"] for v in base["vehicles"]]
+    expected = [*j_c, np.linalg.norm(j_c) / masses[0], np.linalg.norm(j_c) / masses[1],
+                np.linalg.norm(j_c - (n @ j_c) * n)]
+    assert expected[-1] > 1e-3 * np.linalg.norm(j_c)  # an oblique impulse: |J_t| has a slope to find
+    d_eps = np.asarray(grads[4].restitution)
+    np.testing.assert_allclose(d_eps[:3], expected[:3], rtol=0, atol=RTOL_ANALYTIC * np.linalg.norm(j_c) * 10)
+    np.testing.assert_allclose(d_eps[3:], expected[3:], rtol=1e-10)
     # nothing else moves J while eps = -1
     for tree in grads[:4]:
         for g in tree:
@@ -390,3 +400,4 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
         ad = float(jax.jit(jax.grad(angle), static_argnums=1)(0.0, name))
         assert abs(fd) > 1.0, name  # the angle does turn
         np.testing.assert_allclose(ad, fd, rtol=1e-6, err_msg=name)
+
