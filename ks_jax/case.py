@@ -13,8 +13,10 @@ why) so that the others are still solved.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+import operator
 import warnings
 import re
 import tomllib
@@ -490,18 +492,31 @@ def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
 
 
 def to_pytrees(inputs: CaseInputs):
-    """(Vehicle, State, Vehicle, State, Contact) from CaseInputs. Pure and differentiable."""
+    """(Vehicle, State, Vehicle, State, Contact) from CaseInputs. Pure and differentiable.
+
+    A velocity or normal made from a non-finite speed, course, velocity_z or angle is NaN, so that
+    the exchange gives the row its status; it is computed from stand-ins (the double-where), so that
+    the row's zero cotangent times an infinite derivative cannot make NaN the gradient of a parameter
+    it shares with other rows."""
     out = []
     for v in inputs.vehicles:
         vehicle = Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height)
-        sin, cos = la.sincos(v.course)
-        velocity = jnp.stack([v.speed * cos, v.speed * sin, v.velocity_z * jnp.ones_like(v.speed)])
+        ok, (speed, course, vz) = _finite_stand_ins(v.speed, v.course, v.velocity_z)
+        sin, cos = la.sincos(course)
+        velocity = jnp.where(ok, jnp.stack([speed * cos, speed * sin, vz * jnp.ones_like(speed)]), jnp.nan)
         state = State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
         out += [vehicle, state]
     c = inputs.contact
-    contact = Contact(c.point, normal_from_angles(c.normal, c.normal_pitch), c.restitution, c.friction,
-                      c.penetration_time)
+    ok, (azimuth, pitch) = _finite_stand_ins(c.normal, c.normal_pitch)
+    contact = Contact(c.point, jnp.where(ok, normal_from_angles(azimuth, pitch), jnp.nan), c.restitution,
+                      c.friction, c.penetration_time)
     return (*out, contact)
+
+
+def _finite_stand_ins(*xs):
+    """(ok, xs with 0 for each where ok is False): ok where all of ``xs`` are finite."""
+    ok = functools.reduce(operator.and_, [jnp.isfinite(x) for x in xs])
+    return ok, tuple(jnp.where(ok, x, jnp.zeros_like(x)) for x in xs)
 
 
 # ---------------------------------------------------------------------------------------

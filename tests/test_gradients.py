@@ -10,8 +10,10 @@ its values, so the whole file costs one compilation per inertia shape.
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -401,3 +403,40 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
         assert abs(fd) > 1.0, name  # the angle does turn
         np.testing.assert_allclose(ad, fd, rtol=1e-6, err_msg=name)
 
+
+@pytest.mark.parametrize("file", ["seed_000_saturn_pontiac.json", "auto_tbone.json"])
+def test_a_row_with_a_non_finite_input_leaves_a_shared_gradient_finite(file):
+    """A loss over rows that share a parameter (here an angle added to vehicle 2's course, turned
+    0.1 rad from the file's, and to the normal's azimuth), one row with a non-finite speed or normal pitch: that row gets its status and
+    is left out of the loss, and the gradient is the gradient over the good row alone (before the
+    double-where in ``to_pytrees``, inf * cos(course) made it NaN)."""
+    from ks_jax.case import as_arrays
+
+    case = ks_jax.load_case(Path(ks_jax.__file__).parent / "cases" / file)
+    inputs = as_arrays(case.inputs)
+    inputs = inputs._replace(contact=inputs.contact._replace(friction=0.2))  # sliding: the normal matters
+
+    def row(theta, speed, normal_pitch):
+        v2 = inputs.vehicles[1]
+        v2 = v2._replace(course=v2.course + 0.1 + theta, speed=speed)
+        c = inputs.contact._replace(normal=inputs.contact.normal + theta, normal_pitch=normal_pitch)
+        return ks_jax.solve_inputs(inputs._replace(vehicles=(inputs.vehicles[0], v2), contact=c),
+                                   case.auto_point, case.auto_normal)
+
+    def loss(theta, speeds, pitches):
+        res = jax.vmap(row, (None, 0, 0))(theta, speeds, pitches)
+        ok = res.contact.status == 0
+        return jnp.sum(jnp.where(ok, res.contact.impulse_magnitude + res.vehicles[0].delta_v_magnitude, 0.0)), \
+            res.contact.status
+
+    grad = jax.jit(jax.grad(loss, has_aux=True))
+    speed, pitch = inputs.vehicles[1].speed, inputs.contact.normal_pitch
+    alone, status = grad(0.0, jnp.stack([speed]), jnp.stack([pitch]))
+    assert ks_jax.status_text(int(status[0])) == "ok"
+    assert abs(float(alone)) > 1.0  # the shared angle does move the good row's results
+    for bad_speed, bad_pitch in ((jnp.inf, pitch), (jnp.nan, pitch), (-jnp.inf, pitch), (speed, jnp.inf),
+                                 (speed, jnp.nan)):
+        g, status = grad(0.0, jnp.stack([speed, bad_speed]), jnp.stack([pitch, bad_pitch]))
+        assert ks_jax.status_text(int(status[0])) == "ok"
+        assert ks_jax.status_text(int(status[1])).startswith("invalid: "), status
+        assert float(g) == pytest.approx(float(alone), rel=1e-12), (bad_speed, bad_pitch)
