@@ -42,7 +42,13 @@ Choices where MODEL.md is silent
 - Degenerate overlap (area below ~1e3 machine epsilons of the footprint areas, e.g. when
   penetration_time = 0 and the exchange is at the instant of touching): the centroid is the
   middle of the touching features (the contact manifold along the axis of least penetration),
-  which is the limit of the area centroid as penetration_time -> 0.
+  which is the limit of the area centroid as penetration_time -> 0. Its derivative in
+  penetration_time is the growing overlap's (``_overlap_growth``: for a corner entering a side,
+  the centroid of a growing triangle, a third of the way in, which the corner does not give);
+  at the touch itself (penetration_time 0, point and normal automatic) both crushes are 0, with
+  the growing overlap's derivative too. These are the one-sided derivatives from
+  penetration_time > 0; the derivatives in every other input are those of the touching
+  configuration, which stays touching.
 - Normal: perpendicular to the line through the two points where the outlines cross,
   horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where footprint
   1's centre lies relative to footprint 2's (n . (c_1 - c_2) > 0; the axis of least penetration
@@ -77,6 +83,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from . import derived
 from . import linalg as la
 from .exchange import _benign, exchange, input_status
 from .derived import mask_invalid
@@ -92,7 +99,8 @@ class Contact2D(NamedTuple):
     """The automatic contact at one instant: point (3,) m, normal (3,) horizontal unit
     (from vehicle 2 into vehicle 1), overlap polygon (8, 2) m with ``count`` vertices,
     ``area`` () m^2, ``crossings`` (2, 2) m and ``crossing_ok`` () bool (the two outline
-    crossings and whether the normal came from them)."""
+    crossings and whether the normal came from them), ``solid`` () bool (the area is above its
+    tolerance: the point is the area centroid, else the middle of the touching features)."""
 
     point: jnp.ndarray
     normal: jnp.ndarray
@@ -101,6 +109,7 @@ class Contact2D(NamedTuple):
     area: jnp.ndarray
     crossings: jnp.ndarray
     crossing_ok: jnp.ndarray
+    solid: jnp.ndarray
 
 
 # ---------------------------------------------------------------------------------------
@@ -417,20 +426,10 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Con
     the CGs' midpoint): the tolerances grow with it, so that edges the input's own rounding
     parts are still collinear."""
     dtype = state1.position.dtype
-    c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
-    c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
-    axes = _axes(state1.yaw, state2.yaw)
-    n_sat, _ = least_penetration_normal(c1, c2, axes)
-
-    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
-    eps = jnp.finfo(dtype).eps
-    len_tol = 1e3 * eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
-    area_tol = len_tol * jnp.sqrt(scale2)
-
-    poly, count = overlap_polygon(c1, c2)
-    area, centroid = polygon_area_centroid(poly, count)
+    c1, c2, n_sat, len_tol, area_tol, poly, count, area, centroid, manifold = _overlap(
+        vehicle1, state1, vehicle2, state2, coordinates)
     solid = area > area_tol
-    xy = jnp.where(solid, centroid, _manifold_point(c1, c2, n_sat, len_tol))
+    xy = jnp.where(solid, centroid, manifold)
 
     pts, mask = outline_crossings(c1, c2, len_tol)
     two = _first_two(pts, mask)
@@ -443,12 +442,77 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Con
     n_line = jnp.where(side < 0, -n_line, n_line)
     n2 = jnp.where(crossing_ok, n_line, n_sat)
 
+    point = jnp.stack([xy[0], xy[1], _vertical_middle(vehicle1, state1, vehicle2, state2)])
+    normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
+    return Contact2D(point, normal, poly, count, area, two, crossing_ok, solid)
+
+
+def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
+    """What ``contact_geometry`` builds on: both footprints, the axis of least penetration, the
+    length and area tolerances, the overlap polygon (vertices, count), its area and centroid, and
+    the middle of the touching features (``_manifold_point``)."""
+    c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
+    c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
+    n_sat, _ = least_penetration_normal(c1, c2, _axes(state1.yaw, state2.yaw))
+    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
+    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    area_tol = len_tol * jnp.sqrt(scale2)
+    poly, count = overlap_polygon(c1, c2)
+    area, centroid = polygon_area_centroid(poly, count)
+    return c1, c2, n_sat, len_tol, area_tol, poly, count, area, centroid, _manifold_point(c1, c2, n_sat, len_tol)
+
+
+@jax.custom_jvp
+def _growing_overlap(penetration_time, probe):
+    """0 (4,), whose derivative with respect to ``penetration_time`` is ``_overlap_growth(*probe)``
+    (and 0 with respect to everything else). At the touch the overlap has no area and the centroid
+    is the middle of the touching features; the first two components, added to it, give it the
+    derivative of the growing overlap's centroid (for a corner entering a side: a triangle whose
+    centroid is a third of the way in and spreads along the side, where the corner itself only goes
+    in). The last two are the crushes' growth (at the touch both are 0, and AD of the distance to a
+    box's faces from a corner averages the two faces that meet there)."""
+    return jnp.zeros(4, probe[1].position.dtype)
+
+
+@_growing_overlap.defjvp
+def _growing_overlap_jvp(primals, tangents):
+    penetration_time, probe = primals
+    rate = jax.lax.stop_gradient(_overlap_growth(*probe))
+    return jnp.zeros_like(rate), rate * tangents[0]
+
+
+def _overlap_growth(vehicle1, state1, vehicle2, state2, t_i, t_x, coordinates, normal_pitch):
+    """(4,): how fast, as the footprints (``state1``/``state2`` at t = 0, free motion) penetrate
+    after touching at t_i, the overlap's area centroid moves away from the middle of the touching
+    features (x, y; m/s), and the crushes grow (MODEL.md section 4, along the axis of least
+    penetration tilted by ``normal_pitch``; m/s), measured at t_x (>= t_i). Each is its value at a
+    probe instant at which the penetration has grown by sqrt(machine epsilon) of the vehicles' size
+    (about 1e-7 m in float64, 3 mm in float32), divided by the time since t_i: all move linearly
+    with that time while neither vehicle turns (the overlap of a corner and a side is a triangle of
+    fixed shape, growing), so this is then the derivative to rounding; a turning vehicle adds an
+    error of the order of the angle turned before the probe. 0 where the footprints are not closing."""
+    _, closing = jax.jvp(lambda t: -separation(vehicle1, state1, vehicle2, state2, t), (t_x,), (jnp.ones_like(t_x),))
+    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    depth = jnp.sqrt(jnp.finfo(t_x.dtype).eps) * size
+    grows = closing > 0
+    t_probe = t_x + jnp.where(grows, depth / jnp.where(grows, closing, 1.0), 0.0)
+    a1, a2 = advance(state1, t_probe), advance(state2, t_probe)
+    _, _, n_sat, _, _, _, _, area, centroid, manifold = _overlap(vehicle1, a1, vehicle2, a2, coordinates)
+    point = jnp.concatenate([centroid, _vertical_middle(vehicle1, a1, vehicle2, a2)[None]])
+    n = tilt(jnp.concatenate([n_sat, jnp.zeros(1, n_sat.dtype)]), normal_pitch)
+    crush = jnp.stack([derived.crush_depth(point, sign * n, a.position, la.rotation(a.yaw, a.pitch, a.roll), v)
+                       for sign, a, v in ((-1.0, a1, vehicle1), (1.0, a2, vehicle2))])
+    since = t_probe - t_i
+    ok = grows & (area > 0) & (since > 0)
+    return jnp.where(ok, jnp.concatenate([centroid - manifold, crush]) / jnp.where(ok, since, 1.0), 0.0)
+
+
+def _vertical_middle(vehicle1, state1, vehicle2, state2):
+    """() m: the middle of the boxes' vertical overlap (z of the automatic centroid)."""
     bottom = jnp.maximum(state1.position[2] - vehicle1.cg_height, state2.position[2] - vehicle2.cg_height)
     top = jnp.minimum(state1.position[2] - vehicle1.cg_height + vehicle1.height,
                       state2.position[2] - vehicle2.cg_height + vehicle2.height)
-    point = jnp.stack([xy[0], xy[1], 0.5 * (bottom + top)])
-    normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
-    return Contact2D(point, normal, poly, count, area, two, crossing_ok)
+    return 0.5 * (bottom + top)
 
 
 def tilt(normal, pitch):
@@ -464,8 +528,11 @@ def tilt(normal, pitch):
 class AutoContact(NamedTuple):
     """Everything automatic contact decides before the exchange (for plots and checks):
     time t_i () s, found () bool, states at the exchange instant, the contact used, the
-    overlap geometry (``Contact2D``) at that instant, and parted () bool: the footprints touched
-    but are apart again at the exchange instant (a penetration_time longer than the touch)."""
+    overlap geometry (``Contact2D``) at that instant, parted () bool: the footprints touched
+    but are apart again at the exchange instant (a penetration_time longer than the touch),
+    at_touch () bool: the exchange is at the touch itself (penetration_time 0, point and normal
+    automatic), and touch_crush (2,) m: there, the crushes (0, with their derivative in
+    penetration_time, which ``exchange_at_contact`` puts in place of the exchange's)."""
 
     time: jnp.ndarray
     found: jnp.ndarray
@@ -474,6 +541,8 @@ class AutoContact(NamedTuple):
     contact: Contact
     geometry: Contact2D
     parted: jnp.ndarray
+    at_touch: jnp.ndarray
+    touch_crush: jnp.ndarray
 
 
 def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch, *, auto_point, auto_normal):
@@ -491,7 +560,10 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     t_x = jnp.where(found, t_i + contact.penetration_time, 0.0)
     a1, a2 = advance(state1, t_x), advance(state2, t_x)
     geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin))
-    geo = geo._replace(point=geo.point + origin, polygon=geo.polygon + origin[:2],
+    growth = _growing_overlap(contact.penetration_time, (vehicle1, near1, vehicle2, near2, t_i, t_x,
+                                                         la.safe_norm(origin), normal_pitch))
+    shift = jnp.where(geo.solid, 0.0, jnp.concatenate([growth[:2], jnp.zeros(1, growth.dtype)]))
+    geo = geo._replace(point=geo.point + shift + origin, polygon=geo.polygon + origin[:2],
                        crossings=geo.crossings + origin[:2])
     point = jnp.where(auto_point, geo.point, contact.point)
     normal = jnp.where(auto_normal, tilt(geo.normal, normal_pitch), contact.normal)
@@ -507,7 +579,8 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     gap = separation(vehicle1, near1, vehicle2, near2, t_x)  # <= 0 at t_i itself, to rounding
     gap_tol = 1e3 * jnp.finfo(gap.dtype).eps * (_reach(vehicle1) + _reach(vehicle2) + la.safe_norm(origin))
     parted = found & (contact.penetration_time > 0) & (gap > gap_tol)
-    return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo, parted)
+    at_touch = found & ~geo.solid & (contact.penetration_time == 0) & auto_point & auto_normal
+    return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo, parted, at_touch, growth[2:])
 
 
 def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
@@ -567,8 +640,10 @@ def exchange_at_contact(vehicle1, state1, vehicle2, state2, contact, status, aut
         normal=jnp.where(none, n_none, c.normal),
         status=jnp.where(none, jnp.int32(NO_CONTACT), c.status),
     )
-    vehicles = tuple(v._replace(crush=jnp.where(none, 0.0, v.crush), ees=jnp.where(none, 0.0, v.ees))
-                     for v in result.vehicles)
+    touch = ok & auto.at_touch
+    vehicles = tuple(v._replace(crush=jnp.where(none, 0.0, jnp.where(touch, auto.touch_crush[k], v.crush)),
+                                ees=jnp.where(none, 0.0, v.ees))
+                     for k, v in enumerate(result.vehicles))
     parted = ok & auto.found & auto.parted
     result = mask_invalid(ExchangeResult(c, vehicles), ~parted)
     return result._replace(contact=result.contact._replace(

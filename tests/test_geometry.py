@@ -723,3 +723,67 @@ def test_a_touch_that_has_parted_by_the_exchange_is_refused():
     assert not inside.status.startswith("invalid") and abs(float(inside.result.contact.time) - 0.6) < TIME_TOL
     r = ks_jax.sweep(ks_jax.case.case_from_dict(d), {"contact.penetration_time": np.array([0.5, 1.0])})
     assert [ks_jax.status_text(int(s)) for s in r["status"]] == [inside.status, parted.status]
+
+
+# ---------------------------------------------------------------------------------------
+# the derivative in penetration_time at the touch (penetration_time = 0)
+
+
+def _at_the_touch(name):
+    theta = np.array(GRAD_CASES[name][0], float)
+    theta[5] = 0.0
+    return theta, GRAD_CASES[name][1]
+
+
+def _one_sided(value, theta, base, h):
+    """Second-order one-sided differences in penetration_time (>= 0) of ``value`` over AUTO's result."""
+    rows = [build(jnp.asarray(theta + k * h * np.eye(len(THETA))[5]), base) for k in range(3)]
+    f0, f1, f2 = (value(r) for r in run(rows))
+    return (-3 * f0 + 4 * f1 - f2) / (2 * h)
+
+
+def test_centroid_derivative_in_penetration_time_at_the_touch_is_the_growing_triangle():
+    """Oblique: vehicle 2's front-left corner touches vehicle 1's right side (y = -0.9) at (0.3, -0.9).
+    After a time h the overlap is the triangle of the corner, C = (0.3, -0.9) + h (5, 10 sin60), and
+    the points where its front face and its left side cross y = -0.9: (0.3 + 20 h, -0.9) and
+    (0.3, -0.9) (test_oblique_corner_impact). Its centroid moves at (25/3, 10 sin60 / 3) m/s, the
+    one-sided derivative at penetration_time = 0, where the overlap has no area yet (the middle of
+    the touching features, which is the corner, moves at (5, 8.66 / 2)): forward and reverse mode."""
+    theta, base = _at_the_touch("oblique")
+    want = np.array([25.0 / 3.0, 10.0 * math.sin(OBL_YAW) / 3.0, 0.0])
+    e5 = jnp.asarray(np.eye(len(THETA))[5])
+    primal, tangent = jax.jvp(lambda th: build(th, base), (jnp.asarray(theta),), (e5,))
+    out, tan = run_jvp(CONTACT_JVP, [primal], [jax.tree_util.tree_map(lambda x: jnp.asarray(x, float), tangent)])
+    np.testing.assert_allclose(out[0][1:3], [0.3, -0.9], atol=LEN_TOL)  # at the corner
+    np.testing.assert_allclose(tan[0][1:4], want, rtol=1e-6)
+
+    def point(penetration_time, k):
+        args = build(jnp.asarray(theta).at[5].set(penetration_time), base)
+        return G.automatic_contact(*args, auto_point=True, auto_normal=True).contact.point[k]
+
+    grad = jax.jit(jax.grad(point), static_argnums=1)
+    np.testing.assert_allclose([float(grad(0.0, k)) for k in range(3)], want, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("name, h", [("oblique", 1e-6), ("tbone", 1e-6), ("spin", 1e-4)])
+def test_result_derivatives_in_penetration_time_at_the_touch(name, h):
+    """Impulse, delta-V, crush, energy, yaw rate after: d/d(penetration_time) at 0 against second-order
+    one-sided differences (penetration_time >= 0). oblique: a corner into a side at 30 deg; tbone: at
+    2 deg, where the triangle spreads 29 times as fast along the side as it goes in; spin: vehicle 1
+    turning at 2 rad/s, where the probe of the growing overlap adds an error of the order of the angle
+    turned before it (~1e-8 rad). The step h: at 1e-6 s the spinning corner's overlap is 1e-5 m wide, and
+    the rounding of its crossings turns the normal by 5e-5 / s in the differences (the derivative is 0:
+    the parked car's face does not turn)."""
+    theta, base = _at_the_touch(name)
+    e5 = jnp.asarray(np.eye(len(THETA))[5])
+    primal, tangent = jax.jvp(lambda th: build(th, base), (jnp.asarray(theta),), (e5,))
+    out, tan = run_jvp(AUTO_JVP, [primal], [jax.tree_util.tree_map(lambda x: jnp.asarray(x, float), tangent)])
+
+    def value(r):
+        return np.asarray(outputs(jax.tree_util.tree_map(jnp.asarray, r)))
+
+    assert out[0].contact.status == OK
+    ad, fd, f0 = value(tan[0]), _one_sided(value, theta, base, h), value(out[0])
+    assert np.linalg.norm(fd[1:3]) > 1.0  # the centroid does move
+    bad = np.abs(ad - fd) > 1e-5 * np.abs(fd) + 1e-7 * (1 + np.abs(f0))
+    assert not np.any(bad), f"outputs {np.flatnonzero(bad)}: derivatives {ad[bad]} vs differences {fd[bad]}"
