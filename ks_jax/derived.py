@@ -88,7 +88,10 @@ def results(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResul
     and rotation) and keeps its precision in float32.
     """
     size, ratio = factors
-    j_mag = size * jnp.sqrt(1.0 + ratio * ratio)
+    # |J| = size sqrt(1 + ratio^2); as the norm of J, plus 0 whose derivative where size = 0 (eps = -1)
+    # is the one-sided one (the norm's is 0 there): size sqrt(1 + ratio^2) itself made the gradient of
+    # a batched delta-V loss 1.3x slower
+    j_mag = la.safe_norm(j) + jnp.where(size == 0, size * jax.lax.stop_gradient(jnp.sqrt(1.0 + ratio * ratio)), 0.0)
     v1 = _vehicle(j, body1, p, -n, j_mag)
     v2 = _vehicle(-j, body2, p, n, j_mag)
     r1, r2 = body1[4], body2[4]
