@@ -570,10 +570,11 @@ class ImpulseStage(NamedTuple):
     size and ratio, n, u, I^-1 and R of both vehicles, r_i = P - x_i. Vectors as 3-tuples and
     matrices as rows of 3-tuples (``linalg.vec``/``linalg.mat``).
 
-    J = size (n + T / N): size = (1 + eps) N, ratio = |T| / N. The magnitudes are computed from
-    them, |J| = size sqrt(1 + ratio^2) and |J_t| = size ratio, not as norms of J: a norm's
-    derivative at 0 is 0, where |J| at eps = -1 and |J_t| at mu = 0 have the one-sided derivatives
-    (1 + eps) and mu times their factors (d|J|/deps = |J_c(s*)|, d|J_t|/dmu = (1 + eps) N)."""
+    J = size (n + T / N): size = (1 + eps) N, ratio = |T| / N. A norm's derivative at 0 is 0,
+    where |J| at eps = -1 and |J_t| at mu = 0 have the one-sided derivatives (1 + eps) and mu times
+    their factors (d|J|/deps = |J_c(s*)|, d|J_t|/dmu = (1 + eps) N). So |J_t| = size ratio, and |J|
+    is the norm of J plus a term of value 0 whose derivative where size = 0 is
+    sqrt(1 + ratio^2) d(size) (``derived.results``)."""
 
     j: tuple
     sliding: jnp.ndarray
