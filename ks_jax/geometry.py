@@ -39,8 +39,9 @@ Choices where MODEL.md is silent
 - Overlap: vehicle 1's footprint clipped by vehicle 2's four half-planes (Sutherland-Hodgman,
   8 vertices at most). Its area centroid is the impulse centroid; z is the middle of the
   boxes' vertical overlap, [z - cg_height, z - cg_height + height] of each.
-- Degenerate overlap (area below ~1e3 machine epsilons of the footprint areas, e.g. when
-  penetration_time = 0 and the exchange is at the instant of touching): the centroid is the
+- Degenerate overlap (no wider than ~1e3 machine epsilons of the vehicles' size: its area below
+  that length times half its perimeter, e.g. when penetration_time = 0 and the exchange is at the
+  instant of touching): the centroid is the
   middle of the touching features (the contact manifold along the axis of least penetration),
   which is the limit of the area centroid as penetration_time -> 0. Its derivative in
   penetration_time is the growing overlap's (``_overlap_growth``: for a corner entering a side,
@@ -426,16 +427,16 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Con
     the CGs' midpoint): the tolerances grow with it, so that edges the input's own rounding
     parts are still collinear."""
     dtype = state1.position.dtype
-    c1, c2, n_sat, len_tol, area_tol, poly, count, area, centroid, manifold = _overlap(
+    c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, manifold = _overlap(
         vehicle1, state1, vehicle2, state2, coordinates)
-    solid = area > area_tol
     xy = jnp.where(solid, centroid, manifold)
 
     pts, mask = outline_crossings(c1, c2, len_tol)
     two = _first_two(pts, mask)
     chord = two[1] - two[0]
     chord_len = la.safe_norm(chord)
-    crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(area_tol))
+    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(len_tol * size))
     n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
     toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
     side = jnp.where(n_line @ toward1 != 0, n_line @ toward1, n_line @ n_sat)
@@ -449,17 +450,21 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Con
 
 def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
     """What ``contact_geometry`` builds on: both footprints, the axis of least penetration, the
-    length and area tolerances, the overlap polygon (vertices, count), its area and centroid, and
-    the middle of the touching features (``_manifold_point``)."""
+    length tolerance, whether the overlap is solid (wider than the length tolerance: its area
+    above the tolerance times half its perimeter, the inradius of a triangle; the area's rounding
+    is about the coordinates' rounding times the perimeter), the overlap polygon (vertices, count),
+    its area and centroid, and the middle of the touching features (``_manifold_point``)."""
     c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
     n_sat, _ = least_penetration_normal(c1, c2, _axes(state1.yaw, state2.yaw))
     scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
     len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
-    area_tol = len_tol * jnp.sqrt(scale2)
     poly, count = overlap_polygon(c1, c2)
     area, centroid = polygon_area_centroid(poly, count)
-    return c1, c2, n_sat, len_tol, area_tol, poly, count, area, centroid, _manifold_point(c1, c2, n_sat, len_tol)
+    idx, nxt = _next_index(count)
+    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
+    solid = area > 0.5 * len_tol * perimeter
+    return c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, _manifold_point(c1, c2, n_sat, len_tol)
 
 
 @jax.custom_jvp

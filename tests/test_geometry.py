@@ -787,3 +787,25 @@ def test_result_derivatives_in_penetration_time_at_the_touch(name, h):
     assert np.linalg.norm(fd[1:3]) > 1.0  # the centroid does move
     bad = np.abs(ad - fd) > 1e-5 * np.abs(fd) + 1e-7 * (1 + np.abs(f0))
     assert not np.any(bad), f"outputs {np.flatnonzero(bad)}: derivatives {ad[bad]} vs differences {fd[bad]}"
+
+
+def test_short_penetration_in_float32_is_the_triangle():
+    """float32, the oblique corner 0.3 and 1 ms past the touch: the overlap is a triangle 2.6 and 8.7 mm
+    deep (test_oblique_corner_impact), whose centroid is the impulse centroid as in float64. An overlap
+    counts as having no area where it is no wider than 1e3 machine epsilons of the vehicles' size (0.5 mm
+    in float32; this one is, at 0.1 ms). Before, that was where its area was below that length times the
+    vehicles' size, 2e-3 m^2 in float32, and these were put at the middle of the touching features: 2.5 cm
+    off at 1 ms, |J| 1% off."""
+    f32 = lambda tree: jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)  # noqa: E731
+    auto = jax.jit(lambda args: G.automatic_exchange(*args[:5], args[5], auto_point=True, auto_normal=True))
+    for dt in (3e-4, 1e-3):
+        v1, s1, v2, s2, c, pitch = CASES["oblique"]
+        r = auto(f32((v1, s1, v2, s2, c._replace(penetration_time=dt), pitch)))
+        assert r.contact.point.dtype == jnp.float32 and int(r.contact.status) == OK
+        delta = 10.0 * math.sin(OBL_YAW) * dt
+        apex = np.array([0.3, -0.9]) + OBL_V * dt
+        p1 = apex - delta / math.sin(OBL_YAW) * np.array([math.cos(OBL_YAW), math.sin(OBL_YAW)])
+        p2 = apex + delta / math.cos(OBL_YAW) * np.array([math.sin(OBL_YAW), -math.cos(OBL_YAW)])
+        centroid = (apex + p1 + p2) / 3.0
+        np.testing.assert_allclose(np.asarray(r.contact.point[:2], float), centroid, atol=2e-6 + 1e-3 * delta)
+        assert abs(float(r.vehicles[0].crush) - delta / 3.0) < 2e-6 + 1e-3 * delta
