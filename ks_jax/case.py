@@ -627,6 +627,36 @@ def speed_status(inputs: CaseInputs, status):
     return jnp.where((code != OK) & (status < INVALID_NONFINITE), code, status).astype(jnp.asarray(status).dtype)
 
 
+# a typical size in SI of each kind of input that can make the results overflow (angles, restitution and
+# penetration_time cannot): what "out of scale" is measured against in ``farthest_out_of_scale``
+TYPICAL_SIZE = {"mass": 1500.0, "inertia": 2000.0, "length": 4.0, "velocity": 20.0, "angular_velocity": 1.0,
+                "dimensionless": 1.0}
+
+
+def farthest_out_of_scale(inputs: CaseInputs) -> str:
+    """The input whose size is farthest from its kind's ``TYPICAL_SIZE`` (by the ratio, larger or smaller),
+    as "vehicles[0].speed = 4.4704e+199 m/s": the one to name where a row's results overflow (status
+    INVALID_OVERFLOW: the inputs are finite, the results are not). Zeros are left out."""
+    worst, text = -1.0, ""
+    for group, vi, holder in [("vehicles", i, v) for i, v in enumerate(inputs.vehicles)] + \
+            [("contact", None, inputs.contact)]:
+        for name, value in holder._asdict().items():
+            kind = INPUT_KINDS.get(name)
+            if kind not in TYPICAL_SIZE or name == "restitution":
+                continue
+            a = np.asarray(value, dtype=np.float64)
+            size = np.abs(a)
+            with np.errstate(divide="ignore"):
+                far = np.where((size > 0) & np.isfinite(size), np.abs(np.log10(size / TYPICAL_SIZE[kind])), -1.0)
+            k = np.unravel_index(int(np.argmax(far)), far.shape) if far.ndim else ()
+            if far[k] > worst:
+                where = f"vehicles[{vi}].{name}" if group == "vehicles" else f"contact.{name}"
+                unit = U.SI_UNITS[kind]
+                worst, text = float(far[k]), f"{where}{''.join(f'[{j}]' for j in k)} = {a[k]:.5g}" + \
+                    (f" {unit}" if unit else "")
+    return text
+
+
 def automatic_part(case: "Case", path) -> str | None:
     """"point" or "normal" if ``path`` names the part of the contact that automatic contact computes
     in ``case`` (not an input there: a sweep or a fit refuses to vary it), else None."""

@@ -308,7 +308,9 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
     friction-cone limit, O(tau) from it. A row whose inputs break a rule gets that rule's status
     code and NaN in every numeric result; it never affects other rows. (An overflow, INVALID_OVERFLOW,
     is found from results that are not finite: the row's status says so, its other numbers are left as
-    computed.)
+    computed, and so are its derivatives: they are NaN, and so is the gradient of any parameter the row
+    shares with others, however a loss masks the row. Leave such rows out of a batch that is
+    differentiated.)
     How the smoothing works and what ``jax.vmap`` of this function does on a CPU are written in the
     docstring of the module ``ks_jax.exchange`` (``ks_jax.exchange`` itself names this function:
     ``help(sys.modules["ks_jax.exchange"])``).

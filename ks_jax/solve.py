@@ -9,10 +9,10 @@ import jax
 import numpy as np
 
 from .case import Case, CaseInputs, as_arrays, move_scene, scene_origin, speed_status, to_pytrees
-from .case import warn_far_from_origin
+from .case import farthest_out_of_scale, warn_far_from_origin
 from .derived import mask_invalid
 from .exchange import exchange
-from .types import ExchangeResult, status_text
+from .types import INVALID_OVERFLOW, ExchangeResult, status_text
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
@@ -115,6 +115,14 @@ class Solution:
         return solution_dict(self)
 
 
+def _status(case: Case, code) -> str:
+    """The status words of a solved case; an overflow also names the input farthest out of scale."""
+    text = status_text(code)
+    if int(code) == INVALID_OVERFLOW:
+        text += f"; the input farthest out of scale: {farthest_out_of_scale(case.inputs)}"
+    return text
+
+
 def solve(cases, smoothing: float = 0.0):
     """Solve a Case (-> Solution) or a list of cases (-> list of Solution).
 
@@ -151,5 +159,5 @@ def solve(cases, smoothing: float = 0.0):
             res = res._replace(contact=res.contact._replace(point=point))
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)
-            out[i] = Solution(cases[i], row, status_text(row.contact.status))
+            out[i] = Solution(cases[i], row, _status(cases[i], row.contact.status))
     return out[0] if single else out
