@@ -33,7 +33,8 @@ that a change in the machine's load moves both sides of a ratio alike):
   reads, the delta-V one little more than the impulse), and, batch-first, the same losses built by
   ``ks_jax.sum_over_rows`` (the same forward; the gradient each chunk's value and gradient in one
   program), with the gradient through ``exchange`` / this one; the first-call (compile) times;
-- a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs);
+- a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs; the median of ``--repeats`` calls,
+  at least 3);
 - in fresh processes, after everything above: the time and peak memory of a sweep of 10^8 points
   (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
   skips it) and a 1000 x 1000 grid sharded over two forced host devices against one device
@@ -397,8 +398,9 @@ def main():
     tsw_first = time.perf_counter()
     sweep(case, over, progress=False)
     tsw_first = time.perf_counter() - tsw_first
-    r = sweep(case, over, progress=False)
-    tsw = r.seconds
+    sweeps = [sweep(case, over, progress=False) for _ in range(max(reps, 3))]  # the median of several calls
+    r, tsw = sweeps[-1], statistics.median(x.seconds for x in sweeps)
+    tsw_range = (min(x.seconds for x in sweeps), max(x.seconds for x in sweeps))
 
     pc, pc_note = pycrash_rate(3)
 
@@ -454,7 +456,8 @@ def main():
     print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
           f"float32: {first32_s:.2f} s; jit(vmap(exchange)): {first1f:.2f} s batch-first")
     print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
-          f"({r.points / tsw:.3g} points/s; first call incl. compile {tsw_first:.2f} s)")
+          f"({r.points / tsw:.3g} points/s; median of {len(sweeps)} calls, {tsw_range[0]:.2f}-{tsw_range[1]:.2f} s; "
+          f"first call incl. compile {tsw_first:.2f} s)")
     if pc is None:
         print(pc_note)
     else:
