@@ -293,15 +293,23 @@ def rotation(yaw, pitch, roll):
 
 
 def safe_norm(v):
-    """|v|, with gradient 0 (not NaN) at v = 0."""
+    """|v|, with gradient 0 (not NaN) at v = 0 (``safe_sqrt`` of v.v)."""
     sq = dot(v, v) if isinstance(v, (tuple, list)) or v.shape[-1] == 3 else jnp.sum(v * v, -1)
-    pos = sq > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
+    return safe_sqrt(sq)
 
 
 def safe_sqrt(x):
-    pos = x > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+    """sqrt(x) where x > 0, else 0, with gradient 0 (not NaN) where x <= 0.
+
+    sqrt(max(x, tiny)) - sqrt(tiny), tiny the smallest normal number (the difference is sqrt(x) to the
+    last bit for x above ~1e-276 in float64, ~3e-24 in float32): no test of x, so no stand-in. A
+    double-where (sqrt(where(x > 0, x, 1)) where x > 0) went wrong where x is 0 up to rounding: XLA
+    may compute one expression in two fused loops and round it differently in each (where the
+    compiler contracts a*b + c into one rounding in one loop only). x was then 0 in the test and not in
+    the sqrt, or the other way round, and the result sqrt(1) = 1: a single-case ``ks_jax.solve`` gave
+    the seed chapter's inline crash 1.1 N s of tangential impulse instead of 0."""
+    tiny = jnp.finfo(jnp.result_type(x, float)).tiny
+    return jnp.sqrt(jnp.maximum(x, tiny)) - math.sqrt(float(tiny))
 
 
 def safe_div(a, b, fallback=0.0):
