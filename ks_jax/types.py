@@ -198,7 +198,7 @@ class VehicleResult(NamedTuple):
     yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12 (both a stand-in
     0 and 12, which would read as frontal, where no impulse was exchanged: the contact's impulse_magnitude
     is 0; mask them, as ``case.defined_output``, sweeps and ``ks-jax solve --json`` do);
-    crush () m; ees () m/s (NaN when both crushes are 0: undefined).
+    crush () m; ees () m/s (NaN when both crushes are 0 or the energy loss is negative: undefined).
     """
 
     delta_v: Array
