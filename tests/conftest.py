@@ -7,6 +7,8 @@ Tests get everything through the ``kit`` fixture so that nothing imports conftes
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import types
 
 import jax
@@ -16,6 +18,23 @@ import jax
 os.environ["KS_JAX_CACHE"] = "off"
 
 jax.config.update("jax_enable_x64", True)
+
+# Compilation is most of the suite's run time, and the workers of one run (pytest-xdist) build many of
+# the same programs: they share one persistent compile cache, made for the run by the first process
+# that loads this file (the controller, before it starts the workers, which inherit the variable) and
+# deleted when that process ends. JAX keys each entry by the program, the compile options and its own
+# version, so a loaded program is the one a compile would give. In-process only: a subprocess that a
+# test starts (the command line, the notebooks) keeps its own settings.
+_OWN_CACHE = "KS_JAX_TEST_COMPILE_CACHE" not in os.environ
+if _OWN_CACHE:
+    os.environ["KS_JAX_TEST_COMPILE_CACHE"] = tempfile.mkdtemp(prefix="ks-jax-test-xla-")
+jax.config.update("jax_compilation_cache_dir", os.environ["KS_JAX_TEST_COMPILE_CACHE"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+def pytest_unconfigure(config):
+    if _OWN_CACHE:
+        shutil.rmtree(os.environ.pop("KS_JAX_TEST_COMPILE_CACHE"), ignore_errors=True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402

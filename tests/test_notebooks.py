@@ -1,5 +1,6 @@
 """Every notebook runs top to bottom on a fresh kernel (outputs are stripped in the repository)."""
 
+import os
 from pathlib import Path
 
 import pytest
@@ -9,8 +10,12 @@ NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.i
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs(path):
+def test_notebook_runs(path, monkeypatch):
     nbformat = pytest.importorskip("nbformat")
+    # the kernel (a subprocess) compiles into the run's shared compile cache too (tests/conftest.py):
+    # the notebooks build several of the same programs
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", os.environ["KS_JAX_TEST_COMPILE_CACHE"])
+    monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     nbclient = pytest.importorskip("nbclient")
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
