@@ -23,6 +23,10 @@ def clock(pdof):
     return jnp.where(hour == 0, 12.0, hour)
 
 
+PARALLEL = 1e3  # machine epsilons: below it, a unit direction's component counts as 0 in ``crush_depth``
+ROUNDING = 1e3  # machine epsilons of a result's scale: how far a quantity that is 0 may be rounded off it
+
+
 def crush_depth(point, direction, position, rot, vehicle):
     """Distance from ``point`` along ``direction`` (unit, global) until it leaves the
     vehicle's bounding box; 0 if the point is not inside the box (MODEL.md section 4)."""
@@ -31,7 +35,16 @@ def crush_depth(point, direction, position, rot, vehicle):
     lo = jnp.stack([vehicle.cg_to_front - vehicle.length, -0.5 * vehicle.width, -vehicle.cg_height])
     hi = jnp.stack([vehicle.cg_to_front, 0.5 * vehicle.width, vehicle.height - vehicle.cg_height])
     inside = jnp.all((p >= lo) & (p <= hi))
-    exit_dist = jnp.where(d > 0, la.safe_div(hi - p, d, jnp.inf), la.safe_div(lo - p, d, jnp.inf))
+    # A direction component within PARALLEL of 0 (a ray along that pair of faces, up to rounding) never
+    # leaves through them. A threshold far above rounding rather than a test of d != 0: a component
+    # that is 0 up to rounding (a yaw of 90 or 180 degrees) may be computed in two fused loops and
+    # rounded differently in each, and a double-where whose test saw it nonzero and whose stand-in
+    # saw it zero would give a finite wrong distance (``la.safe_sqrt`` says where that happened).
+    # The stand-in, the threshold with d's sign, gives what d itself gives at the threshold.
+    tol = PARALLEL * jnp.finfo(d.dtype).eps
+    oblique = jnp.abs(d) > tol
+    bound = jnp.where(d > 0, hi, lo)
+    exit_dist = jnp.where(oblique, (bound - p) / jnp.where(oblique, d, jnp.copysign(tol, d)), jnp.inf)
     depth = jnp.min(exit_dist)
     return jnp.where(inside & jnp.isfinite(depth), depth, 0.0)
 
@@ -39,17 +52,20 @@ def crush_depth(point, direction, position, rot, vehicle):
 CRUSH_TOLERANCE = 1e-6  # relative to the sum of the two lengths: 10 um for two 5 m cars
 
 
-def ees_pair(energy_loss, crush1, crush2, mass1, mass2, length_sum=1.0):
+def ees_pair(energy_loss, crush1, crush2, mass1, mass2, length_sum=1.0, energy_rounding=0.0):
     """Burg's EES (MODEL.md section 4): E_i = E C_i / (C_1 + C_2), EES_i = sqrt(2 E_i / m_i).
 
     NaN (undefined) when C_1 + C_2 = 0 or the energy loss is negative. "= 0" means below
     ``CRUSH_TOLERANCE * length_sum``: a centroid on a box face gives a crush of rounding size
-    (1e-16 m), which must not hand the whole energy to one vehicle."""
+    (1e-16 m), which must not hand the whole energy to one vehicle. "Negative" means below
+    -``energy_rounding`` (J): an energy loss within it of 0 (an elastic stick, eps = 1) counts as 0, so
+    that its EES is 0 however the program rounds it, not NaN in one program, 0 in another and 1e-7 m/s
+    (the square root of a rounding error) in a third."""
     total = crush1 + crush2
-    defined = (total > CRUSH_TOLERANCE * length_sum) & (energy_loss >= 0)
+    defined = (total > CRUSH_TOLERANCE * length_sum) & (energy_loss >= -energy_rounding)
 
     def one(c, m):
-        e_i = la.safe_div(energy_loss * c, total)
+        e_i = la.safe_div(jnp.where(energy_loss > energy_rounding, energy_loss, 0.0) * c, total)
         return jnp.where(defined, la.safe_sqrt(2.0 * e_i / m), jnp.nan)
 
     return one(crush1, mass1), one(crush2, mass2)
@@ -99,8 +115,10 @@ def results(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResul
         v2.velocity_after + la.cross(v2.angular_velocity_after, r2)
     )
     energy = la.plain_zero(-0.5 * la.dot(j, u + u_after))  # J = 0 (separating): 0, not -0
+    # the rounding of E: the dot product's terms are at most |J| (|u| + |u'|) / 2
+    rounding = ROUNDING * jnp.finfo(energy.dtype).eps * 0.5 * j_mag * (la.safe_norm(u) + la.safe_norm(u_after))
     ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass,
-                          body1[0].length + body2[0].length)
+                          body1[0].length + body2[0].length, jax.lax.stop_gradient(rounding))
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
     v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)
     jn = la.dot(n, j)

@@ -227,6 +227,14 @@ def _cone_scale(a, b, smoothing):
     return jnp.where(tau > 0, smooth, hard)
 
 
+def _rounding(n_c, t_norm):
+    """How far |T_c| may be rounded off mu N_c (the sticking bound) where the two are equal: ``sliding``
+    needs |T_c| above mu N_c by more. Else the flag of a contact with no tangential part, such as an
+    inline crash at mu = 0 (|T_c| = mu N_c = 0), was decided by rounding and differed between programs
+    (a case solved alone and in a batch)."""
+    return derived.ROUNDING * jnp.finfo(t_norm.dtype).eps * (jnp.abs(n_c) + t_norm)
+
+
 def impulse(K, u, n, restitution, friction, smoothing=0.0):
     """The KS impulse on vehicle 1 (MODEL.md section 3, steps 3-6).
 
@@ -247,7 +255,7 @@ def impulse(K, u, n, restitution, friction, smoothing=0.0):
     normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
     size = (1.0 + restitution) * normal
     j = size * d
-    sliding = approaching & (t_norm > a)
+    sliding = approaching & (t_norm > a + _rounding(n_c, t_norm))
     return j, sliding, approaching, size, la.safe_div(friction, m) * t_norm
 
 
@@ -272,7 +280,7 @@ def _impulse_c(K, u, n, restitution, friction, smoothing):
     normal = jnp.where(approaching, -un / jnp.where(approaching, denom, 1.0), 0.0)
     size = (1.0 + restitution) * normal
     j = tuple(size * dk for dk in d)
-    sliding = approaching & (t_norm > a)
+    sliding = approaching & (t_norm > a + _rounding(n_c, t_norm))
     return j, sliding, approaching, size, f * t_norm
 
 

@@ -169,7 +169,8 @@ class ContactResult(NamedTuple):
     impulse_tangential () N s; impulse_azimuth () deg in [0, 360); impulse_elevation () deg (both a
     stand-in 0 where no impulse was exchanged, impulse_magnitude 0: mask them, as ``case.defined_output``
     and ``ks-jax solve --json`` do);
-    sliding () bool; closing_velocity (3,) m/s, u at P before; separation_velocity (3,) m/s,
+    sliding () bool (|T_c| > mu N_c beyond rounding: a contact with no tangential part does not slide, at
+    mu = 0 too); closing_velocity (3,) m/s, u at P before; separation_velocity (3,) m/s,
     u' at P after; energy_loss () J; status () int32 code (``ks_jax.status_text`` gives the words).
     """
 
@@ -198,7 +199,8 @@ class VehicleResult(NamedTuple):
     yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12 (both a stand-in
     0 and 12, which would read as frontal, where no impulse was exchanged: the contact's impulse_magnitude
     is 0; mask them, as ``case.defined_output``, sweeps and ``ks-jax solve --json`` do);
-    crush () m; ees () m/s (NaN when both crushes are 0 or the energy loss is negative: undefined).
+    crush () m; ees () m/s (NaN when both crushes are 0 or the energy loss is negative beyond rounding:
+    undefined; an energy loss of 0 to rounding gives 0).
     """
 
     delta_v: Array

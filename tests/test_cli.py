@@ -149,6 +149,40 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
         np.testing.assert_allclose(a, b, rtol=0, atol=scale, err_msg=path)
 
 
+@pytest.mark.parametrize("name, yaws, friction, restitution, normal", [
+    ("seed_001_lucid_kia.toml", (0, 0), 0.0, 0.0, None),
+    ("seed_001_lucid_kia.toml", (90, 0), 1.0, 1.0, None),
+    ("seed_000_saturn_pontiac.json", (180, 180), 1.0, 1.0, 180),
+])
+def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_and_in_a_batch(
+        name, yaws, friction, restitution, normal):
+    """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone and
+    in a batch (two programs, rounded differently). By hand: at mu = 0 an impulse with no tangential part
+    does not slide (|T_c| = mu N_c = 0: ``sliding`` False); a sticking elastic exchange (eps = 1) loses no
+    energy (u' = -u), so both EES are 0. Before, the first slid in a batch and not alone, and the others'
+    EES were NaN (a loss of -1e-9 J) in one program and 1e-7 m/s in the other."""
+    from ks_jax.case import _read
+
+    d = _read(Path(ks_jax.__file__).parent / "cases" / name)
+    d.pop("reference", None)
+    for vehicle, yaw in zip(d["vehicles"], yaws):
+        vehicle["yaw"] = yaw
+    d["contact"].update(friction=friction, restitution=restitution)
+    if normal is not None:
+        d["contact"]["normal"] = normal
+    case = case_from_dict(d)
+    for sol in (ks_jax.solve(case), *ks_jax.solve([case, case])):
+        assert sol.status == "ok"
+        con = sol.result.contact
+        scale = float(con.impulse_magnitude) * float(np.linalg.norm(con.closing_velocity))
+        if friction == 0.0:
+            assert not bool(con.sliding)
+            assert abs(float(con.impulse_tangential)) <= 1e-12 * float(con.impulse_magnitude)
+        else:
+            assert abs(float(con.energy_loss)) <= 1e-12 * scale
+            assert [float(v.ees) for v in sol.result.vehicles] == [0.0, 0.0]
+
+
 def _leaf_paths(tree):
     return [jax.tree_util.keystr(k) for k, _ in jax.tree_util.tree_flatten_with_path(tree)[0]]
 

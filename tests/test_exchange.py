@@ -483,3 +483,29 @@ def test_create_refuses_two_ways_of_giving_one_thing():
             ks_jax.State.create([0.0, 0.0, 0.5], 0.0, **kwargs)
     with pytest.raises(ValueError, match="normal \\(a vector\\) or azimuth, not both"):
         ks_jax.Contact.create([0.0, 0.0, 0.5], normal=[1.0, 0.0, 0.0], azimuth=1.0)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("tilt", [0.0, 1e-17, -1e-17, 1e-13, -1e-13, 1e-9, 0.05])
+def test_crush_depth_by_hand_for_a_ray_nearly_along_the_sides(tilt, dtype):
+    """Crush (MODEL.md section 4) of a box turned 180 degrees (its axes are the global ones up to
+    rounding, ~1e-16 off), the point at body (0.5, 0.3, 0.2) and the direction body (1, tilt, 0): the
+    ray leaves through the front (2.0 - 0.5) / d_x, or through the side (0.9 - 0.3) / d_y if nearer
+    (tilt 0.05: 1.5 |d| < 0.6 / 0.05 |d|, the front still). A component of rounding size meets no face;
+    its derivative is finite. By hand: depth = 1.5 sqrt(1 + tilt^2) and d depth / d point = -(R e_x) / d_x."""
+    from ks_jax import linalg as la
+    from ks_jax.derived import crush_depth
+
+    vehicle = ks_jax.Vehicle(*(np.asarray(x, dtype) for x in (1500.0, [500.0, 2000.0, 2200.0], 4.5, 1.8, 1.4, 2.0, 0.5)))
+    position = np.asarray([10.0, 5.0, 0.5], dtype)
+    rot = la.rotation(np.asarray(math.pi, dtype), np.asarray(0.0, dtype), np.asarray(0.0, dtype))
+    d_body = np.array([1.0, tilt, 0.0]) / math.hypot(1.0, tilt)
+    point = position + rot @ np.asarray([0.5, 0.3, 0.2], dtype)
+    direction = rot @ np.asarray(d_body, dtype)
+
+    depth, grad = jax.value_and_grad(crush_depth)(point, direction, position, rot, vehicle)
+    want = 1.5 * math.hypot(1.0, tilt)
+    rtol = 1e-12 if dtype == np.float64 else 1e-6
+    np.testing.assert_allclose(float(depth), want, rtol=rtol)
+    np.testing.assert_allclose(np.asarray(grad, float), -np.asarray(rot, float)[:, 0] / d_body[0],
+                               rtol=0, atol=10 * rtol)
