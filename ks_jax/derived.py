@@ -23,8 +23,9 @@ def clock(pdof):
     return jnp.where(hour == 0, 12.0, hour)
 
 
-PARALLEL = 1e3  # machine epsilons: below it, a unit direction's component counts as 0 in ``crush_depth``
-ROUNDING = 1e3  # machine epsilons of a result's scale: how far a quantity that is 0 may be rounded off it
+# machine epsilons of a quantity's scale: how far a quantity that is 0 may be rounded off it (a unit
+# direction's component in ``crush_depth``, the energy loss in ``ees_pair``, |T_c| - mu N_c in ``sliding``)
+ROUNDING = 1e3
 
 
 def crush_depth(point, direction, position, rot, vehicle):
@@ -35,13 +36,13 @@ def crush_depth(point, direction, position, rot, vehicle):
     lo = jnp.stack([vehicle.cg_to_front - vehicle.length, -0.5 * vehicle.width, -vehicle.cg_height])
     hi = jnp.stack([vehicle.cg_to_front, 0.5 * vehicle.width, vehicle.height - vehicle.cg_height])
     inside = jnp.all((p >= lo) & (p <= hi))
-    # A direction component within PARALLEL of 0 (a ray along that pair of faces, up to rounding) never
+    # A direction component within ROUNDING of 0 (a ray along that pair of faces, up to rounding) never
     # leaves through them. A threshold far above rounding rather than a test of d != 0: a component
     # that is 0 up to rounding (a yaw of 90 or 180 degrees) may be computed in two fused loops and
     # rounded differently in each, and a double-where whose test saw it nonzero and whose stand-in
     # saw it zero would give a finite wrong distance (``la.safe_sqrt`` says where that happened).
     # The stand-in, the threshold with d's sign, gives what d itself gives at the threshold.
-    tol = PARALLEL * jnp.finfo(d.dtype).eps
+    tol = ROUNDING * jnp.finfo(d.dtype).eps
     oblique = jnp.abs(d) > tol
     bound = jnp.where(d > 0, hi, lo)
     exit_dist = jnp.where(oblique, (bound - p) / jnp.where(oblique, d, jnp.copysign(tol, d)), jnp.inf)
