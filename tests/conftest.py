@@ -36,6 +36,30 @@ def pytest_unconfigure(config):
     if _OWN_CACHE:
         shutil.rmtree(os.environ.pop("KS_JAX_TEST_COMPILE_CACHE"), ignore_errors=True)
 
+
+# The rest of the compile time is XLA's, and on CPU its cheaper settings (the classic CPU emitters
+# instead of the fusion emitters, LLVM optimisation level 0) take about half as long for the same IEEE
+# arithmetic: the suite ran in 370 s with them and 649 s without (2026-11-24, benchmarks/RESULTS.md). So
+# every program of the test processes is compiled with them (XLA_FLAGS, read when the backend starts,
+# inherited by the workers and by the subprocesses the tests start), except where a test needs what
+# users get: the single-case program below, the notebooks and the tests that solve a case alone and in
+# a batch (``xla_default_env``). KS_JAX_TEST_XLA_DEFAULTS=1 runs the whole suite with XLA's defaults.
+XLA_CHEAP_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0")
+XLA_DEFAULTS = {"xla_cpu_use_fusion_emitters": True, "xla_backend_optimization_level": 3}  # XLA's own
+XLA_CHEAP = os.environ.get("KS_JAX_TEST_XLA_DEFAULTS") != "1"
+if XLA_CHEAP:
+    _flags = os.environ.get("XLA_FLAGS", "").split()
+    os.environ["XLA_FLAGS"] = " ".join(_flags + [f for f in XLA_CHEAP_FLAGS if f not in _flags])
+
+
+def xla_default_env(**extra):
+    """This process's environment for a subprocess that compiles with XLA's defaults (the user's
+    own XLA_FLAGS kept), plus ``extra``."""
+    env = dict(os.environ, **extra)
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if f not in XLA_CHEAP_FLAGS]
+    env["XLA_FLAGS"] = " ".join(flags)
+    return env
+
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -160,16 +184,13 @@ def _grad(args, weights, smoothing):
 # inertia shape and dtype: batches are padded to a fixed number of rows, and ``smoothing`` is
 # a traced argument (tau = 0 takes the exact branch; test_transforms checks that it equals the
 # static ``smoothing=0.0`` path bit for bit).
-# Compilation dominates the suite's run time, so on CPU the batch and gradient programs are
-# compiled with XLA's cheaper settings (the classic CPU emitters instead of the new fusion
-# emitters, LLVM optimisation level 0): about a third of the compile time, the same IEEE
-# arithmetic. The single-case program keeps XLA's defaults (what users get), and
-# test_transforms checks it against the eager path and against the batch rows.
-_CHEAP = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
-_CHEAP = _CHEAP if jax.default_backend() == "cpu" else None
-EXCHANGE = jax.jit(_single)
-BATCH_JIT = jax.jit(_batch, compiler_options=_CHEAP)
-GRAD_JIT = jax.jit(_grad, compiler_options=_CHEAP)
+# The single-case program is compiled with XLA's defaults (what users get; ``XLA_DEFAULTS``
+# overrides the cheaper settings above), and test_transforms checks it against the eager path and
+# against the batch rows.
+_ON_CPU = jax.default_backend() == "cpu"
+EXCHANGE = jax.jit(_single, compiler_options=XLA_DEFAULTS if _ON_CPU else None)
+BATCH_JIT = jax.jit(_batch)
+GRAD_JIT = jax.jit(_grad)
 BATCH_ROWS = 160
 GRAD_ROWS = 128
 
@@ -310,7 +331,7 @@ def kit():
         batch_exchange=batch_exchange, value_and_grad=value_and_grad, output_vector=output_vector,
         outputs=OUTPUTS, output_slices=OUTPUT_SLICES, n_outputs=N_OUTPUTS, traces=TRACES,
         jitted={"single": EXCHANGE, "batch": BATCH_JIT, "grad": GRAD_JIT},
-        cheap_jit=lambda fn: jax.jit(fn, compiler_options=_CHEAP),  # for programs a test compiles once
+        xla_default_env=xla_default_env, xla_cheap=XLA_CHEAP, xla_defaults=XLA_DEFAULTS if _ON_CPU else None,
         rtol_float32=RTOL_FLOAT32,
     )
 

@@ -191,8 +191,8 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
 
     # the gradient's own batching ran in chunks: a scan over them in the reverse pass too
     assert str(jax.make_jaxpr(jax.grad(loss))(args)).count("scan[") >= 2
-    grad = kit.cheap_jit(jax.grad(loss))(args)
-    per_row = kit.cheap_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 1, 2, 3, 4))))(*args)
+    grad = jax.jit(jax.grad(loss))(args)
+    per_row = jax.jit(jax.vmap(jax.grad(row_loss, argnums=(0, 1, 2, 3, 4))))(*args)
     assert "scan[" not in str(jax.make_jaxpr(jax.vmap(jax.grad(row_loss)))(*args))
     for a, b in zip(jax.tree_util.tree_leaves(grad), jax.tree_util.tree_leaves(per_row)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
@@ -201,7 +201,7 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
     direction[:, 0] = 1.0
     h = 1e-5
 
-    @kit.cheap_jit
+    @jax.jit
     def shifted(step):
         return loss((args[0], args[1]._replace(velocity=args[1].velocity + step * direction), *args[2:]))
 
@@ -210,7 +210,7 @@ def test_vmap_of_exchange_in_chunks_differentiates(kit, random_cases, small_chun
     # forward mode of the batch (fit uses jax.jacfwd)
     tangents = jax.tree_util.tree_map(jnp.zeros_like, args)
     tangents = (tangents[0], tangents[1]._replace(velocity=jnp.asarray(direction)), *tangents[2:])
-    _, along = kit.cheap_jit(lambda a, t: jax.jvp(loss, (a,), (t,)))(args, tangents)
+    _, along = jax.jit(lambda a, t: jax.jvp(loss, (a,), (t,)))(args, tangents)
     np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
 
 
@@ -231,8 +231,8 @@ def test_gradient_in_chunks_with_a_shared_vehicle_and_bad_rows(kit, random_cases
         return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, v1, s1, s2, c))
 
     assert "scan[" in str(jax.make_jaxpr(jax.grad(loss))(shared, s1, c))
-    grads = kit.cheap_jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
-    per_row = kit.cheap_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
+    grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
+    per_row = jax.jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
         shared, v1, s1, s2, c)
     reference = (jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[0]), *per_row[1:])
     for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
@@ -286,10 +286,10 @@ def test_second_derivatives_in_chunks(kit, random_cases, small_chunks, monkeypat
 
     p = jnp.array([1.0, 0.9])
     assert "scan[" in str(jax.make_jaxpr(jax.hessian(loss))(p))
-    chunked = kit.cheap_jit(jax.hessian(loss))(p)
+    chunked = jax.jit(jax.hessian(loss))(p)
     monkeypatch.setattr(EXCHANGE_MODULE, "CHUNK_ROWS", 1 << 14)
     assert "scan[" not in str(jax.make_jaxpr(jax.hessian(loss))(p))
-    whole = kit.cheap_jit(jax.hessian(loss))(p)
+    whole = jax.jit(jax.hessian(loss))(p)
     np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-11)
     assert abs(float(whole[0, 1])) > 1.0  # the two parameters interact
 
@@ -326,12 +326,12 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64)
     target = jnp.asarray(4.0)
 
-    value, grads = kit.cheap_jit(jax.value_and_grad(loss, argnums=(1, 2, 4, 5)))(v1, s1, shared, s2, c, target)
+    value, grads = jax.jit(jax.value_and_grad(loss, argnums=(1, 2, 4, 5)))(v1, s1, shared, s2, c, target)
     assert "cond[" in str(jax.make_jaxpr(jax.grad(loss, argnums=1))(v1, s1, shared, s2, c, target))
     plain = jnp.sum(jax.vmap(_evidence_row_loss, in_axes=axes)(v1, s1, shared, s2, c, target))
     np.testing.assert_allclose(float(value), float(plain), rtol=1e-13)
-    np.testing.assert_allclose(float(kit.cheap_jit(loss)(v1, s1, shared, s2, c, target)), float(plain), rtol=1e-13)
-    per_row = kit.cheap_jit(jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes))(
+    np.testing.assert_allclose(float(jax.jit(loss)(v1, s1, shared, s2, c, target)), float(plain), rtol=1e-13)
+    per_row = jax.jit(jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes))(
         v1, s1, shared, s2, c, target)
     reference = (per_row[0], jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[1]), per_row[2],
                  np.sum(np.asarray(per_row[3])))
@@ -358,12 +358,12 @@ def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
         return jnp.sum(jax.vmap(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None))(*args))
 
     p = jnp.array([1.0, 0.9])
-    _, along = kit.cheap_jit(lambda p: jax.jvp(lambda q: scaled(q, loss), (p,), (jnp.array([1.0, 0.0]),)))(p)
+    _, along = jax.jit(lambda p: jax.jvp(lambda q: scaled(q, loss), (p,), (jnp.array([1.0, 0.0]),)))(p)
     h = 1e-6
     fd = (scaled(p + jnp.array([h, 0.0]), plain) - scaled(p - jnp.array([h, 0.0]), plain)) / (2 * h)
     np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
-    chunked = kit.cheap_jit(jax.hessian(lambda q: scaled(q, loss)))(p)
-    whole = kit.cheap_jit(jax.hessian(lambda q: scaled(q, plain)))(p)
+    chunked = jax.jit(jax.hessian(lambda q: scaled(q, loss)))(p)
+    whole = jax.jit(jax.hessian(lambda q: scaled(q, plain)))(p)
     np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-10)
     assert abs(float(whole[0, 1])) > 1.0  # the two parameters interact
 

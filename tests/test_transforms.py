@@ -5,6 +5,7 @@ with the scene (MODEL.md section 3, cross-checks; section 8)."""
 from __future__ import annotations
 
 import math
+import re
 
 import jax
 import numpy as np
@@ -94,6 +95,64 @@ def test_no_recompilation_for_new_values(kit, few_cases):
     assert kit.jitted["single"]._cache_size() == single_cache
     assert kit.jitted["batch"]._cache_size() == batch_cache
     assert single >= 1 and batch >= 1  # the counters do count
+
+
+# The seed chapter's exchange compiled in a subprocess with XLA's defaults: the optimisation level that
+# XLA's flags give, then the compiled program's text.
+_AS_USERS_GET_IT = r"""
+import sys
+import jax
+jax.config.update("jax_enable_x64", True)
+from jaxlib import xla_client
+import ks_jax
+from ks_jax.case import load_case, to_pytrees
+print(xla_client.CompileOptions().executable_build_options.debug_options.xla_backend_optimization_level)
+print(jax.jit(ks_jax.exchange).lower(*to_pytrees(load_case(sys.argv[1]).inputs)).compile().as_text())
+"""
+
+
+def _program(text):
+    """A compiled program's text without its source locations (which name the calling files)."""
+    head, rest = text.split("\n", 1)
+    if "StackFrames" in rest:
+        rest = rest[rest.index("\n\n", rest.index("StackFrames")):]
+    return (head + re.sub(r",? metadata=\{[^}]*\}", "", rest)).rstrip()
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
+def test_the_single_case_program_is_compiled_as_users_get_it(kit):
+    """The test processes compile with XLA's cheaper settings, the single-case program with
+    ``XLA_DEFAULTS`` instead (tests/conftest.py). Those are XLA's defaults: a subprocess with XLA's own
+    settings compiles the seed chapter's exchange to the same program, at the same optimisation level.
+    Unless KS_JAX_TEST_XLA_DEFAULTS=1, the cheaper settings are in effect here: the program compiled
+    with them is another, at level 0."""
+    import os
+    import subprocess
+    import sys
+
+    from jaxlib import xla_client
+
+    from ks_jax.case import load_case, to_pytrees
+
+    seed = os.path.join(os.path.dirname(ks_jax.__file__), "cases", "seed_000_saturn_pontiac.json")
+    done = subprocess.run([sys.executable, "-c", _AS_USERS_GET_IT, seed], capture_output=True, text=True,
+                          env=kit.xla_default_env(JAX_PLATFORMS="cpu"), timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    users_level, users_text = done.stdout.split("\n", 1)
+    users = _program(users_text)
+    assert "fusion" in users and "metadata" not in users
+    args = to_pytrees(load_case(seed).inputs)
+
+    def program(options):
+        return _program(jax.jit(ks_jax.exchange, compiler_options=options).lower(*args).compile().as_text())
+
+    assert program(kit.xla_defaults) == users
+    assert kit.xla_defaults["xla_backend_optimization_level"] == int(users_level)
+    level = xla_client.CompileOptions().executable_build_options.debug_options.xla_backend_optimization_level
+    if kit.xla_cheap:
+        assert program(None) != users and level == 0
+    else:
+        assert program(None) == users and level == int(users_level)
 
 
 # --------------------------------------------------------------------------- scene symmetries
