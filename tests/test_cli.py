@@ -9,7 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import jax
 import numpy as np
 import pytest
 
@@ -132,17 +131,19 @@ def test_seed_case_files_json_and_toml(capsys):
     assert res["contact"]["energy_loss"] / U.FT_LBF == pytest.approx(14624.38, rel=1e-3)
 
 
-# One case solved alone and in a batch of two, in a subprocess that compiles with XLA's defaults (what
-# users get; tests/conftest.py compiles this process's programs with cheaper settings): the leak below
-# came from how XLA fused and rounded one of the two programs. Prints, for each of the three solutions,
-# its status and its results by path.
+# One case solved alone, in a batch of two and in a sweep of two points (its own speed twice), in a
+# subprocess that compiles with XLA's defaults (what users get; tests/conftest.py compiles this process's
+# programs with cheaper settings): the leak below came from how XLA fused and rounded one of the programs.
+# Prints, for each of the four solutions, its status and its results by path (the sweep's components
+# put together into vectors).
 _ALONE_AND_IN_A_BATCH = r"""
 import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 import ks_jax
-from ks_jax.case import case_from_dict, load_case
+from ks_jax.case import case_from_dict, get_input, load_case
+from ks_jax.types import status_text
 spec = json.loads(sys.argv[1])
 case = load_case(spec["path"]) if "path" in spec else case_from_dict(spec["case"])
 out = []
@@ -150,12 +151,25 @@ for sol in (ks_jax.solve(case), *ks_jax.solve([case, case])):
     leaves = jax.tree_util.tree_flatten_with_path(sol.result)[0]
     out.append({"status": sol.status,
                 "results": {jax.tree_util.keystr(k): np.asarray(x, float).tolist() for k, x in leaves}})
+columns = {}
+for path, x in out[0]["results"].items():
+    if path == ".contact.status" or (path == ".contact.time" and not case.auto_point):
+        continue  # the sweep's status is its own; a first-contact time is automatic contact's
+    columns[path] = None if np.ndim(x) == 0 else [f"{path[1:]}[{i}]" for i in range(len(x))]
+speed = float(get_input(case.inputs, "vehicles[1].speed"))
+swept = ks_jax.sweep(case, {"vehicles[1].speed": [speed, speed]}, mode="zip",
+                     outputs=[c for p, cols in columns.items() for c in (cols or [p[1:]])])
+results = {p: float(swept[p[1:]][0]) if cols is None else [float(swept[c][0]) for c in cols]
+           for p, cols in columns.items()}
+results[".contact.status"] = float(swept["status"][0])
+out.append({"status": status_text(swept["status"][0]), "results": results})
 print(json.dumps(out))
 """
 
 
 def _alone_and_in_a_batch(kit, spec):
-    """[(status, {path: np.ndarray})] of the case alone, then of the two rows of the batch."""
+    """[(status, {path: np.ndarray})] of the case alone, of the two rows of the batch and of the sweep's first
+    point."""
     env = kit.xla_default_env(JAX_PLATFORMS="cpu", JAX_COMPILATION_CACHE_DIR=os.environ["KS_JAX_TEST_COMPILE_CACHE"],
                               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
     done = subprocess.run([sys.executable, "-c", _ALONE_AND_IN_A_BATCH, json.dumps(spec)], capture_output=True,
@@ -168,20 +182,20 @@ def _alone_and_in_a_batch(kit, spec):
 @pytest.mark.parametrize("name", sorted(p.name for p in (Path(ks_jax.__file__).parent / "cases").iterdir()
                                          if p.suffix in (".json", ".toml")))
 def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, kit):
-    """``solve`` compiles a case alone without vmap and two cases with it: two programs, which XLA fuses and
-    rounds differently. Every result agrees (to 1e-9 of its scale). A quantity that is 0 up to rounding
+    """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three stages:
+    three programs, which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A quantity that is 0 up to rounding
     (the tangential impulse of the inline seed crashes) is where a double-where's stand-in could leak:
     alone, the seed chapter's crash gave 1.1 N s of tangential impulse, in a batch 0."""
-    (status, alone), (first_status, first), (second_status, _) = _alone_and_in_a_batch(
-        kit, {"path": str(Path(ks_jax.__file__).parent / "cases" / name)})
-    assert status == first_status == second_status
+    (status, alone), *others = _alone_and_in_a_batch(kit, {"path": str(Path(ks_jax.__file__).parent / "cases" / name)})
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
-    assert sorted(alone) == sorted(first) == sorted(fields)
-    for path, a in alone.items():
-        b = first[path]
-        scale = 1e-9 * (1.0 + np.nanmax(np.abs(b)))
-        np.testing.assert_allclose(a, b, rtol=0, atol=scale, err_msg=path)
+    assert sorted(alone) == sorted(fields) and len(others) == 3
+    for (other_status, other), what in zip(others, ("batch row 0", "batch row 1", "sweep")):
+        assert other_status == status, what
+        assert sorted(other) == sorted(alone) if what != "sweep" else set(other) <= set(alone), what
+        for path, b in other.items():
+            scale = 1e-9 * (1.0 + np.nanmax(np.abs(alone[path])))
+            np.testing.assert_allclose(b, alone[path], rtol=0, atol=scale, err_msg=f"{what}: {path}")
 
 
 @pytest.mark.parametrize("name, yaws, friction, restitution, normal", [
