@@ -43,7 +43,8 @@ def pytest_unconfigure(config):
 # every program of the test processes is compiled with them (XLA_FLAGS, read when the backend starts,
 # inherited by the workers and by the subprocesses the tests start), except where a test needs what
 # users get: the single-case program below, the notebooks and the tests that solve a case alone, in
-# a batch and in a sweep (``xla_default_env``). KS_JAX_TEST_XLA_DEFAULTS=1 runs the whole suite with XLA's defaults.
+# a batch and in a sweep (``xla_default_env``). KS_JAX_TEST_XLA_DEFAULTS=1 runs the whole suite with
+# XLA's defaults.
 XLA_CHEAP_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0")
 XLA_DEFAULTS = {"xla_cpu_use_fusion_emitters": True, "xla_backend_optimization_level": 3}  # XLA's own
 XLA_CHEAP = os.environ.get("KS_JAX_TEST_XLA_DEFAULTS") != "1"

@@ -136,7 +136,7 @@ def test_seed_case_files_json_and_toml(capsys):
 # programs with cheaper settings): the leak below came from how XLA fused and rounded one of the programs.
 # Prints, for each of the four solutions, its status and its results by path (the sweep's components
 # put together into vectors).
-_ALONE_AND_IN_A_BATCH = r"""
+_ALONE_BATCHED_AND_SWEPT = r"""
 import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
@@ -167,12 +167,12 @@ print(json.dumps(out))
 """
 
 
-def _alone_and_in_a_batch(kit, spec):
+def _alone_batched_and_swept(kit, spec):
     """[(status, {path: np.ndarray})] of the case alone, of the two rows of the batch and of the sweep's first
     point."""
     env = kit.xla_default_env(JAX_PLATFORMS="cpu", JAX_COMPILATION_CACHE_DIR=os.environ["KS_JAX_TEST_COMPILE_CACHE"],
                               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
-    done = subprocess.run([sys.executable, "-c", _ALONE_AND_IN_A_BATCH, json.dumps(spec)], capture_output=True,
+    done = subprocess.run([sys.executable, "-c", _ALONE_BATCHED_AND_SWEPT, json.dumps(spec)], capture_output=True,
                           text=True, env=env, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     return [(s["status"], {k: np.asarray(v, float) for k, v in s["results"].items()})
@@ -182,11 +182,13 @@ def _alone_and_in_a_batch(kit, spec):
 @pytest.mark.parametrize("name", sorted(p.name for p in (Path(ks_jax.__file__).parent / "cases").iterdir()
                                          if p.suffix in (".json", ".toml")))
 def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, kit):
-    """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three stages:
-    three programs, which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A quantity that is 0 up to rounding
-    (the tangential impulse of the inline seed crashes) is where a double-where's stand-in could leak:
-    alone, the seed chapter's crash gave 1.1 N s of tangential impulse, in a batch 0."""
-    (status, alone), *others = _alone_and_in_a_batch(kit, {"path": str(Path(ks_jax.__file__).parent / "cases" / name)})
+    """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three
+    stages: programs which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A
+    quantity that is 0 up to rounding (the tangential impulse of the inline seed crashes) is where a
+    double-where's stand-in could leak: alone, the seed chapter's crash gave 1.1 N s of tangential impulse,
+    in a batch 0."""
+    path = Path(ks_jax.__file__).parent / "cases" / name
+    (status, alone), *others = _alone_batched_and_swept(kit, {"path": str(path)})
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
     assert sorted(alone) == sorted(fields) and len(others) == 3
@@ -203,7 +205,7 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, kit):
     ("seed_001_lucid_kia.toml", (90, 0), 1.0, 1.0, None),
     ("seed_000_saturn_pontiac.json", (180, 180), 1.0, 1.0, 180),
 ])
-def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_and_in_a_batch(
+def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched_and_swept(
         name, yaws, friction, restitution, normal, kit):
     """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone and
     in a batch (two programs, rounded differently). By hand: at mu = 0 an impulse with no tangential part
@@ -219,7 +221,7 @@ def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_and_in_
     d["contact"].update(friction=friction, restitution=restitution)
     if normal is not None:
         d["contact"]["normal"] = normal
-    for status, res in _alone_and_in_a_batch(kit, {"case": d}):
+    for status, res in _alone_batched_and_swept(kit, {"case": d}):
         assert status == "ok"
         magnitude = float(res[".contact.impulse_magnitude"])
         if friction == 0.0:
