@@ -207,8 +207,8 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, kit):
 ])
 def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched_and_swept(
         name, yaws, friction, restitution, normal, kit):
-    """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone and
-    in a batch (two programs, rounded differently). By hand: at mu = 0 an impulse with no tangential part
+    """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone, in
+    a batch and in a sweep (programs rounded differently). By hand: at mu = 0 an impulse with no tangential part
     does not slide (|T_c| = mu N_c = 0: ``sliding`` False); a sticking elastic exchange (eps = 1) loses no
     energy (u' = -u), so both EES are 0. Before, the first slid in a batch and not alone, and the others'
     EES were NaN (a loss of -1e-9 J) in one program and 1e-7 m/s in the other."""
