@@ -5,13 +5,18 @@ with the scene (MODEL.md section 3, cross-checks; section 8)."""
 from __future__ import annotations
 
 import math
+import os
 import re
+import subprocess
+import sys
 
 import jax
 import numpy as np
 import pytest
+from jaxlib import xla_client
 
 import ks_jax
+from ks_jax.case import load_case, to_pytrees
 import reference as ref
 
 RTOL_JIT = 1e-13  # jit vs eager, vmap vs single: the same arithmetic, fused differently
@@ -126,14 +131,6 @@ def test_the_single_case_program_is_compiled_as_users_get_it(kit):
     settings compiles the seed chapter's exchange to the same program, at the same optimisation level.
     Unless KS_JAX_TEST_XLA_DEFAULTS=1, the cheaper settings are in effect here: the program compiled
     with them is another, at level 0."""
-    import os
-    import subprocess
-    import sys
-
-    from jaxlib import xla_client
-
-    from ks_jax.case import load_case, to_pytrees
-
     seed = os.path.join(os.path.dirname(ks_jax.__file__), "cases", "seed_000_saturn_pontiac.json")
     done = subprocess.run([sys.executable, "-c", _AS_USERS_GET_IT, seed], capture_output=True, text=True,
                           env=kit.xla_default_env(JAX_PLATFORMS="cpu"), timeout=300)
