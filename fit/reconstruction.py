@@ -3,8 +3,8 @@
 All starts of all cases go through one compiled, doubly vmapped solver (cases x starts); the
 best start of each case is kept, and the Jacobian of the whitened residuals with respect to the
 physical unknowns is evaluated there (in the same call) for the Laplace covariance
-(``fit.uncertainty``). Monte Carlo refits perturbed evidence the same way, one vmapped batch
-(in chunks, when a progress bar is wanted).
+(``fit.uncertainty``). Monte Carlo refits perturbed evidence the same way, through the same compiled
+program: with refits, the fit and the refits go to it in calls of one row count (``ROWS_PER_CALL``).
 """
 
 from __future__ import annotations
@@ -268,16 +268,51 @@ def _stack(trees):
     return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
 
 
-def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts):
-    """Fit B cases x S starts in one call. inputs: stacked CaseInputs [B]; values, sigmas (B, m);
-    lo, hi, pm, pw (B, n); z0 (B, S, n). Returns NumPy arrays shaped (B, S, ...)."""
-    rep = lambda a: np.repeat(np.asarray(a, np.float64), starts, axis=0)  # noqa: E731
-    arr = lambda a: jnp.asarray(rep(a), dtype)  # noqa: E731
-    rows_inputs = jax.tree_util.tree_map(arr, inputs)
+# Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, at most. The fit and
+# its refits then run in calls of one row count (the last call of each padded with copies of its last row), so
+# that they share one compiled program instead of compiling one for each row count: at XLA's defaults on the
+# 2-core CPU a program took about 5 s to compile for a case with its contact given and 16-21 s with automatic
+# contact, much longer than the calls themselves (benchmarks/RESULTS_fit.md, 2026-11-25). A fit without refits
+# is one call of exactly its rows. On a CPU, calls of 500 rows fitted 8000 rows (1000 cases x 8 starts) in
+# 1.0-1.25x the time of one call, calls of 128 or 256 rows in 1.3-2.0x (benchmarks/bench_fit_blocks.py). Not
+# a power of two: 512 rows per call took 1.2-1.3x and 8192 rows 2.8-3.1x the time of 500 and 8000 rows. On
+# other devices (not measured) a call's rows run side by side and its latency counts more, hence a larger
+# block.
+ROWS_PER_CALL = {"cpu": 500}
+ROWS_PER_CALL_ELSEWHERE = 8000
+
+
+def rows_per_call(rows: int) -> int:
+    """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
+    ``ROWS_PER_CALL`` of the default backend."""
+    return min(rows, ROWS_PER_CALL.get(jax.default_backend(), ROWS_PER_CALL_ELSEWHERE))
+
+
+def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None):
+    """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw
+    (B, n); z0 (B, S, n). The B x S rows go to the solver in calls of ``block`` rows (default: one call of
+    them all), the last padded: a row's fit does not depend on the others in its call. Returns NumPy arrays
+    shaped (B, S, ...)."""
     B = np.asarray(values).shape[0]
-    out = _fit_rows(problem, solver, max_iter, rows_inputs, arr(values), arr(sigmas), arr(lo), arr(hi), arr(pm),
-                    arr(pw), jnp.asarray(np.asarray(z0).reshape(B * starts, -1), dtype), jnp.asarray(smoothing, dtype))
-    return {k: np.asarray(v).reshape(B, starts, *np.shape(v)[1:]) for k, v in out.items()}
+    rows = B * starts
+    block = block or rows
+    total = -(-rows // block) * block
+
+    def padded(a, per_case=True):  # (B, ...) per case, or (B * S, ...) per row -> (total, ...)
+        a = np.asarray(a, np.float64)
+        a = np.repeat(a, starts, axis=0) if per_case else a
+        return np.concatenate([a, np.repeat(a[-1:], total - rows, axis=0)]) if total > rows else a
+
+    args = [jax.tree_util.tree_map(padded, inputs)] + [padded(a) for a in (values, sigmas, lo, hi, pm, pw)]
+    args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
+    smoothing = jnp.asarray(smoothing, dtype)
+    parts = []
+    for start in range(0, total, block):
+        part = jax.tree_util.tree_map(lambda a: jnp.asarray(a[start:start + block], dtype), args)
+        out = _fit_rows(problem, solver, max_iter, *part, smoothing)
+        parts.append({k: np.asarray(v) for k, v in out.items()})
+    return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
+            for k in parts[0]}
 
 
 def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
@@ -527,8 +562,10 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
     stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
     inputs = _stack([a["inputs"] for a in arrays])
+    # with refits, the fit runs in calls of the refits' row count (``ROWS_PER_CALL``): one compiled program
+    block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     out = _run(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
-               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts)
+               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
         if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
@@ -542,7 +579,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
             r.monte_carlo = _monte_carlo(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
-                                         smoothing, dtype, progress, chunk)
+                                         smoothing, dtype, progress, chunk, block)
             r.notes += _linearisation_notes(r)
         results.append(r)
     return results
@@ -587,9 +624,9 @@ def _linearisation_notes(result: FitResult) -> list:
 
 
 def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
-                 chunk):
+                 chunk, block):
     """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2); the first
-    start of each refit is the estimate, the others are drawn as for the fit."""
+    start of each refit is the estimate, the others are drawn as for the fit. Calls of ``block`` rows."""
     n_mc = int(samples)
     noise = rng.standard_normal((n_mc, len(a["values"])))
     values = a["values"] + a["sigmas"] * noise
@@ -598,14 +635,14 @@ def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples
     z0[:, 0] = z_best
     size = min(chunk, n_mc) if progress else n_mc
     bar = _progress(n_mc, "monte carlo") if progress else None
-    inputs = _stack([a["inputs"]] * size)
-    const = {k: np.repeat(a[k][None], size, 0) for k in ("sigmas", "lo", "hi", "pm", "pw")}
+    const = {k: a[k][None] for k in ("sigmas", "lo", "hi", "pm", "pw")}
     xs, conv = [], []
     for s in range(0, n_mc, size):
         k = min(size, n_mc - s)
-        pad = lambda x: np.concatenate([x, np.repeat(x[-1:], size - k, 0)]) if k < size else x  # noqa: E731
-        out = _run(problem, solver, max_iter, inputs, pad(values[s:s + k]), const["sigmas"], const["lo"],
-                   const["hi"], const["pm"], const["pw"], pad(z0[s:s + k]), smoothing, dtype, starts)
+        rep = lambda x: np.repeat(x, k, 0)  # noqa: E731
+        out = _run(problem, solver, max_iter, _stack([a["inputs"]] * k), values[s:s + k], rep(const["sigmas"]),
+                   rep(const["lo"]), rep(const["hi"]), rep(const["pm"]), rep(const["pw"]), z0[s:s + k], smoothing,
+                   dtype, starts, block)
         best = [_best(out["cost"][i], out["converged"][i]) for i in range(k)]
         xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
         conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))

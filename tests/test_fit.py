@@ -156,6 +156,29 @@ def test_seed_001_monte_carlo_agrees_with_laplace():
     assert not any("Monte Carlo refits spread" in n for n in r.notes)  # they agree: no note
 
 
+def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing(monkeypatch):
+    """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
+    calls of one row count (``rows_per_call``), the last call padded, so that both use one compiled program.
+    Calls of 5 rows split cases between calls and pad the last: each result equals that of calls holding every
+    row of the fit (9, padded to 12) and of the refits (12), and the solver was compiled once for the fit and
+    its refits (twice before, one program per row count)."""
+    from fit import reconstruction as rc
+
+    case = load_case(FIT_SEED)
+    kw = dict(starts=3, seed=4, monte_carlo=4)
+    one_call = fit.reconstruct_batch([case] * 3, **kw)
+    assert rc.rows_per_call(4 * 3) == 12
+    monkeypatch.setattr(rc, "ROWS_PER_CALL", {jax.default_backend(): 5})
+    programs = rc._fit_rows._cache_size()
+    blocks = fit.reconstruct_batch([case] * 3, **kw)
+    assert rc._fit_rows._cache_size() == programs + 1
+    for a, b in zip(blocks, one_call):
+        assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std
+        np.testing.assert_array_equal(a.monte_carlo["x"], b.monte_carlo["x"])
+    assert len({r.estimate["vehicles[1].speed"] for r in blocks}) == 1  # the same case: the same estimate
+    assert blocks[0].estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
+
+
 def test_monte_carlo_cut_off_by_a_bound_is_noted():
     """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
