@@ -23,10 +23,10 @@ the others a Latin hypercube within the bounds), vmapped in one compiled call, t
 Uncertainty (``fit.uncertainty``): standard errors and correlations from the Gauss-Newton
 (Laplace) covariance (J^T W J + prior)^-1 at the optimum, in the physical units (the delta
 method through the bound transforms); optional Monte Carlo (evidence perturbed by its sigmas,
-refitted by the same compiled solver, in calls of up to 500 rows on a CPU, 5/50/95 percentiles); ``unidentified``: what the evidence does
-not determine, from the small singular values of the scaled Jacobian, in words, with
-std = inf (null in JSON) for those unknowns rather than a confident number; ``at_bound``:
-unknowns pinned at a bound.
+refitted by the same compiled solver, in calls of up to 500 rows on a CPU, 5/50/95 percentiles);
+``unidentified``: what the evidence does not determine, from the small singular values of the
+scaled Jacobian, in words, with std = inf (null in JSON) for those unknowns rather than a
+confident number; ``at_bound``: unknowns pinned at a bound.
 """
 
 from .problem import Evidence, Problem, Unknown, parse_evidence, parse_unknowns

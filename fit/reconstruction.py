@@ -635,14 +635,12 @@ def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples
     z0[:, 0] = z_best
     size = min(chunk, n_mc) if progress else n_mc
     bar = _progress(n_mc, "monte carlo") if progress else None
-    const = {k: a[k][None] for k in ("sigmas", "lo", "hi", "pm", "pw")}
     xs, conv = [], []
     for s in range(0, n_mc, size):
         k = min(size, n_mc - s)
-        rep = lambda x: np.repeat(x, k, 0)  # noqa: E731
-        out = _run(problem, solver, max_iter, _stack([a["inputs"]] * k), values[s:s + k], rep(const["sigmas"]),
-                   rep(const["lo"]), rep(const["hi"]), rep(const["pm"]), rep(const["pw"]), z0[s:s + k], smoothing,
-                   dtype, starts, block)
+        same = [np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pm", "pw")]
+        out = _run(problem, solver, max_iter, _stack([a["inputs"]] * k), values[s:s + k], *same, z0[s:s + k],
+                   smoothing, dtype, starts, block)
         best = [_best(out["cost"][i], out["converged"][i]) for i in range(k)]
         xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
         conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))
