@@ -213,8 +213,23 @@ def _show_case_warnings():
     warnings.simplefilter("always", CaseWarning)
 
 
-def _terminated(signum, frame):
+_SIGNALLED = []  # signals received by the command (``_stopped``), kept in case a library swallows the exception
+
+
+def _stopped(signum, frame):
+    """SIGINT (Ctrl-C) and SIGTERM (a kill): KeyboardInterrupt and SystemExit(128 + signum). The signal is
+    also kept, and ``raise_if_stopped`` raises again where the command checks: a library that catches the
+    exception raised inside it cannot make the command carry on as if nothing had happened."""
+    _SIGNALLED.append(signum)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise SystemExit(128 + signum)
+
+
+def raise_if_stopped():
+    """Raise again for a signal that ``_stopped`` received (nothing if none did)."""
+    if _SIGNALLED:
+        _stopped(_SIGNALLED[-1], None)
 
 
 def main(argv=None) -> int:
@@ -225,7 +240,8 @@ def main(argv=None) -> int:
     if argv is None and threading.current_thread() is threading.main_thread():
         # the command itself (not a call from Python): a kill unwinds as Ctrl-C does, so that a sweep
         # removes its unfinished file and an earlier --out stays as it was
-        signal.signal(signal.SIGTERM, _terminated)
+        signal.signal(signal.SIGTERM, _stopped)
+        signal.signal(signal.SIGINT, _stopped)
     try:
         return args.run(args)
     except (CaseError, UnitError, FileNotFoundError, IsADirectoryError) as err:

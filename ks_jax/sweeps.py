@@ -1076,6 +1076,7 @@ def write_results(result: SweepResult, out, units="si"):
 
 def run(args) -> int:
     from .case import load_cases
+    from .cli import raise_if_stopped
 
     cases = load_cases(args.file)
     if args.case is None:
@@ -1094,6 +1095,7 @@ def run(args) -> int:
     writer = ResultWriter(args.out, over, mode, shape, units=args.units)  # chunk by chunk: memory stays bounded
 
     def on_chunk(lo, hi, chunk):
+        raise_if_stopped()  # a Ctrl-C or kill that a library caught while the chunk was solved
         writer.chunk(lo, hi, chunk)
         if sample is not None:
             sample.chunk(lo, hi, chunk)
@@ -1103,6 +1105,7 @@ def run(args) -> int:
         result = sweep(case, over, outputs=args.output, mode=mode, chunk_size=args.chunk_size,
                        smoothing=args.smoothing, progress=False if args.no_progress else None,
                        output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False)
+        raise_if_stopped()
         writer.close()
     except BaseException:
         writer.abort()

@@ -748,6 +748,28 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
 
 
+def test_a_signal_that_a_library_swallowed_still_stops_the_command(monkeypatch):
+    """Ctrl-C raises KeyboardInterrupt wherever the command's main thread is, possibly inside a library that
+    catches it (``test_a_killed_sweep_leaves_the_earlier_file`` once saw a sweep finish with exit status 0
+    after its SIGINT). The command keeps the signal, and ``raise_if_stopped``, called before each chunk is
+    written and before the file is finished, raises it again: KeyboardInterrupt for SIGINT, exit status
+    128 + 15 for SIGTERM."""
+    import signal
+
+    from ks_jax import cli
+
+    monkeypatch.setattr(cli, "_SIGNALLED", [])
+    cli.raise_if_stopped()  # no signal: nothing
+    for sig, raised in ((signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, SystemExit)):
+        try:
+            cli._stopped(sig, None)  # as the handler runs, inside a library that swallows what it raises
+        except BaseException:
+            pass
+        with pytest.raises(raised) as info:
+            cli.raise_if_stopped()
+        assert raised is KeyboardInterrupt or info.value.code == 128 + 15
+
+
 def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
     """progress=None: a bar on stderr once the sweep has run PROGRESS_DELAY seconds (any size: a million
     points with automatic contact run for 5-15 s), none before; progress=False: never."""
