@@ -7,8 +7,9 @@ The two compute the impulse in two forms (``impulse_stage(for_gradients=False)``
 from __future__ import annotations
 
 import copy
-import re
 import importlib
+import re
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -273,6 +274,33 @@ def test_batched_programs_call_no_library_routines(kit, random_cases, small_chun
         assert _library_calls(stage.lower(*stage_args)) == set()
     solve = jax.jit(jax.vmap(jnp.linalg.solve)).lower(jnp.eye(3)[None].repeat(8, 0), jnp.ones((8, 3)))
     assert _library_calls(solve)
+
+
+def _instructions(fn, *args):
+    """The number of HLO instructions in XLA's compiled program of ``jax.jit(fn)``, fusions' bodies
+    included."""
+    return len(re.findall(r"^\s+\S+ = ", jax.jit(fn).lower(*args).compile().as_text(), re.M))
+
+
+def test_a_batch_of_two_rows_compiles_to_about_the_program_of_one(kit, random_cases):
+    """``jax.vmap`` adds a batch axis, not work: XLA's program for two rows has about the instructions
+    of the program for one (1.08-1.09x here, 2026-11-25). With the contact normal divided by
+    ``la.safe_norm`` (``sqrt(maximum(n.n, tiny))``) XLA copied that expression into every loop that reads
+    the normal: 7.0x the instructions of one row (58,515 against 8,389), 15 us per row against 0.4 at
+    16,384 rows (benchmarks/RESULTS.md). Batches up to CHUNK_ROWS rows run that program, and so do a
+    multi-case ``solve``, the last stage of automatic contact and the fit. Checked for the exchange and
+    for that stage."""
+    from ks_jax.solve import auto_contact, auto_exchange, auto_status
+
+    one = tuple(jax.tree_util.tree_map(lambda x: x[0], kit.inputs(random_cases["full"][:1])))
+    two = kit.inputs(random_cases["full"][:2])
+    assert _instructions(jax.vmap(ks_jax.exchange), *two) <= 1.5 * _instructions(ks_jax.exchange, *one)
+
+    inputs = ks_jax.load_case(Path(ks_jax.__file__).parent / "cases" / "auto_tbone.json").inputs
+    status = jax.jit(auto_status)(inputs)
+    row = (inputs, status, jax.jit(auto_contact, static_argnums=(2, 3))(inputs, status, True, True))
+    rows = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), row)
+    assert _instructions(jax.vmap(auto_exchange), *rows) <= 1.5 * _instructions(auto_exchange, *row)
 
 
 def test_second_derivatives_in_chunks(kit, random_cases, small_chunks, monkeypatch):
