@@ -303,6 +303,26 @@ def test_a_batch_of_two_rows_compiles_to_about_the_program_of_one(kit, random_ca
     assert _instructions(jax.vmap(auto_exchange), *rows) <= 1.5 * _instructions(auto_exchange, *row)
 
 
+def test_four_results_of_one_row_compile_to_less_than_all_of_them():
+    """A fit's residuals read a few results of ``solve_inputs``, smoothed: XLA keeps what they need of
+    the exchange, so the program is smaller than the one of every result (4,218 against 9,396
+    instructions here, 2026-11-25). The copies of the normal's length that made the batched exchange
+    7x its size (the test above) were made here without a batch: 23,917 against 9,774."""
+    from ks_jax.case import as_arrays, get_output, set_input
+    from ks_jax.solve import solve_inputs
+
+    inputs = as_arrays(ks_jax.load_case(Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json").inputs)
+    paths = ("vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude", "vehicles[0].speed_after",
+             "vehicles[1].speed_after")
+
+    def residuals(p, x):
+        x = set_input(set_input(x, "vehicles[1].speed", p[0]), "contact.friction", p[1])
+        return jnp.stack([get_output(solve_inputs(x, smoothing=1e-3), q) for q in paths])
+
+    every = _instructions(lambda x: solve_inputs(x, smoothing=1e-3), inputs)
+    assert _instructions(residuals, jnp.array([13.0, 0.5]), inputs) < every, every
+
+
 def test_second_derivatives_in_chunks(kit, random_cases, small_chunks, monkeypatch):
     """Forward over reverse (``jax.hessian``) through the chunked gradient equals the same Hessian of
     the whole-batch program (the chunks switched off)."""
