@@ -622,7 +622,7 @@ def impulse_stage(vehicle1, state1, vehicle2, state2, contact, smoothing, status
 
     # |normal| > 0 here (INVALID_NORMAL, _benign). A sum, not la.safe_norm: XLA copied the expression of
     # sqrt(max(n.n, tiny)) into every loop that reads n, and the batched exchange became 7x the
-    # instructions of one row's, 15 us per row instead of 0.4 (2026-11-25; tests/test_batch.py)
+    # instructions of one row's, 15 us per row instead of 0.4-0.5 (2026-11-25; tests/test_batch.py)
     n = contact.normal / jnp.sqrt(jnp.sum(contact.normal * contact.normal))
     p = contact.point
     trig1, trig2 = (None, None) if trig is None else trig

@@ -20,6 +20,7 @@ import ks_jax
 from ks_jax import types as t
 
 EXCHANGE_MODULE = importlib.import_module("ks_jax.exchange")  # ks_jax.exchange is the function
+CASES = Path(ks_jax.__file__).parent / "cases"
 
 
 def _leaves(result):
@@ -286,7 +287,7 @@ def test_a_batch_of_two_rows_compiles_to_about_the_program_of_one(kit, random_ca
     """``jax.vmap`` adds a batch axis, not work: XLA's program for two rows has about the instructions
     of the program for one (1.08-1.09x here, 2026-11-25). With the contact normal divided by
     ``la.safe_norm`` (``sqrt(maximum(n.n, tiny))``) XLA copied that expression into every loop that reads
-    the normal: 7.0x the instructions of one row (58,515 against 8,389), 15 us per row against 0.4 at
+    the normal: 7.0x the instructions of one row (58,515 against 8,389), 15 us per row against 0.4-0.5 at
     16,384 rows (benchmarks/RESULTS.md). Batches up to CHUNK_ROWS rows run that program, and so do a
     multi-case ``solve``, the last stage of automatic contact and the fit. Checked for the exchange and
     for that stage."""
@@ -296,7 +297,7 @@ def test_a_batch_of_two_rows_compiles_to_about_the_program_of_one(kit, random_ca
     two = kit.inputs(random_cases["full"][:2])
     assert _instructions(jax.vmap(ks_jax.exchange), *two) <= 1.5 * _instructions(ks_jax.exchange, *one)
 
-    inputs = ks_jax.load_case(Path(ks_jax.__file__).parent / "cases" / "auto_tbone.json").inputs
+    inputs = ks_jax.load_case(CASES / "auto_tbone.json").inputs
     status = jax.jit(auto_status)(inputs)
     row = (inputs, status, jax.jit(auto_contact, static_argnums=(2, 3))(inputs, status, True, True))
     rows = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), row)
@@ -311,7 +312,7 @@ def test_four_results_of_one_row_compile_to_less_than_all_of_them():
     from ks_jax.case import as_arrays, get_output, set_input
     from ks_jax.solve import solve_inputs
 
-    inputs = as_arrays(ks_jax.load_case(Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json").inputs)
+    inputs = as_arrays(ks_jax.load_case(CASES / "seed_000_saturn_pontiac.json").inputs)
     paths = ("vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude", "vehicles[0].speed_after",
              "vehicles[1].speed_after")
 
