@@ -14,7 +14,10 @@ So ``exchange`` has a vmap rule (``jax.custom_batching.custom_vmap``): over more
 rows, on a CPU, with one device, it computes the batch in a loop over chunks of CHUNK_ROWS rows,
 each in ``exchange_batch``'s three stages, each stage fenced off from the others by a conditional
 (``_fenced``) so that XLA compiles it as it would a separate jitted call. Elsewhere (a GPU, several
-devices, a short batch, a traced ``smoothing``) the rule is ``jax.vmap`` of the same function.
+devices, a short batch, a traced ``smoothing``) the rule is ``jax.vmap`` of the same function, and
+over one row it is the function of that row unbatched: XLA's program for a batch of one row was
+6.7x the size of the program for two rows or for none (55,378 instructions against 8,894 and 8,250;
+4.5 s to compile).
 Derivatives: a custom JVP, ``exchange``'s JVP, carries every derivative. Batched by ``jax.vmap``
 (a gradient or a JVP of a batched loss) it has a vmap rule of its own: the same chunks, in a
 ``lax.scan`` that reverse mode runs backwards, each chunk computed again in the reverse pass
@@ -425,7 +428,10 @@ def _in_chunks_or_whole(fn, in_chunks, n, in_batched, args):
     def whole(*args):
         return jax.vmap(fn, in_axes=axes)(*args)
 
-    if n <= CHUNK_ROWS or jax.device_count() > 1:  # several devices: leave sharding to XLA
+    if n == 1:  # one row unbatched (module docstring)
+        row = fn(*jax.tree_util.tree_map(lambda x, b: x[0] if b else x, args, tuple(in_batched)))
+        out = jax.tree_util.tree_map(lambda x: x[None], row)
+    elif n <= CHUNK_ROWS or jax.device_count() > 1:  # several devices: leave sharding to XLA
         out = whole(*args)
     else:
         chunks = functools.partial(in_chunks, n, tuple(in_batched), axes)

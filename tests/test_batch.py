@@ -283,25 +283,61 @@ def _instructions(fn, *args):
     return len(re.findall(r"^\s+\S+ = ", jax.jit(fn).lower(*args).compile().as_text(), re.M))
 
 
-def test_a_batch_of_two_rows_compiles_to_about_the_program_of_one(kit, random_cases):
-    """``jax.vmap`` adds a batch axis, not work: XLA's program for two rows has about the instructions
-    of the program for one (1.08-1.09x here, 2026-11-25). With the contact normal divided by
-    ``la.safe_norm`` (``sqrt(maximum(n.n, tiny))``) XLA copied that expression into every loop that reads
-    the normal: 7.0x the instructions of one row (58,515 against 8,389), 15 us per row against 0.4-0.5 at
-    16,384 rows (benchmarks/RESULTS.md). Batches up to CHUNK_ROWS rows run that program, and so do a
-    multi-case ``solve``, the last stage of automatic contact and the fit. Checked for the exchange and
-    for that stage."""
+def test_a_batch_compiles_to_about_the_program_of_one_row(kit, random_cases):
+    """``jax.vmap`` adds a batch axis, not work: XLA's program for one or two rows has about the
+    instructions of the program of one unbatched row (1.03x and 1.08x here, 2026-11-25). With the
+    contact normal divided by ``la.safe_norm`` (``sqrt(maximum(n.n, tiny))``) XLA copied that expression
+    into every loop that reads the normal: 7.0x the instructions of one row (58,515 against 8,389), 15 us
+    per row against 0.4-0.5 at 16,384 rows (benchmarks/RESULTS.md). Batches up to CHUNK_ROWS rows run
+    that program, and so do a multi-case ``solve``, the last stage of automatic contact and the fit.
+    Checked for the exchange and for that stage. A batch of one row, now computed unbatched, was 6.7x
+    the size of one row as well."""
     from ks_jax.solve import auto_contact, auto_exchange, auto_status
 
     one = tuple(jax.tree_util.tree_map(lambda x: x[0], kit.inputs(random_cases["full"][:1])))
-    two = kit.inputs(random_cases["full"][:2])
-    assert _instructions(jax.vmap(ks_jax.exchange), *two) <= 1.5 * _instructions(ks_jax.exchange, *one)
+    unbatched = _instructions(ks_jax.exchange, *one)
+    for rows in (1, 2):  # one row batched by vmap was 55,378 against 8,250
+        assert _instructions(jax.vmap(ks_jax.exchange), *kit.inputs(random_cases["full"][:rows])) <= 1.5 * unbatched
 
     inputs = ks_jax.load_case(CASES / "auto_tbone.json").inputs
     status = jax.jit(auto_status)(inputs)
     row = (inputs, status, jax.jit(auto_contact, static_argnums=(2, 3))(inputs, status, True, True))
     rows = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), row)
     assert _instructions(jax.vmap(auto_exchange), *rows) <= 1.5 * _instructions(auto_exchange, *row)
+
+
+def test_a_batch_of_one_row_is_the_row(kit, random_cases):
+    """``jax.vmap(exchange)`` over one row computes the row unbatched (the test above): its values,
+    and its gradient and JVP with one vehicle shared (unbatched), are those of ``exchange`` of the row,
+    for a valid row and for one with invalid inputs."""
+    good = random_cases["full"][5]
+    bad = copy.deepcopy(good)
+    bad["vehicles"][0]["mass"] = 0.0
+    for case in (good, bad):
+        v1, s1, v2, s2, c = kit.inputs([case])
+        shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+        row = tuple(jax.tree_util.tree_map(lambda x: x[0], (v1, s1, v2, s2, c)))
+        batched = jax.jit(jax.vmap(ks_jax.exchange))(v1, s1, v2, s2, c)
+        _assert_same(batched, jax.tree_util.tree_map(lambda x: np.asarray(x)[None], kit.exchange(*row)))
+
+        def row_loss(v2, s1, c, v1=row[0], s2=row[3]):
+            r = ks_jax.exchange(v1, s1, v2, s2, c)
+            return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
+                             + 1e-4 * r.contact.energy_loss, 0.0)
+
+        def loss(v2, s1, c):
+            return jnp.sum(jax.vmap(lambda s1, c: row_loss(v2, s1, c))(s1, c))
+
+        grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
+        reference = jax.jit(jax.grad(row_loss, argnums=(0, 1, 2)))(shared, row[1], row[4])
+        for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
+            np.testing.assert_allclose(np.asarray(a), np.reshape(np.asarray(b), a.shape), rtol=1e-12, atol=1e-15)
+        assert any(np.any(np.asarray(x) != 0) for x in jax.tree_util.tree_leaves(grads)) == (case is good)
+        ones = jax.tree_util.tree_map(jnp.ones_like, s1)
+        along = jax.jit(lambda t: jax.jvp(lambda s: loss(shared, s, c), (s1,), (t,))[1])(ones)
+        row_along = jax.jvp(lambda s: row_loss(shared, s, row[4]), (row[1],),
+                            (jax.tree_util.tree_map(lambda x: x[0], ones),))[1]
+        np.testing.assert_allclose(float(along), float(row_along), rtol=1e-12, atol=1e-15)
 
 
 def test_four_results_of_one_row_compile_to_less_than_all_of_them():
