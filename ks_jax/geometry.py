@@ -603,12 +603,15 @@ def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, stat
     Pure and unbatched; works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
 
     It is ``exchange_at_contact(automatic_stage(input_status(...)))``. A batched caller on CPU
-    may run the three as separate jitted calls (``ks_jax.sweep`` does): in one program XLA's
-    fusion re-derives the status from every input inside each loop that reads a stand-in input
-    (a sweep where no vehicle turns took 3x the time per point; benchmarks/RESULTS.md).
+    may run the three as separate jitted calls (``ks_jax.sweep`` and ``ks_jax.solve`` do): in one
+    program XLA's fusion re-derives the status from every input inside each loop that reads a
+    stand-in input (a sweep where no vehicle turns took 3x the time per point; benchmarks/RESULTS.md).
+    Here the status is stored once (``linalg.materialize``), which keeps the one program (that of a
+    fit's residuals) about the size of the three: 16,170 instructions for two rows against 16,565 for
+    the three, and 43,057 without it (tests/test_batch.py).
     """
     args = (vehicle1, state1, vehicle2, state2, contact)
-    status = input_status(*args)
+    status, = la.materialize(input_status(*args))  # an int32: its bits are stored as they are
     auto = automatic_stage(*args, normal_pitch, status, auto_point=auto_point, auto_normal=auto_normal)
     return exchange_at_contact(*args, status, auto, smoothing)
 

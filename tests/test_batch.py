@@ -306,6 +306,26 @@ def test_a_batch_compiles_to_about_the_program_of_one_row(kit, random_cases):
     assert _instructions(jax.vmap(auto_exchange), *rows) <= 1.5 * _instructions(auto_exchange, *row)
 
 
+def test_automatic_contact_in_one_program_compiles_to_about_its_three_stages():
+    """``solve_inputs`` with automatic contact in one program (a fit's residuals are) has about the
+    instructions of its three stages compiled apart (``_solve_batch``): 16,170 against 16,565 for two
+    rows here (2026-11-25). Unless the status is stored once, XLA computes it again from every input in
+    each loop that reads a stand-in input: 43,057 (2.6x); the fit's program of ``auto_tbone.json``, speed
+    and friction unknown, went from 37,272 instructions to 24,865 and its compile from 11.6-14.2 s to
+    9.0-10.5 s."""
+    from ks_jax.case import as_arrays
+    from ks_jax.solve import auto_contact, auto_exchange, auto_status, solve_inputs
+
+    inputs = as_arrays(ks_jax.load_case(CASES / "auto_tbone.json").inputs)
+    rows = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), inputs)
+    status = jax.vmap(auto_status)(rows)
+    contact = jax.vmap(lambda x, s: auto_contact(x, s, True, True))(rows, status)
+    stages = (_instructions(jax.vmap(auto_status), rows)
+              + _instructions(jax.vmap(lambda x, s: auto_contact(x, s, True, True)), rows, status)
+              + _instructions(jax.vmap(auto_exchange), rows, status, contact))
+    assert _instructions(jax.vmap(lambda x: solve_inputs(x, True, True)), rows) <= 1.2 * stages
+
+
 def test_a_batch_of_one_row_is_the_row(kit, random_cases):
     """``jax.vmap(exchange)`` over one row computes the row unbatched (the test above): its values,
     and its gradient and JVP with one vehicle shared (unbatched), are those of ``exchange`` of the row,
