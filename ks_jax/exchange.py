@@ -498,6 +498,16 @@ def _fenced(pred, fn, *operands):
     return jax.lax.cond(pred, fn, skipped, *operands)
 
 
+def fence(fn, *operands):
+    """``fn(*operands)``, on a CPU fenced off (``_fenced``) from what reads its outputs, where no loop
+    index is at hand: the predicate is True passed through ``lax.optimization_barrier``, which XLA does
+    not see through. Elsewhere (a GPU) it is ``fn(*operands)``: no conditional, no predicate to read."""
+    def fenced(*operands):
+        return _fenced(jax.lax.optimization_barrier(jnp.bool_(True)), fn, *operands)
+
+    return jax.lax.platform_dependent(*operands, cpu=fenced, default=fn)
+
+
 def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):
     """``_float_jvp`` of ``_exchange`` over n rows: a ``lax.scan`` over chunks of CHUNK_ROWS rows,
     each in the three stages of ``exchange_with_status`` (``prepare``, ``impulse_stage``,

@@ -86,7 +86,7 @@ import jax.numpy as jnp
 
 from . import derived
 from . import linalg as la
-from .exchange import _benign, exchange, input_status
+from .exchange import _benign, exchange, fence, input_status
 from .derived import mask_invalid
 from .types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
 
@@ -606,12 +606,11 @@ def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, stat
     may run the three as separate jitted calls (``ks_jax.sweep`` and ``ks_jax.solve`` do): in one
     program XLA's fusion re-derives the status from every input inside each loop that reads a
     stand-in input (a sweep where no vehicle turns took 3x the time per point; benchmarks/RESULTS.md).
-    Here the status is stored once (``linalg.materialize``), which keeps the one program (that of a
-    fit's residuals) about the size of the three: 16,170 instructions for two rows against 16,565 for
-    the three, and 43,057 without it (tests/test_batch.py).
+    Here the status is computed in a conditional of its own (``exchange.fence``), which keeps the
+    one program (that of a fit's residuals) about the size of the three (tests/test_batch.py).
     """
     args = (vehicle1, state1, vehicle2, state2, contact)
-    status, = la.materialize(input_status(*args))  # an int32: its bits are stored as they are
+    status = fence(input_status, *args)
     auto = automatic_stage(*args, normal_pitch, status, auto_point=auto_point, auto_normal=auto_normal)
     return exchange_at_contact(*args, status, auto, smoothing)
 

@@ -122,8 +122,8 @@ def adjugate3(m):
 
 
 def materialize(*xs):
-    """``xs`` (arrays of one shape and a float or integer dtype of 2, 4 or 8 bytes) unchanged,
-    computed in a loop of their own and stored, batched under vmap on CPU.
+    """``xs`` (arrays of one shape and float dtype) unchanged, computed in a loop of their own
+    and stored, batched under vmap on CPU.
 
     XLA's CPU fusion copies an elementwise producer into every loop that reads it: the six
     sines/cosines of a rotation (``sincos``, about 40 operations per angle) would be evaluated

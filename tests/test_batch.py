@@ -308,22 +308,24 @@ def test_a_batch_compiles_to_about_the_program_of_one_row(kit, random_cases):
 
 def test_automatic_contact_in_one_program_compiles_to_about_its_three_stages():
     """``solve_inputs`` with automatic contact in one program (a fit's residuals are) has about the
-    instructions of its three stages compiled apart (``_solve_batch``): 16,170 against 16,565 for two
-    rows here (2026-11-25). Unless the status is stored once, XLA computes it again from every input in
-    each loop that reads a stand-in input: 43,057 (2.6x); the fit's program of ``auto_tbone.json``, speed
-    and friction unknown, went from 37,272 instructions to 24,865 and its compile from 11.6-14.2 s to
-    9.0-10.5 s."""
+    instructions of its three stages compiled apart (``_solve_batch``), batched or not: 16,366 against
+    16,565 for two rows, 14,962 against 15,019 for one unbatched here (2026-11-25). Unless the status
+    is fenced off, XLA computes it again from every input in each loop that reads a stand-in input:
+    43,057 and 40,105 instructions (stored by ``linalg.materialize`` instead: 16,170 and 40,105)."""
     from ks_jax.case import as_arrays
     from ks_jax.solve import auto_contact, auto_exchange, auto_status, solve_inputs
 
+    def contact_(x, s):
+        return auto_contact(x, s, True, True)
+
     inputs = as_arrays(ks_jax.load_case(CASES / "auto_tbone.json").inputs)
-    rows = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), inputs)
-    status = jax.vmap(auto_status)(rows)
-    contact = jax.vmap(lambda x, s: auto_contact(x, s, True, True))(rows, status)
-    stages = (_instructions(jax.vmap(auto_status), rows)
-              + _instructions(jax.vmap(lambda x, s: auto_contact(x, s, True, True)), rows, status)
-              + _instructions(jax.vmap(auto_exchange), rows, status, contact))
-    assert _instructions(jax.vmap(lambda x: solve_inputs(x, True, True)), rows) <= 1.2 * stages
+    for batch in (lambda f: f, jax.vmap):
+        rows = inputs if batch is not jax.vmap else jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), inputs)
+        status = batch(auto_status)(rows)
+        contact = batch(contact_)(rows, status)
+        stages = (_instructions(batch(auto_status), rows) + _instructions(batch(contact_), rows, status)
+                  + _instructions(batch(auto_exchange), rows, status, contact))
+        assert _instructions(batch(lambda x: solve_inputs(x, True, True)), rows) <= 1.2 * stages
 
 
 def test_a_batch_of_one_row_is_the_row(kit, random_cases):
