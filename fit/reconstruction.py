@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ks_jax.case import Case, CaseError
+from ks_jax.quick import quick_jit
 from ks_jax.types import OK, status_text
 
 from .problem import (
@@ -41,7 +42,7 @@ PERCENTILES = (5, 50, 95)
 Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
 
 
-@partial(jax.jit, static_argnames=("problem", "solver", "max_iter"))
+@partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
 def _fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
               z0, smoothing):
     """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
@@ -282,6 +283,19 @@ ROWS_PER_CALL = {"cpu": 500}
 ROWS_PER_CALL_ELSEWHERE = 8000
 
 
+# On a CPU, calls of at most this many rows compile with XLA's quicker settings (``ks_jax.quick``): their compile
+# is most of their time. ``ks-jax fit fit_seed_001.json`` took 5.3-6.4 s against 7.0-8.5 s, with 500 refits
+# 6.1-6.8 s against 7.8-8.8 s; 1000 cases x 8 starts in one call of 8000 rows ran 1.37x slower once compiled
+# (9.2 against 6.7 s), so larger calls keep XLA's defaults (benchmarks/RESULTS.md, 2026-11-26).
+QUICK_ROWS = 500
+
+
+def _solver_for(block: int):
+    """The compiled solver for calls of ``block`` rows: quick to compile up to ``QUICK_ROWS`` rows on a CPU."""
+    quick = jax.default_backend() == "cpu" and block <= QUICK_ROWS
+    return _fit_rows.quick if quick else _fit_rows.plain
+
+
 def rows_per_call(rows: int) -> int:
     """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
     ``ROWS_PER_CALL`` of the default backend."""
@@ -306,10 +320,10 @@ def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, 
     args = [jax.tree_util.tree_map(padded, inputs)] + [padded(a) for a in (values, sigmas, lo, hi, pm, pw)]
     args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
     smoothing = jnp.asarray(smoothing, dtype)
-    parts = []
+    parts, fit_rows = [], _solver_for(block)
     for start in range(0, total, block):
         part = jax.tree_util.tree_map(lambda a: jnp.asarray(a[start:start + block], dtype), args)
-        out = _fit_rows(problem, solver, max_iter, *part, smoothing)
+        out = fit_rows(problem, solver, max_iter, *part, smoothing)
         parts.append({k: np.asarray(v) for k, v in out.items()})
     return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
             for k in parts[0]}
@@ -389,7 +403,7 @@ def _stick_threshold(problem, arrays, x, smoothing, dtype) -> float:
 
 
 STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
-_predict = jax.jit(predict, static_argnums=0)
+_predict = quick_jit(predict, static_argnums=0)  # one row (``ks_jax.quick``)
 
 
 def _friction_bounded_below(info, j, least, prior=None, sliding=None):

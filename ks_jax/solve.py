@@ -12,6 +12,7 @@ from .case import Case, CaseInputs, as_arrays, move_scene, scene_origin, speed_s
 from .case import farthest_out_of_scale, warn_far_from_origin
 from .derived import mask_invalid
 from .exchange import exchange
+from .quick import quick_jit
 from .types import INVALID_OVERFLOW, ExchangeResult, status_text
 
 
@@ -56,7 +57,8 @@ def _rows(fn, *args):
     return jax.vmap(fn)(*args)
 
 
-@partial(jax.jit, static_argnames=("smoothing",))
+# a file's few cases: compile time is most of the time (``ks_jax.quick``)
+@partial(quick_jit, static_argnames=("smoothing",))
 def _solve_explicit(inputs, smoothing):
     return _rows(lambda x: solve_inputs(x, False, False, smoothing), inputs)
 
@@ -85,10 +87,10 @@ def auto_exchange(inputs: CaseInputs, status, auto, smoothing=0.0) -> ExchangeRe
     return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
 
 
-_auto_status = jax.jit(lambda inputs: _rows(auto_status, inputs))
-_auto_contact = jax.jit(lambda inputs, status, auto_point, auto_normal: _rows(
+_auto_status = quick_jit(lambda inputs: _rows(auto_status, inputs))
+_auto_contact = quick_jit(lambda inputs, status, auto_point, auto_normal: _rows(
     lambda x, st: auto_contact(x, st, auto_point, auto_normal), inputs, status), static_argnums=(2, 3))
-_auto_exchange = jax.jit(lambda inputs, status, auto, smoothing: _rows(
+_auto_exchange = quick_jit(lambda inputs, status, auto, smoothing: _rows(
     lambda x, st, a: auto_exchange(x, st, a, smoothing), inputs, status, auto), static_argnums=(3,))
 
 

@@ -132,8 +132,9 @@ def test_seed_case_files_json_and_toml(capsys):
 
 
 # One case solved alone, in a batch of two and in a sweep of two points (its own speed twice), in a
-# subprocess that compiles with XLA's defaults (what users get; tests/conftest.py compiles this process's
-# programs with cheaper settings): the leak below came from how XLA fused and rounded one of the programs.
+# subprocess without the tests' XLA flags, as users run it (tests/conftest.py compiles this process's programs
+# with cheaper settings): ``solve``'s programs then compile with ``ks_jax.quick``'s settings and the sweep's
+# with XLA's defaults. The leak below came from how XLA fused and rounded one of the programs.
 # Prints, for each of the four solutions, its status and its results by path (the sweep's components
 # put together into vectors).
 _ALONE_BATCHED_AND_SWEPT = r"""

@@ -169,9 +169,9 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     one_call = fit.reconstruct_batch([case] * 3, **kw)
     assert rc.rows_per_call(4 * 3) == 12
     monkeypatch.setattr(rc, "ROWS_PER_CALL", {jax.default_backend(): 5})
-    programs = rc._fit_rows._cache_size()
+    programs = rc._solver_for(5)._cache_size()
     blocks = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc._fit_rows._cache_size() == programs + 1
+    assert rc._solver_for(5)._cache_size() == programs + 1
     for a, b in zip(blocks, one_call):
         assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std
         np.testing.assert_array_equal(a.monte_carlo["x"], b.monte_carlo["x"])

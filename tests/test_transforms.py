@@ -4,6 +4,7 @@ with the scene (MODEL.md section 3, cross-checks; section 8)."""
 
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import re
@@ -150,6 +151,66 @@ def test_the_single_case_program_is_compiled_as_users_get_it(kit):
         assert program(None) != users and level == 0
     else:
         assert program(None) == users and level == int(users_level)
+
+
+
+# the same operations compiled at LLVM level 0 with XLA's classic emitters and at XLA's defaults: rounding apart
+# (absolute in SI for results that are rounding around 0, as the yaw rates of the seed chapter's inline crash)
+RTOL_QUICK, ATOL_QUICK = 1e-12, 1e-12
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
+@pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json"])
+def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit, name):
+    """``ks_jax.solve``'s programs (a file's few cases) are compiled with ``ks_jax.quick.QUICK_CPU``, not
+    with XLA's defaults (another program), and give the values of the programs compiled at XLA's defaults:
+    the seed chapter (explicit contact) and its staging with automatic contact, solved as a file of two
+    cases (the case and the same one with the bullet car 3 mph faster), every result of every stage."""
+    from ks_jax.quick import QUICK_CPU
+
+    sv = importlib.import_module("ks_jax.solve")  # the module (ks_jax.solve is the function)
+    case = load_case(os.path.join(os.path.dirname(ks_jax.__file__), "cases", name))
+    faster = ks_jax.set_input(case.inputs, "vehicles[1].speed", ks_jax.get_input(case.inputs, "vehicles[1].speed")
+                              + 3 * ks_jax.units.MPH)
+    inputs = ks_jax.case.as_arrays(jax.tree_util.tree_map(lambda *x: np.stack(x), case.inputs, faster))
+    auto = (case.auto_point, case.auto_normal)
+
+    def solve_with(options):  # ``solve._solve_batch``, each of its programs compiled with ``options``
+        def jitted(name):
+            fn = getattr(sv, name)
+            return jax.jit(fn.__wrapped__, compiler_options=options, **fn.jit_kwargs)
+
+        if not any(auto):
+            explicit = jitted("_solve_explicit")
+            return explicit(inputs, 0.0), [(explicit, (inputs, 0.0))]
+        status_fn, contact_fn, exchange_fn = (jitted(n) for n in ("_auto_status", "_auto_contact", "_auto_exchange"))
+        status = status_fn(inputs)
+        contact = contact_fn(inputs, status, *auto)
+        calls = [(status_fn, (inputs,)), (contact_fn, (inputs, status, *auto)),
+                 (exchange_fn, (inputs, status, contact, 0.0))]
+        return exchange_fn(inputs, status, contact, 0.0), calls
+
+    quick, quick_calls = solve_with(QUICK_CPU)
+    defaults, default_calls = solve_with(kit.xla_defaults)
+    names = ("_auto_status", "_auto_contact", "_auto_exchange") if any(auto) else ("_solve_explicit",)
+    plain = [getattr(sv, n).plain._cache_size() for n in names]
+    used = sv._solve_batch(inputs, 0.0, *auto)  # what ks_jax.solve runs: the quick programs, not the plain ones
+    assert [getattr(sv, n).plain._cache_size() for n in names] == plain
+    assert all(getattr(sv, n).quick._cache_size() >= 1 for n in names)
+    assert_trees_close(used, quick, 0.0, "solve.")
+    named = jax.tree_util.tree_flatten_with_path(_as_np(quick))[0]
+    for (path, x), y in zip(named, jax.tree_util.tree_leaves(_as_np(defaults))):
+        name = jax.tree_util.keystr(path)
+        if x.dtype == bool or np.issubdtype(x.dtype, np.integer):
+            np.testing.assert_array_equal(x, y, err_msg=name)
+        elif any(f in name for f in ANGLE_FIELDS):  # degrees, on the circle
+            np.testing.assert_allclose((x - y + 180.0) % 360.0 - 180.0, 0.0, atol=RTOL_QUICK * 360.0, err_msg=name)
+        else:
+            np.testing.assert_allclose(x, y, rtol=RTOL_QUICK, atol=ATOL_QUICK, equal_nan=True, err_msg=name)
+    assert np.all(np.asarray(quick.contact.status) == 0)
+    # another program (the exchange's at least; a stage as short as the status check may compile alike)
+    assert any(_program(fn_q.lower(*args).compile().as_text()) != _program(fn_d.lower(*args).compile().as_text())
+               for (fn_q, args), (fn_d, _) in zip(quick_calls, default_calls))
 
 
 # --------------------------------------------------------------------------- scene symmetries
