@@ -1,14 +1,17 @@
 """``quick_jit``: ``jax.jit`` for programs whose compile time is most of their time.
 
-``ks_jax.solve`` solves the few cases of a file, and ``fit.reconstruct`` fits a few hundred rows per call:
-once compiled they run in milliseconds, and compiling them at XLA's defaults took seconds. On a CPU these
+``ks_jax.solve`` solves the few cases of a file, ``fit.reconstruct`` fits a few hundred rows per call, and
+a sweep of a few thousand points is one short chunk: once compiled they run in milliseconds, and compiling
+them at XLA's defaults took seconds. On a CPU these
 programs are compiled with ``QUICK_CPU``: LLVM's optimisation level 0 and XLA's classic CPU emitters (the
 settings the test suite compiles everything with). The results agree with the default-compiled programs'
 to rounding (tests/test_transforms.py holds them to 1e-12). From an empty cache, ``ks-jax solve`` of the
 seed chapter took 3.2-4.2 s against 5.8 s at XLA's defaults, ``ks-jax fit`` of ``fit_seed_001.json``
-5.3-6.4 s against 7.0-8.5 s (benchmarks/RESULTS.md, 2026-11-26). The batched kernels
-(``jax.vmap(exchange)``, ``exchange_batch``, ``sweep``) and fits of more rows per call keep XLA's defaults:
-there the run time counts. Elsewhere than a CPU (a GPU) every program keeps XLA's defaults.
+5.3-6.4 s against 7.0-8.5 s, ``ks-jax sweep`` of a 41 x 7 grid 3.1-3.3 s against 5.6-6.2 s
+(benchmarks/RESULTS.md, 2026-11-26). The batched kernels (``jax.vmap(exchange)``, ``exchange_batch``), sweeps
+of more than ``sweeps.QUICK_POINTS`` points and fits of more than ``fit.reconstruction.QUICK_ROWS`` rows per
+call keep XLA's defaults: there the run time counts (a sweep's programs compiled quick ran 3-10x slower).
+Elsewhere than a CPU (a GPU) every program keeps XLA's defaults.
 """
 
 from __future__ import annotations

@@ -74,6 +74,7 @@ from .case import UNDEFINED_REASONS, Case, CaseError, _input_leaf, as_arrays, ch
 from .case import automatic_part, canonical_path, input_ties, input_kind, move_scene, origin_offset, output_kind
 from .case import scene_origin, set_input, speed_status, to_pytrees, undefined_kind, warn_far_from_origin, xy_index
 from .exchange import CHUNK_ROWS
+from .quick import QUICK_CPU
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
 DEFAULT_OUTPUTS = (
@@ -89,6 +90,11 @@ DEFAULT_OUTPUTS = (
 )
 # rows per device and chunk, as in exchange's vmap rule: cache-resident (1.4-2x faster than 1 << 16 here)
 DEFAULT_CHUNK = CHUNK_ROWS
+# A sweep of at most this many points compiles its programs with XLA's quicker CPU settings (``ks_jax.quick``):
+# a 41 x 7 grid of the seed chapter from the command line took 3.3 s against 5.0 s, of the automatic T-bone 5.1 s
+# against 10.1 s. Compiled that way the programs run slower (3.5 against 0.35 us per point for explicit contact,
+# 19-22 against 7.3 for automatic), so a larger sweep keeps XLA's defaults (benchmarks/RESULTS.md, 2026-11-26).
+QUICK_POINTS = DEFAULT_CHUNK
 PROGRESS_DELAY = 2.0  # s: with progress=None a sweep that runs longer than this shows a bar
 
 
@@ -270,8 +276,10 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 
 @lru_cache(maxsize=32)
-def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices):
-    """(status_fn, impulse_fn, solve_fn): jitted, sharded over ``devices`` along the row axis.
+def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal, smoothing, out_dtype, devices,
+              quick=False):
+    """(status_fn, impulse_fn, solve_fn): jitted, sharded over ``devices`` along the row axis; ``quick``:
+    compiled with ``ks_jax.quick.QUICK_CPU`` (``QUICK_POINTS``).
 
     Three calls per chunk for an explicit contact: the status and angle sines/cosines
     (``exchange.prepare``), the impulse (``exchange.impulse_stage``), then the results
@@ -332,10 +340,13 @@ def _compiled(paths, ties, outputs, mode, sizes, n_rows, auto_point, auto_normal
 
         return jax.vmap(one, in_axes=(0, None if stage is None else 0) + (0,) * len(vals))(status, stage, *vals)
 
+    options = QUICK_CPU if quick else None
     status_jit = jax.jit(status_fn, in_shardings=(replicated, replicated, replicated, replicated),
-                         out_shardings=rows)
-    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, rows, rows), out_shardings=rows)
-    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, rows, rows, rows), out_shardings=rows)
+                         out_shardings=rows, compiler_options=options)
+    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, rows, rows), out_shardings=rows,
+                          compiler_options=options)
+    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, rows, rows, rows), out_shardings=rows,
+                        compiler_options=options)
     return status_jit, impulse_jit, solve_jit
 
 
@@ -525,9 +536,10 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     base = as_arrays(inputs)
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
+    quick = n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices)
     status_jit, impulse_jit, solve_jit = _compiled(paths, input_ties(case, paths), outputs, mode, sizes, n_rows,
                                                    case.auto_point, case.auto_normal, float(smoothing), out_dtype,
-                                                   devices)
+                                                   devices, quick)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")

@@ -133,8 +133,9 @@ def test_seed_case_files_json_and_toml(capsys):
 
 # One case solved alone, in a batch of two and in a sweep of two points (its own speed twice), in a
 # subprocess without the tests' XLA flags, as users run it (tests/conftest.py compiles this process's programs
-# with cheaper settings): ``solve``'s programs then compile with ``ks_jax.quick``'s settings and the sweep's
-# with XLA's defaults. The leak below came from how XLA fused and rounded one of the programs.
+# with cheaper settings): ``solve``'s programs then compile with ``ks_jax.quick``'s settings, and the sweep's
+# (two points, quick too) are made to compile with XLA's defaults (``QUICK_POINTS`` 0), as a large sweep's
+# are. The leak below came from how XLA fused and rounded one of the programs.
 # Prints, for each of the four solutions, its status and its results by path (the sweep's components
 # put together into vectors).
 _ALONE_BATCHED_AND_SWEPT = r"""
@@ -158,6 +159,7 @@ for path, x in out[0]["results"].items():
         continue  # the sweep's status is its own; a first-contact time is automatic contact's
     columns[path] = None if np.ndim(x) == 0 else [f"{path[1:]}[{i}]" for i in range(len(x))]
 speed = float(get_input(case.inputs, "vehicles[1].speed"))
+ks_jax.sweeps.QUICK_POINTS = 0  # compiled at XLA's defaults
 swept = ks_jax.sweep(case, {"vehicles[1].speed": [speed, speed]}, mode="zip",
                      outputs=[c for p, cols in columns.items() for c in (cols or [p[1:]])])
 results = {p: float(swept[p[1:]][0]) if cols is None else [float(swept[c][0]) for c in cols]

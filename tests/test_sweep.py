@@ -121,6 +121,41 @@ def test_chunk_boundaries_do_not_change_results(case):
             np.testing.assert_array_equal(part[p], whole[p], err_msg=f"{p}, chunk {chunk}")
 
 
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
+def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, monkeypatch, kit):
+    """A sweep of at most ``QUICK_POINTS`` points compiles with ``ks_jax.quick.QUICK_CPU``, a larger one with
+    XLA's defaults; the small sweep's values, every output of an 18-point grid over speed, yaw and friction
+    (sliding and sticking), are those of the same sweep compiled at XLA's defaults, to rounding."""
+    sweeps = sys.modules["ks_jax.sweeps"]
+    seen = []
+    compiled = sweeps._compiled
+
+    def spy(*args):
+        seen.append(args[-1])
+        return compiled(*args)
+
+    monkeypatch.setattr(sweeps, "_compiled", spy)
+    over = {"vehicles[1].speed": np.linspace(3.0, 15.0, 3), "vehicles[1].yaw": np.radians([0.0, 25.0]),
+            "contact.friction": np.array([0.0, 0.3, 2.0])}
+    outputs = [p for p in OUTPUTS if not p.startswith("contact.sliding")] + ["contact.sliding", "vehicles[1].ees"]
+    quick = sweep(case, over, outputs=outputs)
+    monkeypatch.setattr(sweeps, "QUICK_POINTS", 17)
+    sweep(case, over, outputs=outputs)
+    assert seen == [True, False]
+    monkeypatch.setattr(sweeps, "QUICK_CPU", kit.xla_defaults)  # "quick" programs compiled at XLA's defaults
+    monkeypatch.setattr(sweeps, "QUICK_POINTS", 18)
+    compiled.cache_clear()
+    defaults = sweep(case, over, outputs=outputs)
+    assert seen[-1] is True and compiled.cache_info().misses == 1 and set(quick.status_counts) == {"ok"}
+    assert quick["contact.sliding"].any() and not quick["contact.sliding"].all()
+    for p in outputs + ["status"]:
+        if quick[p].dtype.kind in "bi":
+            np.testing.assert_array_equal(quick[p], defaults[p], err_msg=p)
+        else:
+            np.testing.assert_allclose(quick[p], defaults[p], rtol=RTOL, atol=RTOL, err_msg=p)
+
+
 def test_automatic_contact_case_matches_single_solves():
     """A case with automatic contact goes through the geometry in its sweep (three calls: status, contact,
     exchange): the same values as solving a point alone, across chunk boundaries."""
