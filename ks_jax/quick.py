@@ -2,9 +2,8 @@
 
 ``ks_jax.solve`` solves the few cases of a file, ``fit.reconstruct`` fits a few hundred rows per call, and
 a sweep of a few thousand points is one short chunk: once compiled they run in milliseconds, and compiling
-them at XLA's defaults took seconds. On a CPU these
-programs are compiled with ``QUICK_CPU``: LLVM's optimisation level 0 and XLA's classic CPU emitters (the
-settings the test suite compiles everything with). The results agree with the default-compiled programs'
+them at XLA's defaults took seconds. On a CPU these programs are compiled with ``QUICK_CPU``: LLVM's
+optimisation level 0 and XLA's classic CPU emitters (the settings the test suite compiles everything with). The results agree with the default-compiled programs'
 to rounding (tests/test_transforms.py holds them to 1e-12). From an empty cache, ``ks-jax solve`` of the
 seed chapter took 3.2-4.2 s against 5.8 s at XLA's defaults, ``ks-jax fit`` of ``fit_seed_001.json``
 5.3-6.4 s against 7.0-8.5 s, ``ks-jax sweep`` of a 41 x 7 grid 3.1-3.3 s against 5.6-6.2 s

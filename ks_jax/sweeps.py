@@ -91,8 +91,8 @@ DEFAULT_OUTPUTS = (
 # rows per device and chunk, as in exchange's vmap rule: cache-resident (1.4-2x faster than 1 << 16 here)
 DEFAULT_CHUNK = CHUNK_ROWS
 # A sweep of at most this many points compiles its programs with XLA's quicker CPU settings (``ks_jax.quick``):
-# a 41 x 7 grid of the seed chapter from the command line took 3.3 s against 5.0 s, of the automatic T-bone 5.1 s
-# against 10.1 s. Compiled that way the programs run slower (3.5 against 0.35 us per point for explicit contact,
+# a 41 x 7 grid of the seed chapter from the command line took 3.1-3.3 s against 5.6-6.2 s, of the automatic
+# T-bone 5.4-5.7 s against 10.2 s. Compiled that way the programs run slower (3.5 against 0.35 us per point for explicit contact,
 # 19-22 against 7.3 for automatic), so a larger sweep keeps XLA's defaults (benchmarks/RESULTS.md, 2026-11-26).
 QUICK_POINTS = DEFAULT_CHUNK
 PROGRESS_DELAY = 2.0  # s: with progress=None a sweep that runs longer than this shows a bar
