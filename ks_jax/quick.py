@@ -9,7 +9,7 @@ seed chapter took 3.2-4.2 s against 5.8 s at XLA's defaults, ``ks-jax fit`` of `
 5.3-6.4 s against 7.0-8.5 s, ``ks-jax sweep`` of a 41 x 7 grid 3.1-3.3 s against 5.6-6.2 s
 (benchmarks/RESULTS.md, 2026-11-26). The batched kernels (``jax.vmap(exchange)``, ``exchange_batch``), sweeps
 of more than ``sweeps.QUICK_POINTS`` points and fits of more than ``fit.reconstruction.QUICK_ROWS`` rows per
-call keep XLA's defaults: there the run time counts (a sweep's programs compiled quick ran 3-10x slower).
+call keep XLA's defaults: there the run time counts (a sweep's programs compiled quick ran 2.6-10x slower).
 Elsewhere than a CPU (a GPU) every program keeps XLA's defaults.
 """
 
