@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from .exchange import CHUNK_ROWS, _fenced, as_chunks, exchange, prepare, results_stage, values_impulse_stage
+from .exchange import CHUNK_ROWS, _fenced, as_chunks, exchange, platform_dependent, prepare, results_stage, values_impulse_stage
 from .types import Contact, ExchangeResult, State, Vehicle
 
 DEFAULT_CHUNK = CHUNK_ROWS  # rows per chunk, as in ``sweep`` and ``exchange``'s vmap rule
@@ -245,4 +245,4 @@ def _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk):
         g_shared = [jnp.sum(g, axis=0) for g in g_shared]
         return jnp.sum(values), _merge(d_batched, g_rows, g_shared)
 
-    return jax.lax.platform_dependent(diff, fixed, cpu=chunked, default=whole)
+    return platform_dependent(diff, fixed, cpu=chunked, default=whole)

@@ -435,7 +435,7 @@ def _in_chunks_or_whole(fn, in_chunks, n, in_batched, args):
         out = whole(*args)
     else:
         chunks = functools.partial(in_chunks, n, tuple(in_batched), axes)
-        out = jax.lax.platform_dependent(*args, cpu=chunks, default=whole)
+        out = platform_dependent(*args, cpu=chunks, default=whole)
     return out, jax.tree_util.tree_map(lambda _: True, out)
 
 
@@ -470,9 +470,17 @@ def _in_chunks(smoothing, n, in_batched, axes, *args):
         return jax.tree_util.tree_map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, start, 0),
                                       out, result)
 
-    shapes = jax.eval_shape(chunk, 0)[1]
-    out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+    row = jax.tree_util.tree_map(lambda x, b: jax.ShapeDtypeStruct(x.shape[1:] if b else x.shape, x.dtype), args, in_batched)
+    shapes = _row_shapes(smoothing, tuple(row))
+    out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape, s.dtype), shapes)
     return jax.lax.fori_loop(0, -(-n // size), step, out)
+
+
+@functools.lru_cache(maxsize=64)
+def _row_shapes(smoothing, row):
+    """The shapes and dtypes of ``_exchange``'s results for one row of the given shapes and dtypes:
+    those of a chunk's rows, known without tracing the chunk's three stages once more."""
+    return jax.eval_shape(functools.partial(_exchange, smoothing=smoothing), *row)
 
 
 def _vmapped(axes, fn, *extra):
@@ -489,13 +497,21 @@ def _fenced(pred, fn, *operands):
     outputs of a separate jitted call are. Without the fences, one program fuses the stages
     together: with the outputs of each stage stored by ``linalg.materialize`` instead, the chunked
     loop took 1.3-1.8x the time per row (benchmarks/RESULTS.md). The other branch returns
-    zeros and never runs."""
-    shapes = jax.eval_shape(fn, *operands)
+    zeros and never runs. It takes the shapes of the zeros from ``fn``'s outputs as ``lax.cond``
+    traced them (it traces the true branch first), so that ``fn`` is traced once, not twice."""
+    traced = []
 
-    def skipped(*_):
+    def taken(*operands):
+        out = fn(*operands)
+        traced.append(jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(jnp.shape(x), jnp.result_type(x)), out))
+        return out
+
+    def skipped(*operands):
+        # a JAX that traced the false branch first: ``fn`` traced here too
+        shapes = traced[-1] if traced else jax.eval_shape(fn, *operands)
         return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
 
-    return jax.lax.cond(pred, fn, skipped, *operands)
+    return jax.lax.cond(pred, taken, skipped, *operands)
 
 
 def fence(fn, *operands):
@@ -505,7 +521,19 @@ def fence(fn, *operands):
     def fenced(*operands):
         return _fenced(jax.lax.optimization_barrier(jnp.bool_(True)), fn, *operands)
 
-    return jax.lax.platform_dependent(*operands, cpu=fenced, default=fn)
+    return platform_dependent(*operands, cpu=fenced, default=fn)
+
+
+def platform_dependent(*args, cpu, default):
+    """``jax.lax.platform_dependent(*args, cpu=cpu, default=default)``, which traces both branches,
+    except where JAX's default backend is a CPU: there only ``cpu`` is traced. Both branches compute
+    the same values (the CPU one in a form that is faster on a CPU), so a program lowered for another
+    platform than the default still computes them. Tracing the other branch too took most of the
+    trace time of a batched gradient: nested, as in ``sum_over_rows`` of ``jax.vmap(exchange)``, the
+    branches multiply (benchmarks/RESULTS.md)."""
+    if jax.default_backend() == "cpu":
+        return cpu(*args)
+    return jax.lax.platform_dependent(*args, cpu=cpu, default=default)
 
 
 def _jvp_in_chunks(smoothing, n, in_batched, axes, primals, tangents):

@@ -277,6 +277,51 @@ def test_batched_programs_call_no_library_routines(kit, random_cases, small_chun
     assert _library_calls(solve)
 
 
+def test_a_chunked_batch_traces_each_stage_once(kit, random_cases, small_chunks, monkeypatch):
+    """Tracing (JAX, in Python) was most of the first call of a chunked gradient: on a CPU each stage of
+    the exchange is traced once per program that runs it, not also in the branch that
+    ``lax.platform_dependent`` keeps for other platforms, nor again for the shapes of a conditional's
+    skipped branch or of the loop's outputs. Counted (no compile): the stages traced for
+    ``jax.jit(jax.vmap(exchange))`` and its gradient, and a row's loss traced for the gradient of a loss
+    built by ``sum_over_rows``. The code before traced the impulse and results stages 4 times each for
+    the batch and for its gradient, and for ``sum_over_rows`` the row's loss 3 times and the stages 8
+    (benchmarks/RESULTS.md)."""
+    if jax.default_backend() != "cpu":
+        pytest.skip("counts the CPU path's traces")
+    counts = {}
+
+    def counted(name, fn):
+        def traced(*a, **k):
+            counts[name] = counts.get(name, 0) + 1
+            return fn(*a, **k)
+        return traced
+
+    for name in ("prepare", "impulse_stage", "results_stage"):
+        monkeypatch.setattr(EXCHANGE_MODULE, name, counted(name, getattr(EXCHANGE_MODULE, name)))
+    EXCHANGE_MODULE._row_shapes.cache_clear()
+    args = kit.inputs(random_cases["full"][:150])  # three chunks of 64 rows
+
+    def row(*a):
+        counts["row"] = counts.get("row", 0) + 1
+        r = ks_jax.exchange(*a)
+        return jnp.where(r.contact.status == 0, r.vehicles[0].delta_v_magnitude, 0.0)
+
+    def loss(args):
+        return jnp.sum(jax.vmap(row)(*args))
+
+    # the function as written (custom_vmap's jaxpr of one row), the shapes of a row's results, the loop
+    jax.jit(jax.vmap(ks_jax.exchange)).trace(*args)
+    assert counts == {"impulse_stage": 3, "results_stage": 3, "prepare": 1}
+    counts.clear()
+    traced = jax.jit(jax.grad(loss)).trace(args)  # the same, and the JVP's loop over chunks
+    assert "scan[" in str(traced.jaxpr)
+    assert counts["row"] == 1 and counts["impulse_stage"] <= 3 and counts["results_stage"] <= 3
+    counts.clear()
+    summed = ks_jax.sum_over_rows(row, chunk=64)
+    jax.jit(jax.grad(lambda a: summed(*a))).trace(args)
+    assert counts["row"] == 1 and counts["impulse_stage"] <= 2 and counts["results_stage"] <= 2
+
+
 def _instructions(fn, *args):
     """The number of HLO instructions in XLA's compiled program of ``jax.jit(fn)``, fusions' bodies
     included."""
