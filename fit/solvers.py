@@ -87,7 +87,11 @@ def levenberg_marquardt(fun, z0, data, max_iter: int = 100, z_min=None, z_max=No
     lin = _linearise(fun)
     z_min = jnp.full(n, -jnp.inf, dtype) if z_min is None else z_min
     z_max = jnp.full(n, jnp.inf, dtype) if z_max is None else z_max
-    J0, (r0, aux0) = jax.eval_shape(lin, z0, data)
+    # the shapes of one row's residuals and aux, traced without the Jacobian and the batch (the loop
+    # body traces ``lin`` itself): J is (R, m, n), every leaf has a leading R
+    r1, aux1 = jax.eval_shape(fun, z0[0], jax.tree_util.tree_map(lambda x: x[0], data))
+    J0 = jax.ShapeDtypeStruct((R,) + r1.shape + (n,), r1.dtype)
+    r0, aux0 = jax.tree_util.tree_map(lambda s: jax.ShapeDtypeStruct((R,) + s.shape, s.dtype), (r1, aux1))
     zeros = lambda s: jnp.zeros(s.shape, s.dtype)  # noqa: E731
 
     def cond(s):
