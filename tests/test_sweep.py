@@ -122,6 +122,41 @@ def test_chunk_boundaries_do_not_change_results(case):
 
 
 
+def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkeypatch):
+    """The programs do not depend on the axes' sizes, and a short sweep's one chunk is rounded up to a power
+    of two: after a 5 x 3 grid, a 7 x 2 grid and a zip of 11 samples over the same paths compile nothing
+    (the jitted programs' caches keep their sizes), and the 7 x 2 grid's values are those of the same grid
+    in chunks of 3 points (other programs) and of single solves."""
+    sweeps = sys.modules["ks_jax.sweeps"]
+    programs = []
+    compiled = sweeps._compiled
+
+    def spy(*args):
+        programs.append(compiled(*args))
+        return programs[-1]
+
+    monkeypatch.setattr(sweeps, "_compiled", spy)
+    paths = ("vehicles[1].speed", "contact.restitution")
+    sweep(case, {paths[0]: np.linspace(4.0, 12.0, 5), paths[1]: np.array([0.0, 0.1, 0.2])}, outputs=OUTPUTS)
+    sizes = [f._cache_size() for f in programs[-1]]
+    over = {paths[0]: np.linspace(3.0, 15.0, 7), paths[1]: np.array([0.05, 0.4])}
+    grid = sweep(case, over, outputs=OUTPUTS)
+    assert programs[-1] is programs[0] and [f._cache_size() for f in programs[-1]] == sizes
+    samples = sweep(case, {paths[0]: np.linspace(3.0, 15.0, 11), paths[1]: np.linspace(0.0, 0.5, 11)},
+                    outputs=OUTPUTS, mode="zip")
+    assert samples.shape == (11,) and set(samples.status_counts) == {"ok"}
+    assert [f._cache_size() for f in programs[0]] == sizes  # zip: other programs, but the grid's stayed
+    small = sweep(case, over, outputs=OUTPUTS, chunk_size=3)
+    for p in OUTPUTS + ["status"]:
+        np.testing.assert_array_equal(grid[p], small[p], err_msg=p)
+    for i, j in ((0, 0), (6, 1), (3, 0)):
+        point = {paths[0]: over[paths[0]][i], paths[1]: over[paths[1]][j]}
+        for p in OUTPUTS:
+            value, status = single(case, point, p)
+            np.testing.assert_allclose(grid[p][i, j], value, rtol=RTOL, atol=RTOL, err_msg=p)
+            assert grid["status"][i, j] == status
+
+
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
 def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, monkeypatch, kit):
     """A sweep of at most ``QUICK_POINTS`` points compiles with ``ks_jax.quick.QUICK_CPU``, a larger one with
