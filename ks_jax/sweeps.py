@@ -297,7 +297,7 @@ def _compiled(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto
     """(status_fn, impulse_fn, solve_fn): jitted, sharded over ``devices`` along the row axis; ``quick``:
     compiled with ``ks_jax.quick.QUICK_CPU`` (``QUICK_POINTS``); ``static_sizes``: the axes' sizes compiled in
     (a sweep of several chunks: dividing by a constant is cheaper), or None: read from the ``sizes`` argument
-    (one chunk: a sweep of another size in the same ``_bucket`` runs the same programs).
+    (a whole sweep in one chunk: a sweep of another size in the same ``_bucket`` runs the same programs).
 
     Three calls per chunk for an explicit contact: the status and angle sines/cosines
     (``exchange.prepare``), the impulse (``exchange.impulse_stage``), then the results
@@ -556,14 +556,17 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     dtype = jnp.result_type(float)
     out_dtype = np.dtype(output_dtype or dtype)
     quick = n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices)
-    static_sizes = None if n_points <= n_rows else sizes
+    # a whole sweep in one chunk: its axes padded and its sizes an argument, for any size in the same buckets;
+    # a larger one (or a range of one) keeps its exact axes (a zip of 10^8 samples is not padded) and sizes
+    one_chunk = total <= n_rows
+    static_sizes = None if one_chunk else sizes
     status_jit, impulse_jit, solve_jit = _compiled(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes,
                                                    case.auto_point, case.auto_normal, float(smoothing), out_dtype,
                                                    devices, quick)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
-    dev_axes = tuple(_padded(a, dtype) for a in swept.values())
+    dev_axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
     dev_sizes = jnp.asarray(sizes, dtype=index_dtype)
     total_arr = jnp.asarray(total, dtype=index_dtype)
 
