@@ -126,12 +126,15 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
     """The programs do not depend on the axes' sizes, and a short sweep's one chunk is rounded up to a power
     of two: after a 5 x 3 grid, a 7 x 2 grid and a zip of 11 samples over the same paths compile nothing
     (the jitted programs' caches keep their sizes), and the 7 x 2 grid's values are those of the same grid
-    in chunks of 3 points (other programs) and of single solves."""
+    in chunks of 3 points (other programs) and of single solves. A range of a larger sweep is not padded."""
     sweeps = sys.modules["ks_jax.sweeps"]
     programs = []
     compiled = sweeps._compiled
 
+    calls = []
+
     def spy(*args):
+        calls.append(args)
         programs.append(compiled(*args))
         return programs[-1]
 
@@ -149,6 +152,11 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
     small = sweep(case, over, outputs=OUTPUTS, chunk_size=3)
     for p in OUTPUTS + ["status"]:
         np.testing.assert_array_equal(grid[p], small[p], err_msg=p)
+    # a range of a larger sweep keeps its exact axes (a zip's are as long as the sweep) and sizes
+    many = {paths[0]: np.linspace(3.0, 15.0, 40000), paths[1]: np.linspace(0.0, 0.5, 40000)}
+    part = sweep(case, many, outputs=OUTPUTS, mode="zip", index_range=(39990, 40000))
+    assert part.shape == (10,) and set(part.status_counts) == {"ok"}
+    assert calls[-1][5] == (40000, 40000)  # static_sizes
     for i, j in ((0, 0), (6, 1), (3, 0)):
         point = {paths[0]: over[paths[0]][i], paths[1]: over[paths[1]][j]}
         for p in OUTPUTS:
