@@ -21,6 +21,7 @@ from pathlib import Path
 
 import jax
 
+from . import units
 from .case import CaseError
 from .units import UnitError
 
@@ -153,7 +154,8 @@ _CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime)")  # the 
 def _compilation_cache():
     """Keep compiled programs between runs (the first run of a command compiles for seconds;
     later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it. The cache is
-    trimmed to CACHE_LIMIT here (``prune_cache``): each grid shape of a sweep is a program of its own."""
+    trimmed to CACHE_LIMIT here (``prune_cache``): each grid shape of a sweep is a program of its own.
+    Its folder ``units`` keeps pint's unit definitions, parsed (``units.REGISTRY_CACHE``)."""
     where = os.environ.get("KS_JAX_CACHE", "")
     if where.lower() in ("off", "0", "no"):
         return
@@ -163,6 +165,7 @@ def _compilation_cache():
         prune_cache(path, CACHE_LIMIT)
     except OSError:
         return
+    units.REGISTRY_CACHE = path / "units"
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 

@@ -87,6 +87,13 @@ class UnitError(ValueError):
     """A quantity string that cannot be read, or has the wrong dimension."""
 
 
+# A folder where pint keeps its unit definitions, parsed, between runs (pint's ``cache_folder``), or None:
+# parse them in every process. The command line sets it (``ks_jax.cli``) before the first unit string is read:
+# pint's registry took 0.28-0.30 s to build from its definitions file, 0.035 s from the folder
+# (benchmarks/RESULTS.md).
+REGISTRY_CACHE = None
+
+
 @lru_cache(maxsize=1)
 def _registry():
     try:
@@ -95,8 +102,12 @@ def _registry():
         raise UnitError(
             "unit strings need pint: pip install 'ks-jax[units]' (or give bare SI numbers)"
         ) from err
-    ureg = pint.UnitRegistry()
-    return ureg
+    if REGISTRY_CACHE is not None:
+        try:
+            return pint.UnitRegistry(cache_folder=str(REGISTRY_CACHE))
+        except Exception:  # noqa: BLE001 - a folder that cannot be read or written: parse the definitions
+            pass
+    return pint.UnitRegistry()
 
 
 _NUMBER = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"

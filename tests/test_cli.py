@@ -106,6 +106,28 @@ def test_unit_strings_read_one_number_and_its_unit():
         U.parse_quantity("30 deg", "dimensionless")
 
 
+def test_unit_definitions_kept_in_a_folder_read_the_same(tmp_path, monkeypatch):
+    """With ``units.REGISTRY_CACHE`` (the command line sets it) pint keeps its parsed unit definitions in that
+    folder and reads them back in the next process; quantities read that way equal the exact definitions, and
+    a folder that cannot be made (under a file) is passed over: the definitions are parsed as without one."""
+    lbf, ft = 0.45359237 * 9.80665, 0.3048
+    texts = [("21 mph", "velocity", 21 * 1609.344 / 3600), ("2300 lbf*ft*s^2", "inertia", 2300 * lbf * ft),
+             ("155.75 slug", "mass", 155.75 * lbf / ft), ("14117.71 ft-lbf", "energy", 14117.71 * ft * lbf),
+             ("60 rpm", "angular_velocity", 2 * math.pi), ("12 in", "length", 12 * 0.0254)]
+    (tmp_path / "a_file").write_text("not a folder")
+    folder = tmp_path / "units"
+    try:
+        for where in (folder, folder, tmp_path / "a_file" / "units"):  # written, read back, unusable
+            monkeypatch.setattr(U, "REGISTRY_CACHE", where)
+            U._registry.cache_clear()
+            for text, kind, want in texts:
+                assert U.parse_quantity(text, kind) == pytest.approx(want, rel=1e-12), (where, text)
+            if where == folder:
+                assert any(folder.iterdir())
+    finally:
+        U._registry.cache_clear()
+
+
 def test_seed_case_files_json_and_toml(capsys):
     # the manual's panel for chapter 000 and the hand calculation of chapter 001, through the CLI
     from importlib import resources
@@ -519,7 +541,8 @@ sys.exit(code)
 
 def test_compile_cache_is_used_and_kept_apart(tmp_path):
     """KS_JAX_CACHE=DIR: the first run stores its compiled programs there and a second run loads
-    them (JAX's own cache-hit events) and gives the same report; nothing outside DIR is written,
+    them (JAX's own cache-hit events) and gives the same report; so with pint's parsed unit definitions
+    (the folder ``units``, written once); nothing outside DIR is written,
     and KS_JAX_CACHE=off stores and loads nothing."""
     case = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
     cache, off_home = tmp_path / "cache", tmp_path / "home"
@@ -535,11 +558,14 @@ def test_compile_cache_is_used_and_kept_apart(tmp_path):
     written = counts["written"]
     assert counts["loaded"] == 0 and written > 0
     entries = [p.name for p in cache.iterdir()]
-    assert entries and all(_CACHE_ENTRY.fullmatch(name) for name in entries)
+    assert "units" in entries and any((cache / "units").iterdir())  # pint's definitions, parsed
+    assert all(_CACHE_ENTRY.fullmatch(name) for name in entries if name != "units") and len(entries) > 1
+    kept = {p.name: p.stat().st_mtime_ns for p in (cache / "units").iterdir()}
     again, counts = run(cache)
     assert again == first
     assert counts == {"loaded": written, "written": 0}  # every program it stored, loaded
     assert sorted(p.name for p in cache.iterdir()) == sorted(entries)
+    assert {p.name: p.stat().st_mtime_ns for p in (cache / "units").iterdir()} == kept  # read, not written again
     off, counts = run("off")
     assert off == first
     assert counts == {"loaded": 0, "written": 0}
