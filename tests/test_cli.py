@@ -9,12 +9,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import ks_jax
 from ks_jax import units as U
-from ks_jax.case import CaseError, CaseWarning, case_from_dict, load_case
+from ks_jax.case import CaseError, CaseWarning, at_rest_after, case_from_dict, defined_output, load_case
 from ks_jax.cli import _CACHE_ENTRY, main, prune_cache
 
 # A case written in US units; its SI twin below is written by hand from the exact unit definitions.
@@ -297,6 +299,31 @@ def test_text_report_has_both_unit_systems(tmp_path, capsys):
     assert code == 0
     for word in ("impulse", "lbf s", "N s", "ft lbf", "mph", "PDOF", "EES", "crush", "sliding"):
         assert word in out
+
+
+def test_undefined_outputs_are_masked_alike_on_numpy_and_on_jax_results():
+    """``defined_output`` and ``at_rest_after`` compute with NumPy on a solved case's NumPy results (a report
+    compiles no XLA program for them) and with jax.numpy on JAX arrays (a sweep's traced rows): the same
+    numbers and NaN in the same places, for a case that exchanges an impulse and for one at rest (no
+    approach: the impulse's directions and both courses after are undefined)."""
+    still = copy.deepcopy(US_CASE)
+    still["vehicles"][1].update(speed="0 mph", yaw_rate=0)
+    undefined = []
+    for d in (US_CASE, still):
+        result = ks_jax.solve(case_from_dict(d)).result
+        as_jax = jax.tree_util.tree_map(jnp.asarray, result)
+        paths = [f"contact.{name}" for name in result.contact._fields] + [
+            f"vehicles[{k}].{name}" for k in (0, 1) for name in result.vehicles[k]._fields]
+        for path in paths:
+            got, ref = defined_output(result, path), defined_output(as_jax, path)
+            assert isinstance(got, (np.ndarray, np.generic)) and isinstance(ref, jax.Array), path
+            np.testing.assert_array_equal(got, np.asarray(ref), err_msg=path)
+        for k in (0, 1):
+            assert isinstance(at_rest_after(result.vehicles[k]), (np.ndarray, np.generic))
+            assert bool(at_rest_after(result.vehicles[k])) == bool(at_rest_after(as_jax.vehicles[k]))
+        undefined.append({p for p in paths if np.isnan(np.asarray(defined_output(result, p), float)).any()})
+    assert not undefined[0]
+    assert {"vehicles[0].pdof", "vehicles[1].course_after", "contact.impulse_azimuth"} <= undefined[1]
 
 
 def test_demo_prints_both_seed_chapters(capsys):
