@@ -21,7 +21,7 @@ from pathlib import Path
 
 import jax
 
-from . import units
+from . import stored, units
 from .case import CaseError
 from .units import UnitError
 
@@ -148,14 +148,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 # when a command starts, its compile cache is trimmed to this many bytes (least recently used programs first)
 CACHE_LIMIT = 512 * 2**20
-_CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime)")  # the files JAX writes there
+_CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime|export)")  # JAX's files and ks_jax.stored's
 
 
 def _compilation_cache():
     """Keep compiled programs between runs (the first run of a command compiles for seconds;
     later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it. The cache is
     trimmed to CACHE_LIMIT here (``prune_cache``): each grid shape of a sweep is a program of its own.
-    Its folder ``units`` keeps pint's unit definitions, parsed (``units.REGISTRY_CACHE``)."""
+    Its folder ``units`` keeps pint's unit definitions, parsed (``units.REGISTRY_CACHE``), and the traced
+    programs of ``ks_jax.stored`` lie beside JAX's compiled ones (``stored.FOLDER``)."""
     where = os.environ.get("KS_JAX_CACHE", "")
     if where.lower() in ("off", "0", "no"):
         return
@@ -166,6 +167,7 @@ def _compilation_cache():
     except OSError:
         return
     units.REGISTRY_CACHE = path / "units"
+    stored.FOLDER = path
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 

@@ -19,6 +19,8 @@ import functools
 
 import jax
 
+from .stored import stored_jit
+
 # per-program XLA debug options (a program compiled with them is cached apart from one without)
 QUICK_CPU = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
 
@@ -27,9 +29,10 @@ def quick_jit(fun, **jit_kwargs):
     """``jax.jit(fun, **jit_kwargs)``, compiled with ``QUICK_CPU`` when JAX's default backend is a CPU.
     The returned function has both jitted forms as attributes: ``quick`` (with ``QUICK_CPU``) and
     ``plain`` (XLA's defaults), for a caller that picks one by the size of its work; ``jit_kwargs`` and
-    ``__wrapped__`` (``fun``) compile it with other options."""
-    quick = jax.jit(fun, compiler_options=QUICK_CPU, **jit_kwargs)
-    plain = jax.jit(fun, **jit_kwargs)
+    ``__wrapped__`` (``fun``) compile it with other options. Both keep their programs between runs of the
+    command line (``ks_jax.stored``)."""
+    quick = stored_jit(fun, compiler_options=QUICK_CPU, **jit_kwargs)
+    plain = stored_jit(fun, **jit_kwargs)
 
     @functools.wraps(fun)
     def call(*args, **kwargs):

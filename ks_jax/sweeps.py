@@ -75,6 +75,7 @@ from .case import automatic_part, canonical_path, input_ties, input_kind, move_s
 from .case import scene_origin, set_input, speed_status, to_pytrees, undefined_kind, warn_far_from_origin, xy_index
 from .exchange import CHUNK_ROWS
 from .quick import QUICK_CPU
+from .stored import stored_jit
 from .types import INVALID_NONFINITE, STATUS_TEXT, status_text
 
 DEFAULT_OUTPUTS = (
@@ -359,12 +360,15 @@ def _compiled(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto
         return jax.vmap(one, in_axes=(0, None if stage is None else 0) + (0,) * len(vals))(status, stage, *vals)
 
     options = QUICK_CPU if quick else None
-    status_jit = jax.jit(status_fn, in_shardings=(replicated,) * 5,
-                         out_shardings=rows, compiler_options=options)
-    impulse_jit = jax.jit(impulse_fn, in_shardings=(replicated, rows, rows), out_shardings=rows,
-                          compiler_options=options)
-    solve_jit = jax.jit(solve_fn, in_shardings=(replicated, rows, rows, rows), out_shardings=rows,
-                        compiler_options=options)
+    # what the three close over, for the key of the programs the command line keeps (``ks_jax.stored``)
+    context = (paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing,
+               jnp.dtype(out_dtype).name, len(devices))
+    status_jit = stored_jit(status_fn, context, in_shardings=(replicated,) * 5,
+                            out_shardings=rows, compiler_options=options)
+    impulse_jit = stored_jit(impulse_fn, context, in_shardings=(replicated, rows, rows), out_shardings=rows,
+                             compiler_options=options)
+    solve_jit = stored_jit(solve_fn, context, in_shardings=(replicated, rows, rows, rows), out_shardings=rows,
+                           compiler_options=options)
     return status_jit, impulse_jit, solve_jit
 
 

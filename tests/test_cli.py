@@ -558,10 +558,15 @@ def store_all():
     setup()
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 cli._compilation_cache = store_all
-seen = collections.Counter()
+seen, traced = collections.Counter(), set()
 jax.monitoring.register_event_listener(lambda event, **_: seen.update([event.rsplit("/", 1)[-1]]))
+def on_duration(event, duration, fun_name=None, **_):
+    if event.endswith("jaxpr_trace_duration"):
+        traced.add(fun_name)
+jax.monitoring.register_event_duration_secs_listener(on_duration)
 code = cli.main(sys.argv[1:])
-print(json.dumps({"loaded": seen["cache_hits"], "written": seen["cache_misses"]}), file=sys.stderr)
+print(json.dumps({"loaded": seen["cache_hits"], "written": seen["cache_misses"], "traced": sorted(traced)}),
+      file=sys.stderr)
 sys.exit(code)
 """
 
@@ -569,8 +574,9 @@ sys.exit(code)
 def test_compile_cache_is_used_and_kept_apart(tmp_path):
     """KS_JAX_CACHE=DIR: the first run stores its compiled programs there and a second run loads
     them (JAX's own cache-hit events) and gives the same report; so with pint's parsed unit definitions
-    (the folder ``units``, written once); nothing outside DIR is written,
-    and KS_JAX_CACHE=off stores and loads nothing."""
+    (the folder ``units``, written once) and with the programs as traced (``ks_jax.stored``: the second run
+    traces none of ``solve``'s functions, and its report is the one of jax.jit's programs, KS_JAX_CACHE=off);
+    nothing outside DIR is written, and KS_JAX_CACHE=off stores and loads nothing."""
     case = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
     cache, off_home = tmp_path / "cache", tmp_path / "home"
 
@@ -582,25 +588,29 @@ def test_compile_cache_is_used_and_kept_apart(tmp_path):
         return json.loads(done.stdout), json.loads(done.stderr.strip().splitlines()[-1])
 
     first, counts = run(cache)
-    written = counts["written"]
-    assert counts["loaded"] == 0 and written > 0
+    written = counts.pop("written")
+    assert counts.pop("loaded") == 0 and written > 0
+    assert "flat" in counts["traced"]  # ks_jax.stored's export of a program
     entries = [p.name for p in cache.iterdir()]
     assert "units" in entries and any((cache / "units").iterdir())  # pint's definitions, parsed
-    assert all(_CACHE_ENTRY.fullmatch(name) for name in entries if name != "units") and len(entries) > 1
+    assert all(_CACHE_ENTRY.fullmatch(name) for name in entries if name != "units")
+    assert any(name.endswith("-export") for name in entries) and any(name.endswith("-cache") for name in entries)
     kept = {p.name: p.stat().st_mtime_ns for p in (cache / "units").iterdir()}
     again, counts = run(cache)
     assert again == first
-    assert counts == {"loaded": written, "written": 0}  # every program it stored, loaded
+    assert counts.pop("loaded") == written and counts.pop("written") == 0  # every program it stored, loaded
+    assert not {"flat", "_solve_explicit", "solve_inputs"} & set(counts["traced"]), counts["traced"]
     assert sorted(p.name for p in cache.iterdir()) == sorted(entries)
     assert {p.name: p.stat().st_mtime_ns for p in (cache / "units").iterdir()} == kept  # read, not written again
     off, counts = run("off")
     assert off == first
-    assert counts == {"loaded": 0, "written": 0}
+    assert counts["loaded"] == 0 and counts["written"] == 0 and "_solve_explicit" in counts["traced"]
     assert not off_home.exists()
 
 
 def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
     names = [f"jit_solve_fn-{k:064x}-cache" for k in range(5)]
+    names[1] = f"ks_jax__solve_explicit-{1:064x}-export"  # a program of ks_jax.stored: counted alike
     for age, name in enumerate(names):  # names[0] used last, names[4] first
         (tmp_path / name).write_bytes(b"x" * 1000)
         os.utime(tmp_path / name, (1e9 - 100 * age, 1e9 - 100 * age))

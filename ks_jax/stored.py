@@ -1,0 +1,174 @@
+"""``stored_jit``: ``jax.jit`` whose traced and lowered programs the command line keeps between runs.
+
+JAX's compilation cache (``ks_jax.cli``) saves XLA's compile in a later run of a command, not the tracing of the
+program in Python and its lowering, which JAX does again in every process: with a warm cache they were 1.5 s of
+the 1.8 s of ``ks-jax fit fit_seed_001.json`` and 2.3 s of the 3.1 s of a 41 x 7 sweep of the automatic-contact
+T-bone (benchmarks/RESULTS.md). Where ``FOLDER`` is set (the command line sets it, in its cache folder), a
+``stored_jit`` function exports its program on its first call for given static arguments and shapes
+(``jax.export``) and writes it there; a later process reads it back and compiles it (from JAX's cache), without
+tracing. The program is the one ``jax.jit`` traces: its values are the jitted function's (tests/test_cli.py
+compares a command's results with and without the cache).
+
+A program is found by a key that holds everything it was traced from: the function (module, name and first
+line), the values of its static arguments and of ``context`` (what the function closes over), the tree, shapes
+and dtypes of its other arguments, the digest of the source files of ``ks_jax`` and ``fit``, the versions of JAX
+and jaxlib, whether 64-bit floats are on, the platform and the compiler options. A static value without a
+faithful ``repr`` (an object printed with its address), more than one device, no ``flatbuffers`` (JAX writes
+exported programs with it: the ``cache`` extra), or a program that cannot be exported or read back: then the
+call is ``jax.jit``'s, as without ``FOLDER``.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import inspect
+import os
+import pickle
+import tempfile
+from pathlib import Path
+
+import jax
+
+FOLDER = None  # where programs are kept (``ks_jax.cli``); None: every call is jax.jit's
+SUFFIX = "-export"  # a stored program's file name: <function>-<64 hex digits of its key>-export
+
+
+def stored_jit(fun, context=(), compiler_options=None, **jit_kwargs):
+    """``jax.jit(fun, compiler_options=compiler_options, **jit_kwargs)``, kept in ``FOLDER`` (module docstring).
+    ``context``: a tuple of the values ``fun`` closes over that the key would not otherwise see. Attributes of
+    the jitted function (``lower``, ``trace``, ...) are those of ``jax.jit``'s."""
+    return _Stored(fun, tuple(context), compiler_options, jit_kwargs)
+
+
+class _Stored:
+    def __init__(self, fun, context, options, jit_kwargs):
+        self.jitted = jax.jit(fun, compiler_options=options, **jit_kwargs)
+        self.fun, self.context, self.options, self.jit_kwargs = fun, context, options, jit_kwargs
+        self.programs = {}  # key -> (jitted call of the exported program, output tree)
+        self.refused = set()  # keys of programs that could not be exported
+        functools.update_wrapper(self, fun)
+
+    def __getattr__(self, name):  # lower, trace, eval_shape, _cache_size, ...
+        return getattr(self.jitted, name)
+
+    def __call__(self, *args, **kwargs):
+        if FOLDER is None or jax.device_count() != 1 or not _can_serialize():
+            return self.jitted(*args, **kwargs)
+        split = self._split(args, kwargs)
+        if split is None:
+            return self.jitted(*args, **kwargs)
+        static, names, dynamic = split
+        leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
+        key = self._key(static, in_tree, leaves)
+        if key is None or key in self.refused:
+            return self.jitted(*args, **kwargs)
+        program = self.programs.get(key) or self._load(key) or self._export(key, static, names, in_tree, leaves)
+        if program is None:
+            return self.jitted(*args, **kwargs)
+        call, out_tree = program
+        return jax.tree_util.tree_unflatten(out_tree, call(*leaves))
+
+    def _split(self, args, kwargs):
+        """(static arguments by name, names of the others, their values), or None for a signature this does
+        not handle (``*args``, ``**kwargs``, positional-only parameters)."""
+        try:
+            signature = inspect.signature(self.fun)
+            bound = signature.bind(*args, **kwargs)
+        except (TypeError, ValueError):
+            return None
+        params = list(signature.parameters.values())
+        if any(p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) for p in params):
+            return None
+        bound.apply_defaults()
+        nums = self.jit_kwargs.get("static_argnums", ())
+        nums = (nums,) if isinstance(nums, int) else tuple(nums)
+        static_names = set(self.jit_kwargs.get("static_argnames", ())) | {params[i].name for i in nums}
+        static = {k: v for k, v in bound.arguments.items() if k in static_names}
+        names = [k for k in bound.arguments if k not in static_names]
+        return static, names, tuple(bound.arguments[k] for k in names)
+
+    def _key(self, static, in_tree, leaves):
+        described = repr((sorted(static.items()), self.context))
+        if " at 0x" in described:  # an object's default repr: not its value
+            return None
+        try:
+            avals = [str(jax.typeof(x)) for x in leaves]
+        except TypeError:
+            return None
+        code = self.fun.__code__
+        text = repr((self.fun.__module__, self.fun.__qualname__, code.co_firstlineno, described, str(in_tree), avals,
+                     _environment(), repr(self.options), repr(sorted(self.jit_kwargs.items()))))
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def _path(self, key):
+        name = "".join(c if c.isalnum() or c in "_." else "_" for c in self.fun.__qualname__)[-60:]
+        return Path(FOLDER) / f"ks_jax_{name}-{key}{SUFFIX}"
+
+    def _ready(self, key, out_tree, exported):
+        program = (jax.jit(exported.call, compiler_options=self.options), out_tree)
+        self.programs[key] = program
+        return program
+
+    def _load(self, key):
+        path = self._path(key)
+        try:
+            out_tree, data = pickle.loads(path.read_bytes())
+            exported = jax.export.deserialize(bytearray(data))
+            os.utime(path)  # recently used: the cache is trimmed least recently used first (``cli.prune_cache``)
+        except Exception:  # noqa: BLE001 - missing, unreadable or from another JAX: export it again
+            return None
+        return self._ready(key, out_tree, exported)
+
+    def _export(self, key, static, names, in_tree, leaves):
+        out_trees = []
+
+        def flat(*leaves):
+            outputs, out_tree = jax.tree_util.tree_flatten(
+                self.fun(**static, **dict(zip(names, jax.tree_util.tree_unflatten(in_tree, leaves)))))
+            out_trees.append(out_tree)
+            return outputs
+
+        try:
+            exported = jax.export.export(jax.jit(flat, compiler_options=self.options))(*leaves)
+            data = pickle.dumps((out_trees[-1], exported.serialize()))
+        except Exception:  # noqa: BLE001 - a program jax.export cannot take: jax.jit's call from now on
+            self.refused.add(key)
+            return None
+        path = self._path(key)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as f:
+                f.write(data)
+            os.replace(f.name, path)  # whole or not at all, for a process that reads it at the same time
+        except OSError:
+            pass  # not kept; this run still uses it
+        return self._ready(key, out_trees[-1], exported)
+
+
+@functools.lru_cache(maxsize=1)
+def _can_serialize():
+    """Whether ``jax.export`` can write a program: it needs ``flatbuffers`` (the ``cache`` extra)."""
+    try:
+        import flatbuffers  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@functools.lru_cache(maxsize=1)
+def _sources():
+    """The digest of the source files of ``ks_jax`` and ``fit``: a program traced from other code is another."""
+    digest = hashlib.sha256()
+    for package in ("ks_jax", "fit"):
+        folder = Path(__file__).resolve().parent.parent / package
+        for path in sorted(folder.rglob("*.py")):
+            digest.update(str(path.relative_to(folder.parent)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def _environment():
+    import jaxlib
+
+    return (_sources(), jax.__version__, jaxlib.__version__, bool(jax.config.jax_enable_x64), jax.default_backend(),
+            jax.devices()[0].device_kind)

@@ -1,0 +1,106 @@
+"""``ks_jax.stored``: programs kept on disk between runs, read back without tracing, with jax.jit's values."""
+
+import importlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax import stored
+
+pytest.importorskip("flatbuffers")  # the ``cache`` extra (in ``test``): JAX writes exported programs with it
+
+
+def _leaves_equal(a, b):
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b), strict=True):
+        assert np.asarray(x).dtype == np.asarray(y).dtype
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def _exports(folder):
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(stored.SUFFIX))
+
+
+def test_a_program_is_written_once_and_read_back_without_tracing(tmp_path, monkeypatch):
+    """The first call writes the program; a new function object (a later process) reads it and calls
+    nothing of the Python function; the values are jax.jit's, bit for bit. Another static value or
+    another dtype is another program; a damaged file is written again; without a folder nothing is."""
+    traced = []
+
+    def fn(x, power, scale):
+        traced.append(power)
+        return {"y": jnp.sin(x) * scale**power, "pair": (x * power, jnp.cumsum(x))}
+
+    x = np.linspace(0.0, 2.0, 7)
+    want = jax.jit(fn, static_argnames="power")(x, power=3, scale=2.0)
+    monkeypatch.setattr(stored, "FOLDER", None)
+    stored.stored_jit(fn, static_argnames=("power",))(x, power=3, scale=2.0)
+    assert not any(tmp_path.iterdir())
+
+    monkeypatch.setattr(stored, "FOLDER", tmp_path)
+    _leaves_equal(stored.stored_jit(fn, static_argnames=("power",))(x, power=3, scale=2.0), want)
+    (first,) = _exports(tmp_path)
+    before = len(traced)
+    later = stored.stored_jit(fn, static_argnames=("power",))
+    _leaves_equal(later(x, power=3, scale=2.0), want)
+    assert len(traced) == before  # read back, not traced
+    assert _exports(tmp_path) == [first]
+
+    _leaves_equal(later(x, power=4, scale=2.0), jax.jit(fn, static_argnames="power")(x, power=4, scale=2.0))
+    _leaves_equal(later(x.astype(np.float32), power=4, scale=2.0),
+                  jax.jit(fn, static_argnames="power")(x.astype(np.float32), power=4, scale=2.0))
+    assert len(_exports(tmp_path)) == 3
+
+    (tmp_path / first).write_bytes(b"not a program")
+    _leaves_equal(stored.stored_jit(fn, static_argnames=("power",))(x, power=3, scale=2.0), want)
+    assert len(traced) > before and (tmp_path / first).read_bytes() != b"not a program"
+
+
+def test_a_static_value_without_a_faithful_repr_is_not_stored(tmp_path, monkeypatch):
+    class Opaque:  # printed as <...Opaque object at 0x...>: two of them with other values would print alike
+        def __init__(self, k):
+            self.k = k
+
+        def __hash__(self):
+            return hash(self.k)
+
+        def __eq__(self, other):
+            return isinstance(other, Opaque) and other.k == self.k
+
+    monkeypatch.setattr(stored, "FOLDER", tmp_path)
+    fn = stored.stored_jit(lambda x, o: x * o.k, static_argnums=(1,))
+    assert float(fn(jnp.float64(2.0), Opaque(3))) == 6.0
+    assert float(fn(jnp.float64(2.0), Opaque(5))) == 10.0
+    assert _exports(tmp_path) == []
+
+
+def test_a_small_sweep_and_a_solve_read_back_give_the_same_results(tmp_path, monkeypatch):
+    """What the command line runs: ``ks_jax.solve`` (automatic contact: three programs) and a small sweep
+    (three programs), stored, then read back by new function objects (``sweeps._compiled`` emptied,
+    ``quick_jit`` made again), with the results of the jitted programs."""
+    sweeps = importlib.import_module("ks_jax.sweeps")
+    case = ks_jax.load_case(ks_jax.__path__[0] + "/cases/auto_tbone.json")
+    over = {"vehicles[1].speed": np.linspace(9.0, 18.0, 5), "contact.restitution": np.linspace(0.0, 0.3, 3)}
+
+    def run():
+        sweeps._compiled.cache_clear()
+        swept = ks_jax.sweep(case, over, progress=False)
+        return ks_jax.solve(case).result, {k: v for k, v in swept.outputs.items()}
+
+    monkeypatch.setattr(stored, "FOLDER", None)
+    want = run()
+    monkeypatch.setattr(stored, "FOLDER", tmp_path)
+    _leaves_equal(run(), want)
+    written = _exports(tmp_path)
+    assert len(written) == 3 + 3, written
+    exports = []
+    monkeypatch.setattr(stored._Stored, "_export", lambda self, *a: exports.append(a) or None)
+    sv = importlib.import_module("ks_jax.solve")
+    for name in ("_auto_status", "_auto_contact", "_auto_exchange"):  # new function objects
+        fn = getattr(sv, name)
+        monkeypatch.setattr(sv, name, ks_jax.quick.quick_jit(fn.__wrapped__, **fn.jit_kwargs))
+    _leaves_equal(run(), want)
+    assert exports == [] and _exports(tmp_path) == written
+    sweeps._compiled.cache_clear()
