@@ -15,7 +15,9 @@ and dtypes of its other arguments, the digest of the source files of ``ks_jax`` 
 and jaxlib, whether 64-bit floats are on, the platform and the compiler options. A static value without a
 faithful ``repr`` (an object printed with its address), more than one device, no ``flatbuffers`` (JAX writes
 exported programs with it: the ``cache`` extra), or a program that cannot be exported or read back: then the
-call is ``jax.jit``'s, as without ``FOLDER``.
+call is ``jax.jit``'s, as without ``FOLDER``. Not in the key: a module's setting changed while the program runs
+(a constant such as ``exchange.CHUNK_ROWS`` set from outside); the command line changes none, and a process
+that does should leave ``FOLDER`` unset.
 """
 
 from __future__ import annotations
@@ -50,6 +52,8 @@ class _Stored:
         functools.update_wrapper(self, fun)
 
     def __getattr__(self, name):  # lower, trace, eval_shape, _cache_size, ...
+        if name == "jitted":  # not set yet (a copy being made)
+            raise AttributeError(name)
         return getattr(self.jitted, name)
 
     def __call__(self, *args, **kwargs):
@@ -115,9 +119,12 @@ class _Stored:
         try:
             out_tree, data = pickle.loads(path.read_bytes())
             exported = jax.export.deserialize(bytearray(data))
-            os.utime(path)  # recently used: the cache is trimmed least recently used first (``cli.prune_cache``)
         except Exception:  # noqa: BLE001 - missing, unreadable or from another JAX: export it again
             return None
+        try:
+            os.utime(path)  # recently used: the cache is trimmed least recently used first (``cli.prune_cache``)
+        except OSError:
+            pass
         return self._ready(key, out_tree, exported)
 
     def _export(self, key, static, names, in_tree, leaves):
