@@ -1,7 +1,8 @@
 """ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
 
 See MODEL.md (the contract) for frames, equations and result names. Public surface:
-``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``sum_over_rows``, ``load_case``, ``solve``, ``sweep``, ``units``;
+``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``sum_over_rows``, ``load_case``, ``solve``, ``sweep``, ``units``,
+``keep_programs`` (programs kept between processes, as the command line keeps them);
 ``ks_jax.plot`` (matplotlib) loads on first use.
 """
 
@@ -10,6 +11,7 @@ from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case,
 from .batch import exchange_batch, sum_over_rows
 from .exchange import exchange
 from .solve import Solution, solve, solve_inputs
+from .stored import keep_programs
 from .sweeps import SweepResult, sweep
 from .types import (
     Contact,
@@ -44,6 +46,7 @@ __all__ = [
     "VehicleResult",
     "exchange",
     "exchange_batch",
+    "keep_programs",
     "normal_from_angles",
     "status_text",
     "sum_over_rows",

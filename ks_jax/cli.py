@@ -12,17 +12,15 @@ import argparse
 import importlib
 import json
 import os
-import re
 import signal
 import sys
 import threading
 from importlib import resources
-from pathlib import Path
 
 import jax
 
-from . import stored, units
 from .case import CaseError
+from .stored import _CACHE_ENTRY, CACHE_LIMIT, keep_programs, prune_cache  # noqa: F401
 from .units import UnitError
 
 # subcommands that live in their own modules: name -> module with add_arguments(p) and run(args)
@@ -146,56 +144,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# when a command starts, its compile cache is trimmed to this many bytes (least recently used programs first)
-CACHE_LIMIT = 512 * 2**20
-_CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime|export)")  # JAX's files and ks_jax.stored's
-
-
 def _compilation_cache():
-    """Keep compiled programs between runs (the first run of a command compiles for seconds;
-    later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it. The cache is
-    trimmed to CACHE_LIMIT here (``prune_cache``): each grid shape of a sweep is a program of its own.
-    Its folder ``units`` keeps pint's unit definitions, parsed (``units.REGISTRY_CACHE``), and the traced
-    programs of ``ks_jax.stored`` lie beside JAX's compiled ones (``stored.FOLDER``)."""
+    """Keep programs between runs (``ks_jax.keep_programs``: the first run of a command compiles for seconds;
+    later runs load them). KS_JAX_CACHE=off disables it; KS_JAX_CACHE=DIR moves it."""
     where = os.environ.get("KS_JAX_CACHE", "")
     if where.lower() in ("off", "0", "no"):
         return
-    path = Path(where) if where else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ks-jax" / "jax"
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        prune_cache(path, CACHE_LIMIT)
+        keep_programs(where or None)
     except OSError:
         return
-    units.REGISTRY_CACHE = path / "units"
-    stored.FOLDER = path
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-
-
-def prune_cache(path, limit):
-    """Delete the least recently used programs of the compile cache in ``path`` until the rest
-    take at most ``limit`` bytes; returns the number of files deleted. Only files named as JAX names
-    its entries are counted or touched, so a KS_JAX_CACHE that points at a directory holding
-    anything else loses nothing else. (JAX's own bound, ``jax_compilation_cache_max_size``, needs
-    the ``filelock`` package.)"""
-    entries = []
-    with os.scandir(path) as it:
-        for entry in it:
-            if _CACHE_ENTRY.fullmatch(entry.name) and entry.is_file(follow_symlinks=False):
-                st = entry.stat(follow_symlinks=False)
-                entries.append((max(st.st_atime, st.st_mtime), st.st_size, entry.path))
-    total = sum(size for _, size, _ in entries)
-    deleted = 0
-    for _, size, file in sorted(entries):
-        if total <= limit:
-            break
-        try:
-            os.remove(file)
-        except FileNotFoundError:  # another run deleted it first
-            pass
-        total -= size
-        deleted += 1
-    return deleted
 
 
 def _show_case_warnings():

@@ -3,7 +3,7 @@
 JAX's compilation cache (``ks_jax.cli``) saves XLA's compile in a later run of a command, not the tracing of the
 program in Python and its lowering, which JAX does again in every process: with a warm cache they were 1.5 s of
 the 1.8 s of ``ks-jax fit fit_seed_001.json`` and 2.3 s of the 3.1 s of a 41 x 7 sweep of the automatic-contact
-T-bone (benchmarks/RESULTS.md). Where ``FOLDER`` is set (the command line sets it, in its cache folder), a
+T-bone (benchmarks/RESULTS.md). Where ``FOLDER`` is set (``keep_programs``: the command line calls it), a
 ``stored_jit`` function exports its program on its first call for given static arguments and shapes
 (``jax.export``) and writes it there; a later process reads it back and compiles it (from JAX's cache), without
 tracing. The program is the one ``jax.jit`` traces: its values are the jitted function's (tests/test_cli.py
@@ -27,13 +27,65 @@ import hashlib
 import inspect
 import os
 import pickle
+import re
 import tempfile
 from pathlib import Path
 
 import jax
 
-FOLDER = None  # where programs are kept (``ks_jax.cli``); None: every call is jax.jit's
+FOLDER = None  # where programs are kept (``keep_programs``); None: every call is jax.jit's
 SUFFIX = "-export"  # a stored program's file name: <function>-<64 hex digits of its key>-export
+# when programs are kept, the folder is trimmed to this many bytes (least recently used programs first)
+CACHE_LIMIT = 512 * 2**20
+_CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime|export)")  # JAX's files and the exports
+
+
+def keep_programs(folder=None, limit=CACHE_LIMIT):
+    """Keep the programs of this process in ``folder`` for later processes, as the command line does; returns
+    the folder. JAX's compiled programs (its compilation cache, for every jitted function of the process), the
+    traced ones of ``ks_jax.solve``, ``ks_jax.sweep`` and ``fit.reconstruct`` (``stored_jit``; with the
+    ``cache`` extra) and pint's parsed unit definitions (the folder ``units``; from the first unit string read
+    after this call). In a notebook, call it first: after a restart, the same calls then skip tracing and
+    compiling. ``folder``: default ``$XDG_CACHE_HOME/ks-jax/jax`` (``~/.cache/ks-jax/jax``). The least recently
+    used programs are deleted down to ``limit`` bytes (``prune_cache``); each grid shape of a sweep of several
+    chunks is a program of its own. Raises OSError where the folder cannot be made."""
+    from . import units
+
+    global FOLDER
+    home = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    path = Path(folder) if folder is not None else home / "ks-jax" / "jax"
+    path.mkdir(parents=True, exist_ok=True)
+    prune_cache(path, limit)
+    units.REGISTRY_CACHE = path / "units"
+    FOLDER = path
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return path
+
+
+def prune_cache(path, limit):
+    """Delete the least recently used programs in ``path`` until the rest take at most ``limit`` bytes;
+    returns the number of files deleted. Only files named as JAX and ``stored_jit`` name theirs are counted or
+    touched, so a folder holding anything else loses nothing else. (JAX's own bound,
+    ``jax_compilation_cache_max_size``, needs the ``filelock`` package.)"""
+    entries = []
+    with os.scandir(path) as it:
+        for entry in it:
+            if _CACHE_ENTRY.fullmatch(entry.name) and entry.is_file(follow_symlinks=False):
+                st = entry.stat(follow_symlinks=False)
+                entries.append((max(st.st_atime, st.st_mtime), st.st_size, entry.path))
+    total = sum(size for _, size, _ in entries)
+    deleted = 0
+    for _, size, file in sorted(entries):
+        if total <= limit:
+            break
+        try:
+            os.remove(file)
+        except FileNotFoundError:  # another run deleted it first
+            pass
+        total -= size
+        deleted += 1
+    return deleted
 
 
 def stored_jit(fun, context=(), compiler_options=None, **jit_kwargs):
@@ -122,7 +174,7 @@ class _Stored:
         except Exception:  # noqa: BLE001 - missing, unreadable or from another JAX: export it again
             return None
         try:
-            os.utime(path)  # recently used: the cache is trimmed least recently used first (``cli.prune_cache``)
+            os.utime(path)  # recently used: the folder is trimmed least recently used first (``prune_cache``)
         except OSError:
             pass
         return self._ready(key, out_tree, exported)

@@ -104,3 +104,55 @@ def test_a_small_sweep_and_a_solve_read_back_give_the_same_results(tmp_path, mon
     _leaves_equal(run(), want)
     assert exports == [] and _exports(tmp_path) == written
     sweeps._compiled.cache_clear()
+
+
+_IN_PYTHON = """
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import ks_jax
+traced, loaded = set(), []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, d, fun_name=None, **_: traced.add(fun_name) if event.endswith("jaxpr_trace_duration") else None)
+jax.monitoring.register_event_listener(lambda event, **_: loaded.append(1) if event.endswith("cache_hits") else None)
+folder = ks_jax.keep_programs(sys.argv[1])
+case = ks_jax.load_case(ks_jax.__path__[0] + "/cases/seed_000_saturn_pontiac.json")
+solved = ks_jax.solve(case).to_dict()
+swept = ks_jax.sweep(case, {"vehicles[1].speed": np.linspace(9.0, 18.0, 5)}, progress=False)
+print(json.dumps({"folder": str(folder), "solved": solved, "traced": sorted(traced), "loaded": len(loaded),
+                  "delta_v": swept["vehicles[0].delta_v_magnitude"].tolist()}))
+"""
+
+
+def test_keep_programs_in_python_keeps_them_for_the_next_process(tmp_path):
+    """``ks_jax.keep_programs(DIR)`` in a notebook's process: the first process writes its programs to DIR
+    (traced and compiled), the next one reads them back, traces none of ``solve``'s or ``sweep``'s functions,
+    and gets the same results as a process that keeps nothing."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    def run(*argv):
+        env = {k: v for k, v in os.environ.items() if k != "KS_JAX_TEST_COMPILE_CACHE"}
+        done = subprocess.run([sys.executable, "-c", _IN_PYTHON, *argv], capture_output=True, text=True,
+                              timeout=300, env=env)
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)
+
+    folder = tmp_path / "kept"
+    first = run(str(folder))
+    assert first["folder"] == str(folder) and first["loaded"] == 0 and "flat" in first["traced"]
+    assert len(_exports(folder)) == 4  # solve's one program, the sweep's three
+    again = run(str(folder))
+    assert again["loaded"] > 0
+    assert not {"flat", "_solve_explicit", "status_fn", "impulse_fn", "solve_fn"} & set(again["traced"])
+    alone = _IN_PYTHON.replace("folder = ks_jax.keep_programs(sys.argv[1])", "folder = sys.argv[1]")
+    done = subprocess.run([sys.executable, "-c", alone, str(tmp_path / "unused")], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    reference = json.loads(done.stdout)
+    assert "_solve_explicit" in reference["traced"] and not (tmp_path / "unused").exists()
+    for key in ("solved", "delta_v"):
+        assert first[key] == reference[key] and again[key] == reference[key]
