@@ -22,6 +22,7 @@ that does should leave ``FOLDER`` unset.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import inspect
@@ -194,14 +195,20 @@ class _Stored:
         except Exception:  # noqa: BLE001 - a program jax.export cannot take: jax.jit's call from now on
             self.refused.add(key)
             return None
-        path = self._path(key)
+        path, written = self._path(key), None
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as f:
+                written = f.name
                 f.write(data)
-            os.replace(f.name, path)  # whole or not at all, for a process that reads it at the same time
+            os.replace(written, path)  # whole or not at all, for a process that reads it at the same time
+            written = None
         except OSError:
             pass  # not kept; this run still uses it
+        finally:  # a file left half-written (a full disk, Ctrl-C): removed
+            if written is not None:
+                with contextlib.suppress(OSError):
+                    os.remove(written)
         return self._ready(key, out_trees[-1], exported)
 
 

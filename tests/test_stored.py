@@ -58,6 +58,20 @@ def test_a_program_is_written_once_and_read_back_without_tracing(tmp_path, monke
     assert len(traced) > before and (tmp_path / first).read_bytes() != b"not a program"
 
 
+def test_a_program_that_cannot_be_written_is_used_and_leaves_no_partial_file(tmp_path, monkeypatch):
+    """A write that fails half-way (a full disk: here the final rename fails) loses nothing: the call gets
+    jax.jit's values from the exported program, and no temporary file is left in the folder."""
+    def no_rename(src, dst):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(stored, "FOLDER", tmp_path)
+    monkeypatch.setattr(stored.os, "replace", no_rename)
+    fn = lambda x: jnp.cos(x) * 3.0  # noqa: E731
+    x = np.linspace(0.0, 1.0, 5)
+    _leaves_equal(stored.stored_jit(fn)(x), jax.jit(fn)(x))
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_static_value_without_a_faithful_repr_is_not_stored(tmp_path, monkeypatch):
     class Opaque:  # printed as <...Opaque object at 0x...>: two of them with other values would print alike
         def __init__(self, k):
