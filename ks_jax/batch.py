@@ -32,6 +32,7 @@ import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
 from .exchange import CHUNK_ROWS, _fenced, as_chunks, exchange, platform_dependent, prepare, results_stage, values_impulse_stage
+from .stored import stored_jit
 from .types import Contact, ExchangeResult, State, Vehicle
 
 DEFAULT_CHUNK = CHUNK_ROWS  # rows per chunk, as in ``sweep`` and ``exchange``'s vmap rule
@@ -54,7 +55,7 @@ def _stages(size, smoothing):
     def res(rows, prepared, stage):
         return jax.vmap(results_stage)(*rows, prepared[0], stage)
 
-    return jax.jit(prep), jax.jit(imp), jax.jit(res)
+    return tuple(stored_jit(fn, (size, smoothing)) for fn in (prep, imp, res))  # kept by ``keep_programs``
 
 
 def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,

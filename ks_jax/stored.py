@@ -44,10 +44,10 @@ _CACHE_ENTRY = re.compile(r"[A-Za-z0-9_.-]+-[0-9a-f]{64}-(cache|atime|export)") 
 def keep_programs(folder=None, limit=CACHE_LIMIT):
     """Keep the programs of this process in ``folder`` for later processes, as the command line does; returns
     the folder. JAX's compiled programs (its compilation cache, for every jitted function of the process), the
-    traced ones of ``ks_jax.solve``, ``ks_jax.sweep`` and ``fit.reconstruct`` (``stored_jit``; with the
-    ``cache`` extra) and pint's parsed unit definitions (the folder ``units``; from the first unit string read
-    after this call). In a notebook, call it first: after a restart, the same calls then skip tracing and
-    compiling. ``folder``: default ``$XDG_CACHE_HOME/ks-jax/jax`` (``~/.cache/ks-jax/jax``). The least recently
+    traced ones of ``ks_jax.solve``, ``ks_jax.sweep``, ``ks_jax.exchange_batch`` and ``fit.reconstruct``
+    (``stored_jit``; with the ``cache`` extra) and pint's parsed unit definitions (the folder ``units``; from
+    the first unit string read after this call). In a notebook, call it first: after a restart, the same calls
+    then skip tracing and compiling. ``folder``: default ``$XDG_CACHE_HOME/ks-jax/jax`` (``~/.cache/ks-jax/jax``). The least recently
     used programs are deleted down to ``limit`` bytes (``prune_cache``); each grid shape of a sweep of several
     chunks is a program of its own. Raises OSError where the folder cannot be made."""
     from . import units

@@ -120,6 +120,33 @@ def test_a_small_sweep_and_a_solve_read_back_give_the_same_results(tmp_path, mon
     sweeps._compiled.cache_clear()
 
 
+def test_exchange_batch_stored_and_read_back_gives_the_same_results(tmp_path, monkeypatch):
+    """``exchange_batch``'s three stages (chunks of 4 rows over 10 rows of the seed chapter, the bullet car's
+    speed varied) stored, then read back by new function objects (``batch._stages`` emptied): no export the
+    second time, and the results of the jitted stages, bit for bit."""
+    batch = importlib.import_module("ks_jax.batch")
+    case = ks_jax.load_case(ks_jax.__path__[0] + "/cases/seed_000_saturn_pontiac.json")
+    args = ks_jax.case.to_pytrees(case.inputs)
+    rows = jax.tree_util.tree_map(lambda x: np.repeat(np.asarray(x)[None], 10, axis=0), args)
+    rows[3].velocity[:, 0] = np.linspace(5.0, 25.0, 10)
+
+    def run():
+        batch._stages.cache_clear()
+        return ks_jax.exchange_batch(*rows, chunk=4)
+
+    monkeypatch.setattr(stored, "FOLDER", None)
+    want = run()
+    monkeypatch.setattr(stored, "FOLDER", tmp_path)
+    _leaves_equal(run(), want)
+    written = _exports(tmp_path)
+    assert len(written) == 3, written
+    exports = []
+    monkeypatch.setattr(stored._Stored, "_export", lambda self, *a: exports.append(a) or None)
+    _leaves_equal(run(), want)
+    assert exports == [] and _exports(tmp_path) == written
+    batch._stages.cache_clear()
+
+
 _IN_PYTHON = """
 import json, sys
 import jax
