@@ -51,7 +51,9 @@ def test_a_program_is_written_once_and_read_back_without_tracing(tmp_path, monke
     _leaves_equal(later(x, power=4, scale=2.0), jax.jit(fn, static_argnames="power")(x, power=4, scale=2.0))
     _leaves_equal(later(x.astype(np.float32), power=4, scale=2.0),
                   jax.jit(fn, static_argnames="power")(x.astype(np.float32), power=4, scale=2.0))
-    assert len(_exports(tmp_path)) == 3
+    _leaves_equal(later(x[:5], power=4, scale=2), jax.jit(fn, static_argnames="power")(x[:5], power=4, scale=2))
+    _leaves_equal(later(x, power=4, scale=2.0), jax.jit(fn, static_argnames="power")(x, power=4, scale=2.0))
+    assert len(_exports(tmp_path)) == 4  # power 4: float64, float32, and 5 values with an int scale
 
     (tmp_path / first).write_bytes(b"not a program")
     _leaves_equal(stored.stored_jit(fn, static_argnames=("power",))(x, power=3, scale=2.0), want)
