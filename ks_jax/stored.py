@@ -1,6 +1,6 @@
 """``stored_jit``: ``jax.jit`` whose traced and lowered programs the command line keeps between runs.
 
-JAX's compilation cache (``ks_jax.cli``) saves XLA's compile in a later run of a command, not the tracing of the
+JAX's compilation cache (``keep_programs``) saves XLA's compile in a later run of a command, not the tracing of the
 program in Python and its lowering, which JAX does again in every process: with a warm cache they were 1.5 s of
 the 1.8 s of ``ks-jax fit fit_seed_001.json`` and 2.3 s of the 3.1 s of a 41 x 7 sweep of the automatic-contact
 T-bone (benchmarks/RESULTS.md). Where ``FOLDER`` is set (``keep_programs``: the command line calls it), a
@@ -167,7 +167,9 @@ class _Stored:
             avals = [str(jax.typeof(x)) for x in leaves]
         except TypeError:
             return None
-        code = self.fun.__code__
+        code = getattr(self.fun, "__code__", None)
+        if code is None:  # not a Python function (a functools.partial): no name and line to key it by
+            return None
         text = repr((self.fun.__module__, self.fun.__qualname__, code.co_firstlineno, described, str(in_tree), avals,
                      _environment(), repr(self.options), repr(sorted(self.jit_kwargs.items()))))
         return hashlib.sha256(text.encode()).hexdigest()
