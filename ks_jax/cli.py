@@ -20,7 +20,7 @@ from importlib import resources
 import jax
 
 from .case import CaseError
-from .stored import _CACHE_ENTRY, CACHE_LIMIT, keep_programs, prune_cache  # noqa: F401
+from .stored import keep_programs
 from .units import UnitError
 
 # subcommands that live in their own modules: name -> module with add_arguments(p) and run(args)

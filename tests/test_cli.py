@@ -17,7 +17,8 @@ import pytest
 import ks_jax
 from ks_jax import units as U
 from ks_jax.case import CaseError, CaseWarning, at_rest_after, case_from_dict, defined_output, load_case
-from ks_jax.cli import _CACHE_ENTRY, main, prune_cache
+from ks_jax.cli import main
+from ks_jax.stored import _CACHE_ENTRY, prune_cache
 
 # A case written in US units; its SI twin below is written by hand from the exact unit definitions.
 US_CASE = {
