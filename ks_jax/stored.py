@@ -47,9 +47,9 @@ def keep_programs(folder=None, limit=CACHE_LIMIT):
     traced ones of ``ks_jax.solve``, ``ks_jax.sweep``, ``ks_jax.exchange_batch`` and ``fit.reconstruct``
     (``stored_jit``; with the ``cache`` extra) and pint's parsed unit definitions (the folder ``units``; from
     the first unit string read after this call). In a notebook, call it first: after a restart, the same calls
-    then skip tracing and compiling. ``folder``: default ``$XDG_CACHE_HOME/ks-jax/jax`` (``~/.cache/ks-jax/jax``). The least recently
-    used programs are deleted down to ``limit`` bytes (``prune_cache``); each grid shape of a sweep of several
-    chunks is a program of its own. Raises OSError where the folder cannot be made."""
+    then skip tracing and compiling. ``folder``: default ``$XDG_CACHE_HOME/ks-jax/jax`` (``~/.cache/ks-jax/jax``).
+    The least recently used programs are deleted down to ``limit`` bytes (``prune_cache``); each grid shape of a
+    sweep of several chunks is a program of its own. Raises OSError where the folder cannot be made."""
     from . import units
 
     global FOLDER
@@ -107,6 +107,12 @@ class _Stored:
             self.signature = inspect.signature(fun)
         except (TypeError, ValueError):
             self.signature = None
+        params = list(self.signature.parameters.values()) if self.signature is not None else []
+        if any(p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) for p in params):
+            self.signature = None  # *args, **kwargs, positional-only: not handled here
+        nums = jit_kwargs.get("static_argnums", ())
+        nums = (nums,) if isinstance(nums, int) else tuple(nums)
+        self.static_names = set(jit_kwargs.get("static_argnames", ())) | {params[i].name for i in nums if params}
         functools.update_wrapper(self, fun)
 
     def __getattr__(self, name):  # lower, trace, eval_shape, _cache_size, ...
@@ -148,15 +154,9 @@ class _Stored:
             bound = self.signature.bind(*args, **kwargs)
         except TypeError:
             return None
-        params = list(self.signature.parameters.values())
-        if any(p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) for p in params):
-            return None
         bound.apply_defaults()
-        nums = self.jit_kwargs.get("static_argnums", ())
-        nums = (nums,) if isinstance(nums, int) else tuple(nums)
-        static_names = set(self.jit_kwargs.get("static_argnames", ())) | {params[i].name for i in nums}
-        static = {k: v for k, v in bound.arguments.items() if k in static_names}
-        names = [k for k in bound.arguments if k not in static_names]
+        static = {k: v for k, v in bound.arguments.items() if k in self.static_names}
+        names = [k for k in bound.arguments if k not in self.static_names]
         return static, names, tuple(bound.arguments[k] for k in names)
 
     def _key(self, static, in_tree, leaves):
