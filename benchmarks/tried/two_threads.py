@@ -1,0 +1,76 @@
+"""``exchange_batch``'s three stages from two Python threads at once (tried; the library is unchanged).
+
+    .venv/bin/python benchmarks/tried/two_threads.py [--rows 1048576] [--repeats 5] [--sizes 2048,4096,8192,16384]
+
+XLA's CPU backend splits a fused loop between its threads only when the loop moves more than about
+256 KiB, and then loop by loop, with a wait at the end of each. At a chunk of 16384 rows most of the
+stages' loops are split in two; below about 4096 rows most run on one thread. So smaller chunks, computed
+two at a time by two Python threads (each thread a contiguous run of every other chunk), might keep both
+cores busy without the waits. This script times the stages (``ks_jax.batch._stages``: the calls of
+``exchange_batch`` without the copy into NumPy arrays) over the same batch, for each chunk size, from one
+thread and from two, in interleaved rounds, and prints the median and the fastest time per row of each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+jax.config.update("jax_enable_x64", True)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import bench_kernel as bk  # noqa: E402
+
+from ks_jax import batch as kb  # noqa: E402
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rows", type=int, default=1 << 20)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--sizes", default="2048,4096,8192,16384", help="rows per chunk, comma-separated")
+    args = ap.parse_args()
+    n = args.rows
+    _, last = bk.random_batch(n)
+    batch = jax.tree_util.tree_map(jnp.asarray, tuple(bk.batch_first(last)))
+    pool = ThreadPoolExecutor(2)
+
+    def variant(size, threads):
+        prep, imp, res = kb._stages(size, 0.0)
+        starts = [min(lo, n - size) for lo in range(0, n, size)]
+
+        def run(part):
+            result = None
+            for start in part:
+                rows, prepared = prep(batch, start)
+                result = res(rows, prepared, imp(rows, prepared))
+            jax.block_until_ready(result)
+
+        if threads == 1:
+            return lambda: run(starts)
+        return lambda: list(pool.map(run, [starts[0::2], starts[1::2]]))
+
+    fns = {(size, t): variant(size, t) for size in map(int, args.sizes.split(",")) for t in (1, 2)}
+    for fn in fns.values():  # compiled and warm
+        fn()
+        fn()
+    times = {k: [] for k in fns}
+    for _ in range(args.repeats):
+        for k, fn in fns.items():
+            t = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t)
+    print(f"{bk.cpu_model()}, jax {jax.__version__}, {n} rows, {args.repeats} rounds")
+    for (size, threads), ts in times.items():
+        print(f"chunk {size:6d}, {threads} thread(s): {statistics.median(ts) / n * 1e9:7.1f} ns/row"
+              f" (fastest round {min(ts) / n * 1e9:.1f})")
+
+
+if __name__ == "__main__":
+    main()
