@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -57,15 +56,8 @@ def main():
         return lambda: list(pool.map(run, [starts[0::2], starts[1::2]]))
 
     fns = {(size, t): variant(size, t) for size in map(int, args.sizes.split(",")) for t in (1, 2)}
-    for fn in fns.values():  # compiled and warm
-        fn()
-        fn()
-    times = {k: [] for k in fns}
-    for _ in range(args.repeats):
-        for k, fn in fns.items():
-            t = time.perf_counter()
-            fn()
-            times[k].append(time.perf_counter() - t)
+    bk.rounds(fns, 2)  # compiled and warm
+    times = bk.rounds(fns, args.repeats)
     print(f"{bk.cpu_model()}, jax {jax.__version__}, {n} rows, {args.repeats} rounds")
     for (size, threads), ts in times.items():
         print(f"chunk {size:6d}, {threads} thread(s): {statistics.median(ts) / n * 1e9:7.1f} ns/row"
