@@ -2,11 +2,10 @@
 
     .venv/bin/python benchmarks/tried/two_threads.py [--rows 1048576] [--repeats 5] [--sizes 2048,4096,8192,16384]
 
-XLA's CPU backend splits a fused loop between its threads only when the loop moves more than about
-256 KiB, and then loop by loop, with a wait at the end of each. At a chunk of 16384 rows most of the
-stages' loops are split in two; below about 4096 rows most run on one thread. So smaller chunks, computed
-two at a time by two Python threads (each thread a contiguous run of every other chunk), might keep both
-cores busy without the waits. This script times the stages (``ks_jax.batch._stages``: the calls of
+XLA's CPU backend splits the work between its threads loop by loop, as its cost model decides for each
+fused loop (one core alone ran the stage path at 557 ns per row, both at 382: an earlier entry of
+benchmarks/RESULTS.md). Smaller chunks give it less to split; computed two at a time by two Python threads
+(each thread every other chunk), they might keep both cores busy with less waiting. This script times the stages (``ks_jax.batch._stages``: the calls of
 ``exchange_batch`` without the copy into NumPy arrays) over the same batch, for each chunk size, from one
 thread and from two, in interleaved rounds, and prints the median and the fastest time per row of each.
 """
