@@ -5,9 +5,10 @@
 XLA's CPU backend splits the work between its threads loop by loop, as its cost model decides for each
 fused loop (one core alone ran the stage path at 557 ns per row, both at 382: an earlier entry of
 benchmarks/RESULTS.md). Smaller chunks give it less to split; computed two at a time by two Python threads
-(each thread every other chunk), they might keep both cores busy with less waiting. This script times the stages (``ks_jax.batch._stages``: the calls of
-``exchange_batch`` without the copy into NumPy arrays) over the same batch, for each chunk size, from one
-thread and from two, in interleaved rounds, and prints the median and the fastest time per row of each.
+(each thread every other chunk), they might keep both cores busy with less waiting. This script times the
+stages (``ks_jax.batch._stages``: the calls of ``exchange_batch`` without the copy into NumPy arrays) over
+the same batch, for each chunk size, from one thread and from two, in interleaved rounds, and prints the
+median and the fastest time per row of each.
 """
 
 from __future__ import annotations
