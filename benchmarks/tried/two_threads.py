@@ -20,7 +20,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -37,7 +36,7 @@ def main():
     args = ap.parse_args()
     n = args.rows
     _, last = bk.random_batch(n)
-    batch = jax.tree_util.tree_map(jnp.asarray, tuple(bk.batch_first(last)))
+    batch = tuple(bk.batch_first(last))  # JAX arrays, batch first
     pool = ThreadPoolExecutor(2)
 
     def variant(size, threads):
