@@ -49,6 +49,8 @@ from ks_jax.case import (
 )
 from ks_jax.solve import solve_inputs
 
+from .uncertainty import fmt
+
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
 NOT_FITTABLE = {"sliding": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
 # inputs that are angles on the circle (radians inside)
@@ -134,8 +136,6 @@ def _field(path):
 def _q(x_si, path) -> str:
     """A value of ``path`` as the user reads it: '100 mph (44.7 m/s)' (errors quote the file's units,
     not only the SI number they were converted to)."""
-    from .uncertainty import fmt
-
     if math.isinf(x_si):
         return "none"  # a bound not given
     try:

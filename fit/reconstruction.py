@@ -10,7 +10,6 @@ program: with refits, the fit and the refits go to it in calls of one row count 
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -18,9 +17,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.case import Case, CaseError
-from ks_jax.quick import quick_jit
-from ks_jax.types import OK, status_text
+from ks_jax.case import Case, CaseError, get_input, input_kind
+from ks_jax.case.scale import move_scene, origin_offset, scene_origin
+from ks_jax.compilation import quick_jit
+from ks_jax.model.types import OK, status_text
+from ks_jax.progress import Progress
 
 from .problem import (
     Problem,
@@ -34,7 +35,7 @@ from .problem import (
     wrap,
 )
 from .solvers import SOLVERS
-from .uncertainty import analyse, default_rtol
+from .uncertainty import analyse, default_rtol, fmt
 
 PERCENTILES = (5, 50, 95)
 
@@ -191,8 +192,6 @@ def _starts(unknowns, inputs_value, n_starts: int, rng) -> np.ndarray:
     bounds, else the case value), the others a Latin hypercube within the bounds (2% margins),
     or normal draws around the first start where a bound is missing (spread: the prior's sigma,
     else |first start|, at least ``START_SPREAD`` of its kind)."""
-    from ks_jax.case import input_kind
-
     n = len(unknowns)
     x0 = np.empty((n_starts, n))
     k = n_starts - 1
@@ -241,8 +240,6 @@ def _arrays(case, unknowns, evidence, dtype):
     evidence values of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
     from each unknown and each piece of evidence) move the results back. ``current`` (the case's values of
     the unknowns, for the starts) stays unmoved."""
-    from ks_jax.case import get_input, move_scene, origin_offset, scene_origin
-
     n = len(unknowns)
     origin = scene_origin(case.inputs, dtype=dtype)
     offsets = lambda paths: np.array([float(origin_offset(p, origin) or 0.0) for p in paths])  # noqa: E731
@@ -491,27 +488,6 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     )
 
 
-def _progress(total, desc):
-    try:
-        from tqdm import tqdm
-
-        return tqdm(total=total, desc=desc, file=sys.stderr, unit="fit")
-    except ImportError:  # pragma: no cover - tqdm is an extra
-
-        class Lines:
-            def __init__(self):
-                self.n = 0
-
-            def update(self, k):
-                self.n += k
-                print(f"{desc}: {self.n}/{total}", file=sys.stderr)
-
-            def close(self):
-                pass
-
-        return Lines()
-
-
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None) -> FitResult:
@@ -612,10 +588,6 @@ def _linearisation_notes(result: FitResult) -> list:
     a median more than MC_MEDIAN_SHIFT sigma from the estimate. Then the results are not linear in
     that unknown over its uncertainty (or a bound cuts the refits off), and the standard error
     misleads."""
-    from ks_jax.case import input_kind
-
-    from .uncertainty import fmt
-
     mc = result.monte_carlo
     if mc is None or mc["samples"] < MC_CHECK_SAMPLES:
         return []
@@ -648,7 +620,7 @@ def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
     z0[:, 0] = z_best
     size = min(chunk, n_mc) if progress else n_mc
-    bar = _progress(n_mc, "monte carlo") if progress else None
+    bar = Progress(n_mc, "monte carlo", "fit") if progress else None
     xs, conv = [], []
     for s in range(0, n_mc, size):
         k = min(size, n_mc - s)

@@ -1,64 +1,57 @@
-"""ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX.
+"""ks-jax: the Kudlich-Slibar impulse-momentum collision model in JAX (docs/model.md).
 
-See MODEL.md (the contract) for frames, equations and result names. Public surface:
-``Vehicle``, ``State``, ``Contact``, ``exchange``, ``exchange_batch``, ``sum_over_rows``, ``load_case``, ``solve``, ``sweep``, ``units``,
-``keep_programs`` (programs kept between processes, as the command line keeps them);
-``ks_jax.plot`` (matplotlib) loads on first use.
+Public API:
+
+- the physics of one collision: ``exchange`` (pure, unbatched; jit, vmap and differentiate it), its
+  inputs ``Vehicle``, ``State``, ``Contact`` and results ``ExchangeResult``, ``ContactResult``,
+  ``VehicleResult``; ``status_text`` (a status code in words), ``normal_from_angles``;
+- batches: ``exchange_batch`` (values into NumPy arrays), ``sum_over_rows`` (a batched loss whose
+  gradient is computed chunk by chunk);
+- case files: ``load_case``, ``load_cases``, ``Case``, ``CaseInputs``, ``CaseError``, and the paths of
+  single inputs and results: ``get_input``, ``set_input``, ``get_output``;
+- solving cases: ``solve`` (-> ``Solution``), ``solve_inputs`` (a case as a pure function of its inputs);
+- sweeps: ``sweep`` (-> ``SweepResult``);
+- ``keep_programs`` (keep compiled programs between processes), ``units`` (conversions to SI).
+
+Also: ``ks_jax.plot`` (pictures, matplotlib), ``ks_jax.report`` (the text panel), and ``fit`` (the
+reconstruction package installed beside ``ks_jax``).
 """
 
 from . import units
-from .case import Case, CaseError, CaseInputs, get_output, get_input, load_case, load_cases, set_input
-from .batch import exchange_batch, sum_over_rows
-from .exchange import exchange
+from .batch import exchange, exchange_batch, sum_over_rows
+from .case import Case, CaseError, CaseInputs, get_input, get_output, load_case, load_cases, set_input
+from .compilation import keep_programs
+from .model.types import Contact, ContactResult, ExchangeResult, State, Vehicle, VehicleResult
+from .model.types import normal_from_angles, status_text
 from .solve import Solution, solve, solve_inputs
-from .stored import keep_programs
 from .sweeps import SweepResult, sweep
-from .types import (
-    Contact,
-    ContactResult,
-    ExchangeResult,
-    State,
-    Vehicle,
-    VehicleResult,
-    normal_from_angles,
-    status_text,
-)
 
 __all__ = [
     "Case",
     "CaseError",
     "CaseInputs",
-    "Solution",
-    "get_input",
-    "get_output",
-    "load_case",
-    "load_cases",
-    "set_input",
-    "solve",
-    "solve_inputs",
-    "sweep",
-    "SweepResult",
     "Contact",
     "ContactResult",
     "ExchangeResult",
+    "Solution",
     "State",
+    "SweepResult",
     "Vehicle",
     "VehicleResult",
     "exchange",
     "exchange_batch",
+    "get_input",
+    "get_output",
     "keep_programs",
+    "load_case",
+    "load_cases",
     "normal_from_angles",
+    "set_input",
+    "solve",
+    "solve_inputs",
     "status_text",
     "sum_over_rows",
+    "sweep",
     "units",
 ]
 __version__ = "0.1.0"
-
-
-def __getattr__(name):
-    # submodules with optional dependencies (matplotlib) or heavier imports load on first use
-    if name in ("plot", "geometry"):
-        import importlib
-
-        return importlib.import_module(f".{name}", __name__)
-    raise AttributeError(f"module 'ks_jax' has no attribute {name!r}")

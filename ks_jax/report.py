@@ -1,4 +1,5 @@
-"""What people read: the auto-ees style panel (SI and US units) and the JSON of MODEL.md section 4."""
+"""What people read: the auto-ees style panel of a solved case, SI beside US units, and the reported
+values of a case file beside ks-jax's. (The JSON of ``ks-jax solve --json`` is ``Solution.to_dict``.)"""
 
 from __future__ import annotations
 
@@ -7,51 +8,13 @@ import math
 import numpy as np
 
 from . import units as U
-from .case import at_rest_after, defined_output, impulse_exchanged, parse_output_value, undefined_kind
-from .types import ContactResult, VehicleResult
-
-
-def _plain(x):
-    x = np.asarray(x)
-    if x.dtype == np.bool_:
-        return bool(x) if x.ndim == 0 else [bool(v) for v in x]
-    if x.ndim == 0:
-        v = float(x)
-        return None if not math.isfinite(v) else v
-    if not np.isfinite(x).any():  # an undefined vector (case.defined_output) is null, not a list of nulls
-        return None
-    return [_plain(v) for v in x]
+from .case import CIRCULAR_OUTPUTS, at_rest_after, defined_output, impulse_exchanged, parse_output_value, parse_path
+from .model.first_contact import HORIZON
 
 
 def _no_impulse(sol):
-    """No impulse was exchanged (``case.impulse_exchanged``): a PDOF is then undefined."""
+    """No impulse was exchanged (``case.impulse_exchanged``): its directions and a PDOF are undefined."""
     return not bool(impulse_exchanged(sol.result))
-
-
-def solution_dict(sol) -> dict:
-    """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, keys of MODEL.md section 4,
-    status as words, NaN as null. An invalid case has only its status. What is not defined is
-    null too (``case.defined_output``; the exchange carries stand-in numbers there, never NaN):
-    ``pdof``, ``pdof_clock``, ``impulse_azimuth`` and ``impulse_elevation`` where no impulse was
-    exchanged; ``time``, ``point``, ``normal``, the closing and separation velocities and EES where
-    the vehicles never touch; ``course_after`` of a vehicle at rest; and ``time`` under an explicit
-    contact (MODEL.md section 4: automatic contact only)."""
-    if sol.result is None or sol.status.startswith("invalid"):
-        return {"name": sol.case.name, "contact": {"status": sol.status}, "vehicles": []}
-    r = sol.result
-    contact = {k: _plain(defined_output(r, f"contact.{k}") if undefined_kind(f"contact.{k}") else getattr(r.contact, k))
-               for k in ContactResult._fields if k != "status"}
-    contact["status"] = sol.status
-    if not (sol.case.auto_point or sol.case.auto_normal):
-        contact["time"] = None  # no search for a first contact: the exchange is at the case state
-    vehicles = []
-    for i, (name, v) in enumerate(zip(sol.case.vehicle_names, r.vehicles)):
-        d = {"name": name}
-        d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}") if undefined_kind(f"vehicles[{i}].{k}")
-                            else getattr(v, k)) for k in VehicleResult._fields})
-        d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
-        vehicles.append(d)
-    return {"name": sol.case.name, "contact": contact, "vehicles": vehicles}
 
 
 def _fmt(x, digits=3):
@@ -63,7 +26,7 @@ def _fmt(x, digits=3):
     return f"{x:,.{digits}f}"
 
 
-def _deg(x, digits=1):
+def angle_text(x, digits=1):
     """A direction in degrees, in [0, 360) as shown: 359.97 to one digit is 0.0, not 360.0."""
     x = float(x)
     return _fmt(round(x % 360.0, digits) % 360.0, digits) if math.isfinite(x) else "undefined"
@@ -87,8 +50,6 @@ def _timing_rows(sol):
         return [_row("timing", "explicit contact: exchange at the case state")]
     dt = float(sol.case.inputs.contact.penetration_time)
     if sol.status == "no_contact":
-        from .geometry import HORIZON
-
         return [_row("first contact (timing)", f"none within {HORIZON:g} s of free motion")]
     return [_row("first contact (timing)", f"{_fmt(c.time, 4)} s"),
             _row("exchange (+ depth of penetration)", f"{_fmt(c.time + dt, 4)} s", f"(+{_fmt(dt, 4)} s)")]
@@ -109,8 +70,6 @@ def text_report(sol, reference: bool = True) -> str:
         lines += _contact_rows(sol, c)
     lines += _vehicle_rows(sol, v1, v2)
     if sol.status == "no_contact":
-        from .geometry import HORIZON
-
         lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
                      "(the search horizon): no exchange.")
     elif not np.isfinite(v1.ees) and c.energy_loss < 0:
@@ -127,13 +86,13 @@ def _contact_rows(sol, c):
     return [
         _row("impulse centroid (x, y, z)", " ".join(_fmt(p) for p in c.point) + " m",
              " ".join(_fmt(p / U.FT) for p in c.point) + " ft"),
-        _row("normal (azimuth, pitch)", f"{_deg(math.degrees(math.atan2(c.normal[1], c.normal[0])))} deg, "
+        _row("normal (azimuth, pitch)", f"{angle_text(math.degrees(math.atan2(c.normal[1], c.normal[0])))} deg, "
              f"{_fmt(math.degrees(math.asin(max(-1.0, min(1.0, float(c.normal[2]))))), 1)} deg"),
         _row("impulse", f"{_fmt(c.impulse_magnitude)} N s", f"{_fmt(c.impulse_magnitude / U.LBF_S)} lbf s"),
         _row("  normal / tangential", f"{_fmt(c.impulse_normal)} / {_fmt(c.impulse_tangential)} N s",
              f"{_fmt(c.impulse_normal / U.LBF_S)} / {_fmt(c.impulse_tangential / U.LBF_S)} lbf s"),
         _row("  azimuth / elevation", "undefined (no impulse)" if _no_impulse(sol)
-             else f"{_deg(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
+             else f"{angle_text(c.impulse_azimuth, 2)} / {_fmt(c.impulse_elevation, 2)} deg"),
         _row("deformation energy (loss)", f"{_fmt(c.energy_loss)} J", f"{_fmt(c.energy_loss / U.FT_LBF, 2)} ft lbf"),
         _row("sliding at separation", "no impulse" if _no_impulse(sol) else "yes" if bool(c.sliding) else "no"),
         _row("closing speed at centroid", f"{_fmt(np.linalg.norm(c.closing_velocity))} m/s",
@@ -153,12 +112,12 @@ def _vehicle_rows(sol, v1, v2):
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
             _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
-                 else f"{_deg(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
+                 else f"{angle_text(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
             _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
             _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
-            _row("course after", "undefined (at rest)" if bool(at_rest_after(v)) else f"{_deg(v.course_after)} deg"),
+            _row("course after", "undefined (at rest)" if bool(at_rest_after(v)) else f"{angle_text(v.course_after)} deg"),
             _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
@@ -168,8 +127,6 @@ def _vehicle_rows(sol, v1, v2):
 def reference_table(sol, reference: dict) -> str:
     """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units; the difference
     in percent, or in degrees for a direction (on the circle: 359 against 1 is 2 degrees apart)."""
-    from .case import CIRCULAR_OUTPUTS, parse_path
-
     lines = ["  reference                              reported            ks-jax              difference"]
     for path, value in reference.items():
         want_si = parse_output_value(value, path, sol.case.name, f"reference.{path}")

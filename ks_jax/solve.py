@@ -1,107 +1,108 @@
-"""Solve cases: CaseInputs -> ExchangeResult, batched over the cases of a file."""
+"""Solve cases: a case's inputs to the exchange's results (docs/model.md), for one case or for every
+case of a file at once.
+
+``solve_inputs`` is the case as a pure function of its inputs (jit, vmap and differentiate it at the
+edge: ``ks_jax.sweep`` and ``fit`` do). It runs the case's pipeline (``stages``): for a given contact,
+the exchange's own three stages; for automatic contact, the input rules, the contact (first touch,
+overlap), and the exchange there. ``solve`` solves the cases of a file, grouped by contact mode, each
+group in one compiled call.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from functools import partial
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .case import Case, CaseInputs, as_arrays, move_scene, scene_origin, speed_status, to_pytrees
-from .case import farthest_out_of_scale, warn_far_from_origin
-from .derived import mask_invalid
-from .exchange import exchange
-from .quick import quick_jit
-from .types import INVALID_OVERFLOW, ExchangeResult, status_text
+from .batch.stages import run
+from .case import Case, CaseInputs, as_arrays, defined_output, to_pytrees, undefined_kind
+from .case.scale import farthest_out_of_scale, move_scene, scene_origin, warn_far_from_origin
+from .compilation import quick_jit
+from .model import collision
+from .model.automatic import automatic_stage, exchange_at_contact
+from .model.checks import check_smoothing, input_status
+from .model.results import mask_invalid
+from .model.types import INVALID_NONFINITE, INVALID_OVERFLOW, INVALID_SPEED_1, INVALID_SPEED_2, OK
+from .model.types import ContactResult, ExchangeResult, VehicleResult, status_text
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
                  smoothing=0.0) -> ExchangeResult:
-    """One case's results from its inputs (pure, unbatched; jit/vmap/grad at the edge).
+    """One case's results from its inputs (pure, unbatched; jit, vmap and grad at the edge).
 
-    ``auto_point``/``auto_normal`` (static) select automatic contact (MODEL.md section 5) for
-    the centroid and/or the normal; otherwise the exchange is at the case state.
-    A negative ``speed`` (reachable by ``set_input``, a sweep or a fit, never by a case file) gives
-    status INVALID_SPEED_1/2 and NaN results (``case.speed_status``), unless the exchange found
-    another invalid input first.
-    """
-    v1, s1, v2, s2, contact = to_pytrees(inputs)
+    ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
+    otherwise the exchange is at the case state. A negative ``speed`` (reachable by ``set_input``, a sweep
+    or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN results (``speed_status``),
+    unless another input breaks a rule first."""
+    return run(stages(auto_point, auto_normal, smoothing), (inputs,), in_axes=None)
+
+
+def stages(auto_point: bool, auto_normal: bool, smoothing=0.0):
+    """The case's pipeline, three functions of a row's ``CaseInputs`` and the outputs of the stages before
+    (``ks_jax.batch.stages.run``): the exchange's own stages (``model.collision.stages``) at a given
+    contact; for automatic contact, the input rules, the contact (``model.automatic.automatic_stage``)
+    and the exchange there (``exchange_at_contact``). ``smoothing``: a Python number or an array."""
     if auto_point or auto_normal:
-        from .geometry import automatic_exchange
+        def rules(inputs):
+            return input_status(*to_pytrees(inputs))
 
-        result = automatic_exchange(v1, s1, v2, s2, contact, inputs.contact.normal_pitch,
-                                    auto_point=auto_point, auto_normal=auto_normal, smoothing=smoothing)
-    else:
-        result = exchange(v1, s1, v2, s2, contact, smoothing)
-    return with_speed_status(inputs, result)
+        def contact(inputs, status):
+            return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, status,
+                                   auto_point=auto_point, auto_normal=auto_normal)
+
+        def exchange(inputs, status, auto):
+            return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
+
+        return rules, contact, exchange
+    prepare, impulse, results = collision.stages(smoothing)
+
+    def prepared(inputs):
+        p = prepare(*to_pytrees(inputs))
+        return p._replace(status=speed_status(inputs, p.status))
+
+    def found(inputs, p):
+        return impulse(*to_pytrees(inputs), p)
+
+    def derived(inputs, p, j):
+        return results(*to_pytrees(inputs), p, j)
+
+    return prepared, found, derived
+
+
+def speed_status(inputs: CaseInputs, status):
+    """``status`` (() int, the exchange's) with INVALID_SPEED_1 (2) where vehicle 1's (2's) ``speed`` is
+    negative and ``status`` is not already invalid (the exchange's reasons come first).
+
+    A case file refuses a negative speed; a swept, sampled or fitted one can reach it, and ``to_pytrees``
+    would turn it into travel backwards along the course. Such a row gets this status and NaN results
+    instead (traceable, per row)."""
+    s1, s2 = inputs.vehicles[0].speed, inputs.vehicles[1].speed
+    code = jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(s2 < 0, INVALID_SPEED_2, OK))
+    return jnp.where((code != OK) & (status < INVALID_NONFINITE), code, status).astype(jnp.asarray(status).dtype)
 
 
 def with_speed_status(inputs: CaseInputs, result: ExchangeResult) -> ExchangeResult:
-    """``result`` of ``inputs`` with ``case.speed_status`` applied: that status and NaN results
-    where a negative speed makes the row invalid."""
+    """``result`` of ``inputs`` with ``speed_status`` applied: that status and NaN results where a negative
+    speed makes the row invalid."""
     status = speed_status(inputs, result.contact.status)
-    result = mask_invalid(result, status == result.contact.status)  # NaN where the speed made it invalid
+    result = mask_invalid(result, status == result.contact.status)
     return result._replace(contact=result.contact._replace(status=status))
 
 
-def _rows(fn, *args):
-    """``fn`` over the leading axis of ``args``. One case unbatched: XLA compiled the vmapped program
-    for a batch of one 3-4x slower than for two rows or for no batch axis (6.1 against 1.5 s
-    explicit, 17.5 against 5.9 s automatic, 2026-11-22). The exchange's own vmap rule now computes
-    one row unbatched, which removed most of that; the stages of automatic contact still compile
-    slightly smaller here (4,947 against 5,206 instructions)."""
-    if jax.tree_util.tree_leaves(args)[0].shape[0] == 1:
-        row = fn(*jax.tree_util.tree_map(lambda x: x[0], args))
+def _solve_rows(inputs, auto_point, auto_normal, smoothing):
+    """``solve_inputs`` of every row of ``inputs``. One row is solved unbatched: XLA compiles a batch of
+    one row to a program several times the size of one unbatched row's."""
+    pipeline = stages(auto_point, auto_normal, smoothing)
+    if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
+        row = run(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), in_axes=None)
         return jax.tree_util.tree_map(lambda x: x[None], row)
-    return jax.vmap(fn)(*args)
+    return run(pipeline, (inputs,))
 
 
-# a file's few cases: compile time is most of the time (``ks_jax.quick``)
-@partial(quick_jit, static_argnames=("smoothing",))
-def _solve_explicit(inputs, smoothing):
-    return _rows(lambda x: solve_inputs(x, False, False, smoothing), inputs)
-
-
-def auto_status(inputs: CaseInputs):
-    """() int32: the first stage of automatic contact, ``exchange.input_status`` of one row."""
-    from .exchange import input_status
-
-    return input_status(*to_pytrees(inputs))
-
-
-def auto_contact(inputs: CaseInputs, status, auto_point: bool, auto_normal: bool):
-    """The second stage: ``geometry.automatic_stage`` of one row, given its ``auto_status``."""
-    from .geometry import automatic_stage
-
-    return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, status, auto_point=auto_point,
-                           auto_normal=auto_normal)
-
-
-def auto_exchange(inputs: CaseInputs, status, auto, smoothing=0.0) -> ExchangeResult:
-    """The third stage: the exchange at ``auto`` (``auto_contact``), as ``solve_inputs`` returns it.
-    The three in one program are ``solve_inputs`` with automatic contact; run as three compiled calls
-    (``_solve_batch``, ``ks_jax.sweep``) they compile and run faster (``geometry.automatic_exchange``)."""
-    from .geometry import exchange_at_contact
-
-    return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
-
-
-_auto_status = quick_jit(lambda inputs: _rows(auto_status, inputs))
-_auto_contact = quick_jit(lambda inputs, status, auto_point, auto_normal: _rows(
-    lambda x, st: auto_contact(x, st, auto_point, auto_normal), inputs, status), static_argnums=(2, 3))
-_auto_exchange = quick_jit(lambda inputs, status, auto, smoothing: _rows(
-    lambda x, st, a: auto_exchange(x, st, a, smoothing), inputs, status, auto), static_argnums=(3,))
-
-
-def _solve_batch(inputs, smoothing, auto_point, auto_normal):
-    """``solve_inputs`` of every row. Automatic contact runs as three compiled calls, status, contact
-    and exchange (``geometry.automatic_exchange`` says why): one program took 5.7 s to compile,
-    the three 2.5 s (benchmarks/RESULTS.md)."""
-    if not (auto_point or auto_normal):
-        return _solve_explicit(inputs, smoothing)
-    status = _auto_status(inputs)
-    return _auto_exchange(inputs, status, _auto_contact(inputs, status, auto_point, auto_normal), smoothing)
+_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3))  # a file's few cases: compiling is most of the time
 
 
 @dataclass
@@ -113,10 +114,42 @@ class Solution:
     status: str
 
     def to_dict(self) -> dict:
-        """MODEL.md section 4 as plain JSON-ready data (SI; NaN -> None)."""
-        from .report import solution_dict
+        """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, the result names of docs/model.md,
+        the status in words, NaN as None: what ``ks-jax solve --json`` prints for the case. An invalid case
+        has only its status. What the model leaves undefined is None too (``case.defined_output``): the
+        impulse's directions where none was exchanged; the first-contact time, centroid, normal, closing
+        and separation velocities and EES where the vehicles never touch; the course after of a vehicle at
+        rest; and ``time`` at a given contact (it belongs to automatic contact)."""
+        if self.result is None or self.status.startswith("invalid"):
+            return {"name": self.case.name, "contact": {"status": self.status}, "vehicles": []}
+        r = self.result
+        contact = {k: _plain(defined_output(r, f"contact.{k}") if undefined_kind(f"contact.{k}")
+                             else getattr(r.contact, k)) for k in ContactResult._fields if k != "status"}
+        contact["status"] = self.status
+        if not (self.case.auto_point or self.case.auto_normal):
+            contact["time"] = None  # no search for a first contact: the exchange is at the case state
+        vehicles = []
+        for i, (name, v) in enumerate(zip(self.case.vehicle_names, r.vehicles)):
+            d = {"name": name}
+            d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}") if undefined_kind(f"vehicles[{i}].{k}")
+                                else getattr(v, k)) for k in VehicleResult._fields})
+            d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
+            vehicles.append(d)
+        return {"name": self.case.name, "contact": contact, "vehicles": vehicles}
 
-        return solution_dict(self)
+
+def _plain(x):
+    """A result as plain JSON-ready data: a bool, a float (None for NaN), or a list of them; a vector that
+    is undefined throughout is None, not a list of Nones."""
+    x = np.asarray(x)
+    if x.dtype == np.bool_:
+        return bool(x) if x.ndim == 0 else [bool(v) for v in x]
+    if x.ndim == 0:
+        v = float(x)
+        return None if not math.isfinite(v) else v
+    if not np.isfinite(x).any():
+        return None
+    return [_plain(v) for v in x]
 
 
 def _status(case: Case, code) -> str:
@@ -130,17 +163,15 @@ def _status(case: Case, code) -> str:
 def solve(cases, smoothing: float = 0.0):
     """Solve a Case (-> Solution) or a list of cases (-> list of Solution).
 
-    Valid cases are solved together in one vmapped call per contact mode; an invalid case
-    (bad input in a multi-case file) gets status "invalid: <reason>" and no numbers.
-    In float32 (JAX's default) a case more than ``case.FAR_IN_FLOAT32`` (1 km) from the origin is solved
-    about its CGs' midpoint (``case.scene_origin``), and its ``contact.point`` is float64.
-    """
+    Valid cases are solved together in one vmapped call per contact mode; an invalid case (bad input in
+    a file of several cases) gets status "invalid: <reason>" and no numbers. In float32 (JAX's default) a
+    case more than ``case.scale.FAR_IN_FLOAT32`` (1 km) from the origin is solved about its CGs' midpoint
+    (``case.scale.scene_origin``), and its ``contact.point`` is float64."""
     single = isinstance(cases, Case)
     cases = [cases] if single else list(cases) if isinstance(cases, (list, tuple)) else None
     if cases is None or not all(isinstance(c, Case) for c in cases):
         raise TypeError("solve takes a Case or a list of them: ks_jax.load_case(path) reads a case file")
-    if not 0.0 <= smoothing < 1.0:
-        raise ValueError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    check_smoothing(smoothing)
     out: list[Solution | None] = [None] * len(cases)
     groups: dict[tuple, list[int]] = {}
     for i, c in enumerate(cases):
@@ -155,7 +186,7 @@ def solve(cases, smoothing: float = 0.0):
             stacked = move_scene(stacked, origin, auto_point)
         warn_far_from_origin(stacked, what="a case", about="the origin" if origin is None else "its CGs' midpoint",
                              auto_point=auto_point)
-        res = _solve_batch(as_arrays(stacked), float(smoothing), auto_point, auto_normal)
+        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing))
         res = jax.tree_util.tree_map(np.asarray, res)
         if origin is not None:
             point = res.contact.point.astype(np.float64)

@@ -8,7 +8,7 @@ Components. Vectors and matrices are read with ``vec``/``mat`` (one ``unstack``)
 ``v[i]``, and the functions here accept arrays or tuples of components (``*_c`` return
 components, the others arrays). Reverse mode is why: the cotangent of each ``v[i]`` is a ``pad``
 into a zero array, and the pads are then added up; batched, those pads and adds were most of
-the backward pass. The transpose of one ``unstack`` is one ``stack`` (benchmarks/RESULTS.md).
+the backward pass. The transpose of one ``unstack`` is one ``stack``.
 """
 
 from __future__ import annotations
@@ -130,18 +130,15 @@ def materialize(*xs):
     again in each of the dozens of loops that read them, several of which (XLA's concatenate
     loops) are not vectorized. ``lax.optimization_barrier`` is dropped before fusion on CPU, and a
     max-reduce over copies is rewritten into an elementwise op; a bitwise-or reduction of the
-    bits with zeros is kept as a reduction, which is not copied into elementwise consumers
-    (benchmarks/RESULTS.md: with libm's sin/cos, 6 sines and 6 cosines per row remained of 70
-    in the backward pass). The values are exact
-    (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
+    bits with zeros is kept as a reduction, which is not copied into elementwise consumers.
+    The values are exact (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
     own derivative). On a GPU it costs one small kernel."""
     xs = jnp.broadcast_arrays(*xs)
     dtype = xs[0].dtype
     int_type = {8: jnp.int64, 4: jnp.int32, 2: jnp.int16}[dtype.itemsize]
     bits = [lax.bitcast_convert_type(x, int_type) for x in xs]
-    # one variadic reduction, an output per value: stacking the values into one array first made
-    # XLA compute them inside a concatenate loop, which does not vectorize (the trig loops of the
-    # backward pass 218 -> 74 ns of CPU per row in the profile)
+    # one variadic reduction, an output per value: stacking the values into one array first makes
+    # XLA compute them inside a concatenate loop, which does not vectorize
     zero = jnp.zeros((), int_type)
     out = lax.reduce([jnp.stack([b, jnp.zeros_like(b)]) for b in bits], [zero] * len(bits),
                      _bitwise_or(len(bits)), (0,))
@@ -157,9 +154,8 @@ def _bitwise_or(count):
 
 
 # sin, cos and atan2 written as polynomials in elementwise operations. XLA's CPU backend
-# evaluates jnp.sin, jnp.cos and jnp.arctan2 by scalar libm calls (15-20 ns per value in float64,
-# and the loop around them is not vectorized); these vectorize, at 1-4 ulp in float64
-# (tests/test_linalg.py measures it against NumPy).
+# evaluates jnp.sin, jnp.cos and jnp.arctan2 by scalar libm calls, in loops that are not vectorized;
+# these vectorize, at 1-4 ulp in float64 (the tests hold them to NumPy).
 
 def _pio2_parts(head_bits, dtype):
     """pi/2 = p1 + p2 + p3 in ``dtype``, p1 and p2 with ``head_bits`` significant bits (so that
@@ -217,8 +213,8 @@ def _sincos_values(x):
 @jax.custom_jvp
 def sincos(x):
     """(sin x, cos x) as vectorizable polynomials (see ``_sincos_values``), stored once
-    (``materialize``: else XLA copies the polynomial into every loop that reads the values, which
-    multiplied the compile time of a solve by 2.5); derivative exact in terms of the values."""
+    (``materialize``: else XLA copies the polynomial into every loop that reads the values, and
+    compiles each copy); derivative exact in terms of the values."""
     return materialize(*_sincos_values(x))
 
 

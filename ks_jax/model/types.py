@@ -1,4 +1,4 @@
-"""Inputs and results as pytrees (MODEL.md sections 2 and 4).
+"""Inputs and results as pytrees (docs/model.md, "Inputs" and "Results").
 
 All fields are arrays in SI units; the kernel sees one collision (no batch axis), and a
 batch is the same pytree with a leading axis on every leaf (``jax.vmap`` at the edge).
@@ -90,8 +90,8 @@ class State(NamedTuple):
     ):
         """State from SI values (angles in rad, rates in rad/s).
 
-        position: (2,) or (3,); a 2D position gets z = ``cg_height``, the vehicle's (MODEL.md
-        section 2), which must then be given (a State does not know its vehicle).
+        position: (2,) or (3,); a 2D position gets z = ``cg_height``, the vehicle's (docs/model.md,
+        "Inputs"), which must then be given (a State does not know its vehicle).
         Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw).
         Either ``yaw_rate`` or ``angular_velocity`` (3,).
         """
@@ -99,7 +99,7 @@ class State(NamedTuple):
         if position.shape[-1] == 2:
             if cg_height is None:
                 raise ValueError("State.create: position (x, y) has no z: give (x, y, z), or cg_height= (the "
-                                 "vehicle's; MODEL.md section 2: z defaults to cg_height)")
+                                 "vehicle's: z defaults to cg_height)")
             z = _f(cg_height)
             position = jnp.concatenate([position, jnp.broadcast_to(z, position.shape[:-1])[..., None]], -1)
         yaw = _f(yaw)
@@ -162,12 +162,12 @@ class Contact(NamedTuple):
 
 
 class ContactResult(NamedTuple):
-    """Per-exchange results (MODEL.md section 4). Shapes are for one exchange.
+    """Per-exchange results (docs/model.md, "Results"). Shapes are for one exchange.
 
     point (3,) m; normal (3,) unit; time () s (0 for an explicit contact: the exchange is at
     the case state); impulse (3,) N s on vehicle 1; impulse_magnitude, impulse_normal (n.J),
     impulse_tangential () N s; impulse_azimuth () deg in [0, 360); impulse_elevation () deg (both a
-    stand-in 0 where no impulse was exchanged, impulse_magnitude 0: mask them, as ``case.defined_output``
+    stand-in 0 where no impulse was exchanged, impulse_magnitude 0: mask them, as ``ks_jax.case.defined_output``
     and ``ks-jax solve --json`` do);
     sliding () bool (|T_c| > mu N_c beyond rounding: a contact with no tangential part does not slide, at
     mu = 0 too); closing_velocity (3,) m/s, u at P before; separation_velocity (3,) m/s,
@@ -191,14 +191,14 @@ class ContactResult(NamedTuple):
 
 
 class VehicleResult(NamedTuple):
-    """Per-vehicle results (MODEL.md section 4).
+    """Per-vehicle results (docs/model.md, "Results").
 
     delta_v (3,) m/s; delta_v_magnitude () m/s = |J|/m; delta_v_body (3,) m/s (longitudinal,
     lateral left +, vertical); delta_yaw_rate () rad/s; velocity_after (3,) m/s; speed_after ()
     m/s (|velocity_after|); course_after () deg in [0, 360); angular_velocity_after (3,) rad/s;
     yaw_rate_after () rad/s; pdof () deg in [0, 360) (SAE J224); pdof_clock () 1..12 (both a stand-in
     0 and 12, which would read as frontal, where no impulse was exchanged: the contact's impulse_magnitude
-    is 0; mask them, as ``case.defined_output``, sweeps and ``ks-jax solve --json`` do);
+    is 0; mask them, as ``ks_jax.case.defined_output``, sweeps and ``ks-jax solve --json`` do);
     crush () m; ees () m/s (NaN when both crushes are 0 or the energy loss is negative beyond rounding:
     undefined; an energy loss of 0 to rounding gives 0).
     """
@@ -225,7 +225,7 @@ class ExchangeResult(NamedTuple):
     vehicles: tuple
 
 
-# Status codes carried per row inside jit (MODEL.md section 4 `status`).
+# Status codes carried per row inside jit (docs/model.md, "status").
 OK = 0
 SEPARATING = 1
 NO_CONTACT = 2
@@ -240,7 +240,7 @@ INVALID_RESTITUTION = 17
 INVALID_FRICTION = 18
 INVALID_NORMAL = 19
 INVALID_PENETRATION_TIME = 20
-INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see ``case.speed_status``
+INVALID_SPEED_1 = 21  # a case's speed (CaseInputs), not an exchange input: see ``ks_jax.solve.speed_status``
 INVALID_SPEED_2 = 22
 INVALID_SMOOTHING = 23  # an array ``smoothing`` (a Python number is refused by a ValueError)
 INVALID_OVERFLOW = 24  # finite inputs whose results are not (say a speed of 1e300 m/s)

@@ -1,4 +1,5 @@
-"""Everything MODEL.md section 4 derives from one impulse: delta-V, PDOF, crush, EES, angles."""
+"""Everything the exchange derives from its impulse (docs/model.md, "Results"): delta-V, PDOF, crush,
+EES, energy loss, the impulse's direction."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ ROUNDING = 1e3
 
 def crush_depth(point, direction, position, rot, vehicle):
     """Distance from ``point`` along ``direction`` (unit, global) until it leaves the
-    vehicle's bounding box; 0 if the point is not inside the box (MODEL.md section 4)."""
+    vehicle's bounding box; 0 if the point is not inside the box (docs/model.md, "crush")."""
     p = la.matvec(rot, point - position, transpose=True)
     d = la.matvec(rot, direction, transpose=True)
     lo = jnp.stack([vehicle.cg_to_front - vehicle.length, -0.5 * vehicle.width, -vehicle.cg_height])
@@ -54,7 +55,7 @@ CRUSH_TOLERANCE = 1e-6  # relative to the sum of the two lengths: 10 um for two 
 
 
 def ees_pair(energy_loss, crush1, crush2, mass1, mass2, length_sum=1.0, energy_rounding=0.0):
-    """Burg's EES (MODEL.md section 4): E_i = E C_i / (C_1 + C_2), EES_i = sqrt(2 E_i / m_i).
+    """Burg's EES (docs/model.md, "ees"): E_i = E C_i / (C_1 + C_2), EES_i = sqrt(2 E_i / m_i).
 
     NaN (undefined) when C_1 + C_2 = 0 or the energy loss is negative. "= 0" means below
     ``CRUSH_TOLERANCE * length_sum``: a centroid on a box face gives a crush of rounding size
@@ -95,10 +96,10 @@ def _vehicle(force, body, point, normal_into, j_mag):
     )
 
 
-def results(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
-    """Assemble the section 4 results from the impulse ``j`` on vehicle 1.
+def derive(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResult:
+    """Every result of the exchange from the impulse ``j`` on vehicle 1.
 
-    factors = (size, ratio) of ``exchange.ImpulseStage``: J = size (n + T / N), ratio = |T| / N,
+    factors = (size, ratio) of ``collision.Impulse``: J = size (n + T / N), ratio = |T| / N,
     from which |J| and |J_t| are computed (with their one-sided derivatives at J = 0 and J_t = 0).
     body_i = (vehicle, state, R, I^-1 global, r = P - x). The energy loss uses
     E = -J.(u + u')/2, which equals the kinetic-energy difference of both bodies (translation
@@ -106,8 +107,7 @@ def results(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResul
     """
     size, ratio = factors
     # |J| = size sqrt(1 + ratio^2); as the norm of J, plus 0 whose derivative where size = 0 (eps = -1)
-    # is the one-sided one (the norm's is 0 there): size sqrt(1 + ratio^2) itself made the gradient of
-    # a batched delta-V loss 1.3x slower
+    # is the one-sided one (the norm's is 0 there): size sqrt(1 + ratio^2) itself makes a slower gradient
     j_mag = la.safe_norm(j) + jnp.where(size == 0, size * jax.lax.stop_gradient(jnp.sqrt(1.0 + ratio * ratio)), 0.0)
     v1 = _vehicle(j, body1, p, -n, j_mag)
     v2 = _vehicle(-j, body2, p, n, j_mag)

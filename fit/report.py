@@ -1,0 +1,51 @@
+"""What a reconstructionist reads of a fit: estimates with standard errors in the trade's units and SI,
+residuals in sigmas, what the evidence does not determine, convergence."""
+
+from __future__ import annotations
+
+import math
+
+from ks_jax.case import input_kind
+
+from .uncertainty import fmt
+
+
+def text_report(result) -> str:
+    """What a reconstructionist reads: estimates, residuals, what is not determined."""
+    if result.status.startswith("invalid"):
+        return f"Reconstruction: {result.case_name}\n  not fitted: {result.status}"
+    lines = [f"Reconstruction: {result.case_name}", ""]
+    width = max(len(u.path) for u in result.unknowns) + 2
+    lines.append("Estimates (+/- one standard error, Laplace):")
+    for u in result.unknowns:
+        kind = input_kind(u.path)
+        x, s = result.estimate[u.path], result.std[u.path]
+        std = "not determined by the evidence" if not math.isfinite(s) else f"+/- {fmt(s, kind)}"
+        lines.append(f"  {u.path:<{width}} {fmt(x, kind, si=True):<34} {std}")
+    if result.monte_carlo:
+        mc = result.monte_carlo
+        lines += ["", f"Monte Carlo ({mc['samples']} refits of perturbed evidence, "
+                      f"{100 * mc['converged_fraction']:.0f}% converged): 5% / 50% / 95%"]
+        for u in result.unknowns:
+            kind = input_kind(u.path)
+            if u.path in result.not_determined:  # the refits spread over the bounds: not an interval
+                lines.append(f"  {u.path:<{width}} no interval: not determined by the evidence (below)")
+                continue
+            p = [mc["percentiles"][q][u.path] for q in ("5", "50", "95")]
+            lines.append(f"  {u.path:<{width}} " + " / ".join(fmt(v, kind) for v in p))
+    lines += ["", "Evidence (fitted vs measured, residual in sigmas):"]
+    ew = max(len(k) for k in result.residuals) + 2
+    for e, kind, (key, res) in zip(result.evidence, result.evidence_kinds, result.residuals.items()):
+        lines.append(f"  {key:<{ew}} fitted {fmt(result.fitted[key], kind):<16} measured "
+                     f"{fmt(e.value, kind):<16} +/- {fmt(e.sigma, kind):<12} {res:+.2f} sigma")
+    lines.append(f"  chi^2 = {result.chi2:.3g} for {len(result.evidence)} evidence, {len(result.unknowns)} unknowns")
+    lines += ["", "Not determined by the evidence:"]
+    lines += [f"  - {s}" for s in result.unidentified] or ["  (nothing: every unknown is determined)"]
+    if result.at_bound:
+        lines += ["", "At a bound:"] + [f"  - {s}" for s in result.at_bound]
+    if result.notes:
+        lines += ["", "Notes:"] + [f"  - {s}" for s in result.notes]
+    lines += ["", f"Converged: {'yes' if result.converged else 'NO'} ({result.iterations} iterations; "
+                  f"{result.starts_converged} of {result.starts} starts converged, {result.starts_at_best} reached "
+                  f"the best fit); exchange status at the estimate: {result.status}"]
+    return "\n".join(lines)

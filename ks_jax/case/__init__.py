@@ -1,0 +1,27 @@
+"""Case files: from a JSON or TOML file to the inputs of a solve, and the paths that name single
+inputs and results (docs/model.md, "Case files" and "Paths").
+
+- ``load``: reading files into ``Case`` objects, every number converted to SI;
+- ``inputs``: ``CaseInputs``, the pytree of a case's inputs, and ``to_pytrees`` for the physics;
+- ``schema``: what each field is (its kind of quantity and shape);
+- ``paths``: getting and setting one number by its path ("vehicles[1].speed");
+- ``outputs``: results the model leaves undefined in some rows, and why;
+- ``scale``: scenes far from the origin in float32, and inputs far out of scale;
+- ``errors``: ``CaseError`` and ``CaseWarning``.
+"""
+
+from .errors import CaseError, CaseWarning
+from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs, as_arrays, to_pytrees
+from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
+from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
+from .outputs import undefined_kind
+from .paths import PathError, automatic_part, canonical_path, check_output_path, get_input, get_output
+from .paths import input_kind, input_leaf, input_ties, output_kind, parse_path, set_input
+
+__all__ = [
+    "CIRCULAR_OUTPUTS", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs", "CaseWarning", "ContactInputs",
+    "PathError", "VehicleInputs", "as_arrays", "at_rest_after", "automatic_part", "canonical_path",
+    "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input", "get_output",
+    "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases", "output_kind",
+    "parse_output_value", "parse_path", "set_input", "to_pytrees", "undefined_kind",
+]

@@ -1,0 +1,103 @@
+"""A case's inputs as one pytree of SI arrays (``CaseInputs``), and the kernel's pytrees made from it.
+
+``CaseInputs`` holds every scalar a user may vary, sweep or fit, in the form case files give them
+(speed and course rather than a velocity vector, a normal's azimuth and pitch). ``to_pytrees`` turns it
+into the physics' (Vehicle, State, Vehicle, State, Contact).
+"""
+
+from __future__ import annotations
+
+import functools
+import operator
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ..model import linalg as la
+from ..model.types import Contact, State, Vehicle, normal_from_angles
+
+
+class VehicleInputs(NamedTuple):
+    """One vehicle's inputs, SI. inertia is always (3, 3) (body frame); velocity is held as
+    horizontal ``speed``, ``course`` and ``velocity_z``; angular_velocity (3,) rad/s, global."""
+
+    mass: Any
+    inertia: Any
+    length: Any
+    width: Any
+    height: Any
+    cg_to_front: Any
+    cg_height: Any
+    position: Any
+    yaw: Any
+    pitch: Any
+    roll: Any
+    speed: Any
+    course: Any
+    velocity_z: Any
+    angular_velocity: Any
+
+class ContactInputs(NamedTuple):
+    """point (3,) m; normal: azimuth (rad); normal_pitch (rad); restitution; friction;
+    penetration_time (s). point/normal are placeholders (zeros) under automatic contact."""
+
+    point: Any
+    normal: Any
+    normal_pitch: Any
+    restitution: Any
+    friction: Any
+    penetration_time: Any
+
+class CaseInputs(NamedTuple):
+    vehicles: tuple
+    contact: ContactInputs
+
+@dataclass(frozen=True)
+class Case:
+    """One case: its name, its inputs (None if invalid), and which contact parts are automatic."""
+
+    name: str
+    inputs: CaseInputs | None
+    auto_point: bool = False
+    auto_normal: bool = False
+    vehicle_names: tuple = ("vehicle 1", "vehicle 2")
+    error: str | None = None
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+    source: str | None = None
+
+    @property
+    def valid(self) -> bool:
+        return self.error is None
+
+def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
+    """Every leaf as a jnp array (of ``dtype``, default: JAX's default float)."""
+    dtype = dtype or jnp.result_type(float)
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dtype), inputs)
+
+def to_pytrees(inputs: CaseInputs):
+    """(Vehicle, State, Vehicle, State, Contact) from CaseInputs. Pure and differentiable.
+
+    A velocity or normal made from a non-finite speed, course, velocity_z or angle is NaN, so that
+    the exchange gives the row its status; it is computed from stand-ins (the double-where), so that
+    the row's zero cotangent times an infinite derivative cannot make NaN the gradient of a parameter
+    it shares with other rows."""
+    out = []
+    for v in inputs.vehicles:
+        vehicle = Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height)
+        ok, (speed, course, vz) = _finite_stand_ins(v.speed, v.course, v.velocity_z)
+        sin, cos = la.sincos(course)
+        velocity = jnp.where(ok, jnp.stack([speed * cos, speed * sin, vz * jnp.ones_like(speed)]), jnp.nan)
+        state = State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
+        out += [vehicle, state]
+    c = inputs.contact
+    ok, (azimuth, pitch) = _finite_stand_ins(c.normal, c.normal_pitch)
+    contact = Contact(c.point, jnp.where(ok, normal_from_angles(azimuth, pitch), jnp.nan), c.restitution,
+                      c.friction, c.penetration_time)
+    return (*out, contact)
+
+def _finite_stand_ins(*xs):
+    """(ok, xs with 0 for each where ok is False): ok where all of ``xs`` are finite."""
+    ok = functools.reduce(operator.and_, [jnp.isfinite(x) for x in xs])
+    return ok, tuple(jnp.where(ok, x, jnp.zeros_like(x)) for x in xs)

@@ -1,0 +1,264 @@
+"""Case files (JSON or TOML) into ``Case`` objects (docs/model.md, "Case files"). Units exist only at
+this edge: every number is converted to SI here.
+
+Errors name the case, the field path, the value and the rule, and raise ``CaseError``. In a file with
+several cases, a bad case is kept as an invalid ``Case`` (its ``error`` says why), so that the others
+are still solved.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .. import units as U
+from .errors import CaseError, CaseWarning
+from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs
+from .paths import check_output_path, output_kind
+from .schema import CASE_FIELDS, CONTACT_FIELDS, TEXT_FIELDS, VEHICLE_FIELDS
+
+
+def _where(case_name, path):
+    return f"case '{case_name}': {path}"
+
+def _number(value, kind, path, case_name):
+    try:
+        x = U.parse_quantity(value, kind)
+    except U.UnitError as err:
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: {err}") from None
+    if not math.isfinite(x):
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a finite number")
+    return x
+
+def _vector(value, kind, path, case_name, sizes):
+    if not isinstance(value, (list, tuple)) or len(value) not in sizes:
+        want = " or ".join(str(s) for s in sizes)
+        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a list of {want} quantities")
+    return [_number(v, kind, f"{path}[{i}]", case_name) for i, v in enumerate(value)]
+
+def _inertia(value, path, case_name):
+    if isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(r, (list, tuple)) for r in value):
+        m = np.array([_vector(r, "inertia", f"{path}[{i}]", case_name, (3,)) for i, r in enumerate(value)])
+        if not np.allclose(m, m.T, rtol=1e-9, atol=0):
+            raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be symmetric")
+        if np.any(np.linalg.eigvalsh(m) <= 0):
+            raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be positive definite")
+        return m
+    moments = _vector(value, "inertia", path, case_name, (3,))
+    for i, x in enumerate(moments):
+        if x <= 0:
+            raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: principal moments of inertia must be positive")
+    return np.diag(moments)
+
+def _check_keys(d, allowed, path, case_name):
+    """A table must be a dict; an unknown field (a typo, or a key of another tool) is ignored with
+    a CaseWarning naming it, so that a misspelt optional field does not pass silently."""
+    if not isinstance(d, dict):
+        raise CaseError(f"{_where(case_name, path)}: must be a table/object, got {d!r}")
+    for k in d:
+        if k not in allowed:
+            warnings.warn(CaseWarning(f"{_where(case_name, path + '.' + k if path else k)}: unknown field, ignored "
+                                      f"(known: {', '.join(sorted(allowed - {'...'}))})"), stacklevel=2)
+
+def _require(d, key, path, case_name):
+    if key not in d:
+        raise CaseError(f"{_where(case_name, path + '.' + key)}: missing field")
+    return d[key]
+
+def _positive(x, raw, path, case_name, rule):
+    if not x > 0:
+        raise CaseError(f"{_where(case_name, path)} = {raw!r}: {rule}")
+
+def _vehicle_inputs(d, i, case_name):
+    path = f"vehicles[{i}]"
+    _check_keys(d, set(VEHICLE_FIELDS) | TEXT_FIELDS, path, case_name)
+    num = lambda k: _number(d[k], VEHICLE_FIELDS[k][0], f"{path}.{k}", case_name)  # noqa: E731
+    if "mass" in d and "weight" in d:
+        raise CaseError(f"{_where(case_name, path)}: give mass or weight, not both")
+    if "mass" in d:
+        mass = num("mass")
+        _positive(mass, d["mass"], f"{path}.mass", case_name, "mass must be positive")
+    elif "weight" in d:
+        mass = num("weight") / U.G0
+        _positive(mass, d["weight"], f"{path}.weight", case_name, "weight must be positive")
+    else:
+        raise CaseError(f"{_where(case_name, path + '.mass')}: missing field (give mass or weight)")
+    inertia = _inertia(_require(d, "inertia", path, case_name), f"{path}.inertia", case_name)
+    dims = {}
+    for k in ("length", "width", "height", "cg_to_front", "cg_height"):
+        _require(d, k, path, case_name)
+        dims[k] = num(k)
+    for k in ("length", "width", "height"):
+        _positive(dims[k], d[k], f"{path}.{k}", case_name, f"{k} must be positive")
+    if not 0 <= dims["cg_to_front"] <= dims["length"]:
+        raise CaseError(f"{_where(case_name, path + '.cg_to_front')} = {d['cg_to_front']!r}: "
+                        f"must be between 0 and the length ({dims['length']:.4g} m)")
+    if not 0 <= dims["cg_height"] <= dims["height"]:
+        raise CaseError(f"{_where(case_name, path + '.cg_height')} = {d['cg_height']!r}: "
+                        f"must be between 0 and the height ({dims['height']:.4g} m)")
+    pos = _vector(_require(d, "position", path, case_name), "length", f"{path}.position", case_name, (2, 3))
+    if len(pos) == 2:
+        pos.append(dims["cg_height"])
+    yaw = num("yaw") if "yaw" in d else None
+    if yaw is None:
+        raise CaseError(f"{_where(case_name, path + '.yaw')}: missing field")
+    pitch = num("pitch") if "pitch" in d else 0.0
+    roll = num("roll") if "roll" in d else 0.0
+    if "velocity" in d and ("speed" in d or "course" in d):
+        raise CaseError(f"{_where(case_name, path)}: give velocity, or speed (and course), not both")
+    if "velocity" in d:
+        vel = _vector(d["velocity"], "velocity", f"{path}.velocity", case_name, (2, 3))
+        speed, course = math.hypot(vel[0], vel[1]), math.atan2(vel[1], vel[0])
+        vz = vel[2] if len(vel) == 3 else 0.0
+    elif "speed" in d:
+        speed = num("speed")
+        if speed < 0:
+            raise CaseError(f"{_where(case_name, path + '.speed')} = {d['speed']!r}: speed must be >= 0 "
+                            "(reverse the course for backwards travel)")
+        course = num("course") if "course" in d else yaw
+        vz = 0.0
+    else:
+        raise CaseError(f"{_where(case_name, path + '.speed')}: missing field (give speed or velocity)")
+    if "yaw_rate" in d and "angular_velocity" in d:
+        raise CaseError(f"{_where(case_name, path)}: give yaw_rate or angular_velocity, not both")
+    if "angular_velocity" in d:
+        w = _vector(d["angular_velocity"], "angular_velocity", f"{path}.angular_velocity", case_name, (3,))
+    else:
+        w = [0.0, 0.0, num("yaw_rate") if "yaw_rate" in d else 0.0]
+    return VehicleInputs(mass, inertia, dims["length"], dims["width"], dims["height"], dims["cg_to_front"],
+                         dims["cg_height"], np.array(pos), yaw, pitch, roll, speed, course, vz, np.array(w))
+
+def _contact_inputs(d, case_name):
+    path = "contact"
+    _check_keys(d, set(CONTACT_FIELDS) | TEXT_FIELDS, path, case_name)
+    num = lambda k: _number(d[k], CONTACT_FIELDS[k][0], f"contact.{k}", case_name)  # noqa: E731
+    _require(d, "restitution", path, case_name)
+    eps = num("restitution")
+    if not -1 <= eps <= 1:
+        raise CaseError(f"{_where(case_name, 'contact.restitution')} = {d['restitution']!r}: "
+                        "restitution must be in [-1, 1]")
+    _require(d, "friction", path, case_name)
+    mu = num("friction")
+    if mu < 0:
+        raise CaseError(f"{_where(case_name, 'contact.friction')} = {d['friction']!r}: friction must be >= 0")
+    pt = num("penetration_time") if "penetration_time" in d else 0.0
+    if pt < 0:
+        raise CaseError(f"{_where(case_name, 'contact.penetration_time')} = {d['penetration_time']!r}: "
+                        "penetration_time must be >= 0")
+    normal_pitch = num("normal_pitch") if "normal_pitch" in d else 0.0
+    auto_point = "point" not in d
+    point = np.zeros(3) if auto_point else np.array(_vector(d["point"], "length", "contact.point", case_name, (3,)))
+    auto_normal = "normal" not in d
+    azimuth = 0.0
+    if not auto_normal:
+        raw = d["normal"]
+        if isinstance(raw, (list, tuple)):
+            vec = _vector(raw, "dimensionless", "contact.normal", case_name, (2, 3))
+            vec = vec + [0.0] * (3 - len(vec))
+            if math.hypot(*vec) == 0:
+                raise CaseError(f"{_where(case_name, 'contact.normal')} = {raw!r}: the normal must be a non-zero vector")
+            azimuth = math.atan2(vec[1], vec[0])
+            if "normal_pitch" in d:
+                raise CaseError(f"{_where(case_name, 'contact.normal_pitch')}: give the pitch in the vector "
+                                "or use an azimuth for contact.normal, not both")
+            normal_pitch = math.atan2(vec[2], math.hypot(vec[0], vec[1]))
+        else:
+            azimuth = num("normal")
+    return ContactInputs(point, azimuth, normal_pitch, eps, mu, pt), auto_point, auto_normal
+
+def case_from_dict(d: dict, default_name: str = "case", source: str | None = None) -> Case:
+    """Read one case (a dict as in a JSON/TOML file). Raises CaseError."""
+    if not isinstance(d, dict):
+        raise CaseError(f"case '{default_name}': a case must be an object/table, got {type(d).__name__}")
+    name = str(d.get("name", default_name))
+    _check_keys(d, CASE_FIELDS, "", name)
+    vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
+    if vehicles is None:
+        raise CaseError(f"case '{name}': vehicles: missing field")
+    if not isinstance(vehicles, list) or len(vehicles) != 2:
+        n = len(vehicles) if isinstance(vehicles, list) else vehicles
+        raise CaseError(f"case '{name}': vehicles = {n!r} vehicles: a case needs exactly two vehicles")
+    if "contact" not in d:
+        raise CaseError(f"case '{name}': contact: missing field")
+    veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
+    contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
+    if "reference" in d:
+        _check_reference(d["reference"], name)
+    inputs = CaseInputs(veh, contact)
+    names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
+    return Case(name, inputs, auto_point, auto_normal, names, None, d, source)
+
+def _check_reference(reference, case_name):
+    """``reference``: reported results to print beside ks-jax's (an output path -> its value, e.g. the
+    manual's panel); checked when the case is read, so that a bad entry costs its case only."""
+    if not isinstance(reference, dict):
+        raise CaseError(f"{_where(case_name, 'reference')} = {reference!r}: must map output paths to reported "
+                        "values, e.g. {\"contact.impulse_magnitude\": \"1336.904 lbf*s\"}")
+    for path, value in reference.items():
+        try:
+            check_output_path(path)
+        except CaseError as err:
+            raise CaseError(f"{_where(case_name, 'reference')}: {err}") from None
+        parse_output_value(value, path, case_name, f"reference.{path}")
+
+def _read(path: Path):
+    try:
+        text = path.read_bytes().decode("utf-8-sig")  # -sig: a byte-order mark, as some editors write
+    except UnicodeDecodeError as err:
+        raise CaseError(f"{path}: not a UTF-8 text file (byte {err.start}: {err.reason}); case files are JSON "
+                        "or TOML text") from None
+    try:
+        if path.suffix.lower() == ".toml":
+            return tomllib.loads(text)
+        return json.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
+        kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
+        other = "" if path.suffix.lower() in (".json", ".toml") else \
+            f" (case files are JSON or TOML; a '{path.suffix}' file is read as JSON)"
+        raise CaseError(f"{path}: cannot be read as {kind}{other}: {err}") from None
+
+def cases_from_data(data, source=None) -> list[Case]:
+    """All cases of a loaded file. A file with one case raises CaseError on a bad case; in a
+    file with ``cases``, a bad case becomes an invalid Case and the others are kept."""
+    if isinstance(data, dict) and "cases" in data:
+        if not isinstance(data["cases"], list) or not data["cases"]:
+            raise CaseError(f"{source or 'file'}: cases must be a non-empty list")
+        out = []
+        for i, d in enumerate(data["cases"]):
+            default = d.get("name", f"case {i + 1}") if isinstance(d, dict) else f"case {i + 1}"
+            try:
+                out.append(case_from_dict(d, f"case {i + 1}", source))
+            except CaseError as err:
+                out.append(Case(str(default), None, error=str(err), raw=d if isinstance(d, dict) else {},
+                                source=source))
+        return out
+    return [case_from_dict(data, Path(source).stem if source else "case", source)]
+
+def load_cases(path) -> list[Case]:
+    """Every case in a JSON or TOML file (see ``cases_from_data``)."""
+    path = Path(path)
+    if not path.exists():
+        raise CaseError(f"{path}: no such file")
+    if path.is_dir():
+        raise CaseError(f"{path}: is a directory; give a case file (JSON or TOML)")
+    return cases_from_data(_read(path), str(path))
+
+def load_case(path):
+    """The case in a file: a ``Case`` if the file holds one, a list of Case if it holds ``cases``."""
+    cases = load_cases(path)
+    data = _read(Path(path))
+    return cases if isinstance(data, dict) and "cases" in data else cases[0]
+
+def parse_output_value(value, path: str, case_name: str = "case", where: str | None = None) -> float:
+    """A measured/reference value for an output path, in the unit the results use (SI, or
+    degrees for pdof, impulse_azimuth, impulse_elevation, course_after)."""
+    kind = output_kind(path)
+    label = where or path
+    if kind == "degrees":
+        return _number(value, "angle", label, case_name) / U.DEG
+    return _number(value, kind, label, case_name)

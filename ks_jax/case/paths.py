@@ -1,0 +1,165 @@
+"""Single numbers of a case's inputs and results, addressed by paths: "vehicles[1].speed",
+"contact.point[0]", "vehicles[0].delta_v_body[0]" (docs/model.md, "Paths")."""
+
+from __future__ import annotations
+
+import re
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..model.types import ContactResult, VehicleResult
+from .errors import CaseError
+from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs
+from .schema import INPUT_KINDS, OUTPUT_KINDS
+
+_PATH = re.compile(r"^(vehicles)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$|^(contact)\.(\w+)((?:\[\d+\])*)$")
+
+class PathError(CaseError):
+    pass
+
+def canonical_path(path: str) -> str:
+    """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
+    return path.strip().replace(" ", "")
+
+def parse_path(path: str):
+    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,))."""
+    m = _PATH.match(canonical_path(path))
+    if not m:
+        raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")
+    if m.group(1):
+        idx = tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
+        vi = int(m.group(2))
+        if vi not in (0, 1):
+            raise PathError(f"path '{path}': vehicle index must be 0 or 1")
+        return "vehicles", vi, m.group(3), idx
+    idx = tuple(int(k) for k in re.findall(r"\d+", m.group(7)))
+    return "contact", None, m.group(6), idx
+
+def input_leaf(path):
+    """(group, vehicle index, field in CaseInputs, index tuple) for an input path."""
+    group, vi, name, idx = parse_path(path)
+    if group == "vehicles":
+        if name == "yaw_rate" and not idx:
+            return group, vi, "angular_velocity", (2,)
+        if name == "inertia" and len(idx) == 1:
+            if idx[0] > 2:
+                raise PathError(f"path '{path}': index out of range (0..2)")
+            return group, vi, "inertia", (idx[0], idx[0])
+        if name not in VehicleInputs._fields:
+            hint = {"velocity": " (vary speed and course instead)",
+                    "weight": f" (a case's weight sets its mass: use vehicles[{vi}].mass, in lb where weights "
+                              "are in lbf)"}.get(name, "")
+            raise PathError(f"path '{path}': '{name}' is not a vehicle input{hint}; "
+                            f"inputs are {', '.join(VehicleInputs._fields)}, yaw_rate")
+    elif name not in ContactInputs._fields:
+        raise PathError(f"path '{path}': '{name}' is not a contact input; inputs are {', '.join(ContactInputs._fields)}")
+    shapes = {"position": 1, "angular_velocity": 1, "point": 1, "inertia": 2}
+    if len(idx) != shapes.get(name, 0):
+        need = shapes.get(name, 0)
+        raise PathError(f"path '{path}': '{name}' needs {need} index{'es' if need != 1 else ''} to name a number")
+    if any(k > 2 for k in idx):
+        raise PathError(f"path '{path}': index out of range (0..2)")
+    return group, vi, name, idx
+
+def input_kind(path) -> str:
+    """The unit kind of an input path (see ``units.SI_UNITS``); PathError for an unknown path."""
+    group, vi, name, idx = parse_path(path)
+    input_leaf(path)
+    return INPUT_KINDS[name]
+
+def get_input(inputs: CaseInputs, path: str):
+    """The value of the input ``path`` (section 6: "vehicles[1].speed", "contact.point[0]",
+    "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``), SI (angles in rad); a PathError
+    names a path that is not an input. ``set_input`` is its converse."""
+    group, vi, name, idx = input_leaf(path)
+    leaf = getattr(inputs.vehicles[vi] if group == "vehicles" else inputs.contact, name)
+    return jnp.asarray(leaf)[idx] if idx else leaf
+
+def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
+    """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable). A
+    product of inertia (``inertia[i][j]``, i != j) sets [j][i] too: the tensor stays symmetric."""
+    group, vi, name, idx = input_leaf(path)
+    try:
+        dtype = None if value is None else jnp.result_type(value)
+    except TypeError:
+        dtype = None
+    if dtype is None or not jnp.issubdtype(dtype, jnp.number) or jnp.shape(value) != ():
+        raise CaseError(f"set_input '{path}' = {value!r}: the value must be one number, in SI units (for a "
+                        "unit string, convert it first: ks_jax.units.parse_quantity)")
+    holder = inputs.vehicles[vi] if group == "vehicles" else inputs.contact
+    leaf = getattr(holder, name)
+    new = jnp.asarray(leaf).at[idx].set(value) if idx else value
+    if name == "inertia" and len(idx) == 2 and idx[0] != idx[1]:
+        new = new.at[idx[::-1]].set(value)
+    holder = holder._replace(**{name: new})
+    if group == "vehicles":
+        vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))
+        return inputs._replace(vehicles=vehicles)
+    return inputs._replace(contact=holder)
+
+def automatic_part(case: "Case", path) -> str | None:
+    """"point" or "normal" if ``path`` names the part of the contact that automatic contact computes
+    in ``case`` (not an input there: a sweep or a fit refuses to vary it), else None."""
+    _, _, name, _ = input_leaf(path)
+    return name if (name == "point" and case.auto_point or name == "normal" and case.auto_normal) else None
+
+def input_ties(case: "Case", paths) -> tuple:
+    """((k, path), ...): the inputs that follow ``paths[k]`` when the inputs at ``paths`` are varied (a
+    sweep, a fit), as re-solving the case file with the new value would move them (docs/model.md, "Inputs"):
+    - a vehicle's course defaults to its yaw: where the case gives neither ``course`` nor ``velocity``
+      for vehicle i, its course is still its yaw (not changed since, e.g. by ``set_input``) and
+      ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its travel too;
+    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position, its z
+      is still its ``cg_height`` and neither ``vehicles[i].position[2]`` nor ``vehicles[i].position`` is
+      among ``paths``, a new ``cg_height`` moves the CG to it.
+    So a sweep or fit at the case's own values solves the case as it is."""
+    paths = [canonical_path(p) for p in paths]
+    ties = []
+    vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
+    for k, path in enumerate(paths):
+        group, vi, name, _ = parse_path(path)
+        if group != "vehicles" or name not in ("yaw", "cg_height"):
+            continue
+        raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) else {}
+        raw = raw if isinstance(raw, dict) else {}
+        v = case.inputs.vehicles[vi]
+        if name == "yaw" and "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths \
+                and np.array_equal(np.asarray(v.course), np.asarray(v.yaw)):
+            ties.append((k, f"vehicles[{vi}].course"))
+        position = raw.get("position")
+        if name == "cg_height" and isinstance(position, list) and len(position) == 2 \
+                and not {f"vehicles[{vi}].position[2]", f"vehicles[{vi}].position"} & set(paths) \
+                and np.array_equal(np.asarray(v.position)[..., 2], np.asarray(v.cg_height)):
+            ties.append((k, f"vehicles[{vi}].position[2]"))
+    return tuple(ties)
+
+def check_output_path(path: str):
+    """Raise PathError unless ``path`` names a number among the section 4 results."""
+    group, vi, name, idx = parse_path(path)
+    fields = VehicleResult._fields if group == "vehicles" else ContactResult._fields
+    if group == "contact" and name == "status":
+        raise PathError(f"path '{path}': the status is a code, not a number to sweep, fit or compare: read "
+                        "result.contact.status (ks_jax.status_text gives its words); a sweep always returns "
+                        "'status'")
+    if name not in fields or name == "status":
+        raise PathError(f"path '{path}': '{name}' is not a {'vehicle' if group == 'vehicles' else 'contact'} result; "
+                        f"results are {', '.join(f for f in fields if f != 'status')}")
+    vector = name in {"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
+                      "delta_v_body", "velocity_after", "angular_velocity_after"}
+    if vector and (len(idx) != 1 or idx[0] > 2):
+        raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]"
+                        if len(idx) != 1 else f"path '{path}': index out of range (0..2)")
+    if not vector and idx:
+        raise PathError(f"path '{path}': '{name}' is a number and takes no index")
+    return group, vi, name, idx
+
+def get_output(result, path: str):
+    """The number at an output path of a (possibly batched) ExchangeResult."""
+    group, vi, name, idx = check_output_path(path)
+    leaf = getattr(result.vehicles[vi] if group == "vehicles" else result.contact, name)
+    return leaf[(..., *idx)] if idx else leaf
+
+def output_kind(path: str) -> str:
+    """The unit kind of an output path ("degrees" for the results reported in degrees)."""
+    return OUTPUT_KINDS[check_output_path(path)[2]]

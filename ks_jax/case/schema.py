@@ -1,0 +1,59 @@
+"""What each field of a case file is: its kind of quantity (for units) and shape, and the kind of every
+input and output path's number."""
+
+from __future__ import annotations
+
+VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
+    "mass": ("mass", None),
+    "weight": ("force", None),
+    "inertia": ("inertia", "inertia"),
+    "length": ("length", None),
+    "width": ("length", None),
+    "height": ("length", None),
+    "cg_to_front": ("length", None),
+    "cg_height": ("length", None),
+    "position": ("length", "vec23"),
+    "yaw": ("angle", None),
+    "pitch": ("angle", None),
+    "roll": ("angle", None),
+    "velocity": ("velocity", "vec23"),
+    "speed": ("velocity", None),
+    "course": ("angle", None),
+    "yaw_rate": ("angular_velocity", None),
+    "angular_velocity": ("angular_velocity", "vec3"),
+}
+
+CONTACT_FIELDS = {
+    "point": ("length", "vec3"),
+    "normal": ("angle", "normal"),
+    "normal_pitch": ("angle", None),
+    "restitution": ("dimensionless", None),
+    "friction": ("dimensionless", None),
+    "penetration_time": ("time", None),
+}
+
+TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
+
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "contact", "unknowns", "evidence", "options",
+               "reference"}
+
+INPUT_KINDS = {
+    "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",
+    "cg_to_front": "length", "cg_height": "length", "position": "length", "yaw": "angle", "pitch": "angle",
+    "roll": "angle", "speed": "velocity", "course": "angle", "velocity_z": "velocity",
+    "angular_velocity": "angular_velocity", "yaw_rate": "angular_velocity",
+    "point": "length", "normal": "angle", "normal_pitch": "angle", "restitution": "dimensionless",
+    "friction": "dimensionless", "penetration_time": "time",
+}
+
+OUTPUT_KINDS = {
+    "point": "length", "normal": "dimensionless", "time": "time", "impulse": "impulse",
+    "impulse_magnitude": "impulse", "impulse_normal": "impulse", "impulse_tangential": "impulse",
+    "impulse_azimuth": "degrees", "impulse_elevation": "degrees", "sliding": "dimensionless",
+    "closing_velocity": "velocity", "separation_velocity": "velocity", "energy_loss": "energy",
+    "delta_v": "velocity", "delta_v_magnitude": "velocity", "delta_v_body": "velocity",
+    "delta_yaw_rate": "angular_velocity", "velocity_after": "velocity", "speed_after": "velocity",
+    "course_after": "degrees", "angular_velocity_after": "angular_velocity",
+    "yaw_rate_after": "angular_velocity", "pdof": "degrees", "pdof_clock": "dimensionless",
+    "crush": "length", "ees": "velocity",
+}

@@ -1,0 +1,68 @@
+"""``ks-jax fit FILE``: the case's ``unknowns`` reconstructed from its ``evidence`` (docs/fit.md).
+
+The text report is ``fit.report.text_report``; ``--json`` prints ``FitResult.to_dict`` (SI values, null for
+"not determined"), and with several cases in the file ``{"cases": [...]}``. Monte Carlo shows a progress
+bar on stderr.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from fit import reconstruct
+from fit.report import text_report
+
+from ..case import load_cases
+from ..case.errors import CaseError
+from .options import seed_option, smoothing_option
+
+
+def add_arguments(parser) -> None:
+    """The arguments of ``ks-jax fit``."""
+    parser.add_argument("file", help="case file (JSON or TOML) with 'unknowns' and 'evidence'")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON (SI units)")
+    parser.add_argument("--starts", type=int, default=8, help="multi-start count (default 8)")
+    parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
+                        help="refit N copies of the evidence perturbed by its sigmas; report 5/50/95 percentiles")
+    parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts and Monte Carlo")
+    parser.add_argument("--smoothing", type=smoothing_option, default=1e-3,
+                        help="smooth friction cone tau (> 0 keeps the fit differentiable; default 1e-3)")
+    parser.add_argument("--solver", choices=("lm", "lbfgs", "adam"), default="lm",
+                        help="lm: Levenberg-Marquardt (default); lbfgs, adam: optax")
+
+
+def run(args) -> int:
+    """``ks-jax fit``: exit status 0, or 1 where a case of several was not fitted."""
+    cases = load_cases(args.file)
+    if args.starts < 1:
+        raise CaseError(f"--starts {args.starts}: need at least one start")
+    if args.monte_carlo < 0:
+        raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
+    results, failed = [], {}
+    for k, case in enumerate(cases):
+        try:
+            if not case.valid:
+                raise CaseError(case.error)
+            for key in ("unknowns", "evidence"):
+                if key not in case.raw:
+                    raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
+                                    "'evidence', docs/fit.md)")
+            results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
+                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0))
+        except CaseError as err:  # in a file of several cases: reported, and the others are fitted
+            if len(cases) == 1:
+                raise
+            failed[k] = str(err) if str(err).startswith("invalid") else f"invalid: {err}"
+            results.append(None)
+    if args.json:
+        dicts = [{"name": c.name, "status": failed[k]} if r is None else r.to_dict()
+                 for k, (c, r) in enumerate(zip(cases, results))]
+        print(json.dumps(dicts[0] if len(dicts) == 1 else {"cases": dicts}, indent=1))
+    else:
+        print("\n\n".join(f"Reconstruction: {c.name}\n  not fitted: {failed[k]}" if r is None else text_report(r)
+                           for k, (c, r) in enumerate(zip(cases, results))))
+    failed.update((k, r.status) for k, r in enumerate(results) if r is not None and r.status.startswith("invalid"))
+    for k, message in sorted(failed.items()):
+        print(f"ks-jax: case '{cases[k].name}' not fitted: {message}", file=sys.stderr)
+    return 1 if failed else 0

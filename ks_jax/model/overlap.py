@@ -1,0 +1,278 @@
+"""Where and how the footprints overlap: the impulse centroid and the contact plane of automatic
+contact (docs/model.md, "Automatic contact").
+
+Pure and unbatched, built from fixed-size arrays (an overlap polygon is (8, 2) with a vertex count).
+
+- Overlap: vehicle 1's footprint clipped by vehicle 2's four half-planes (Sutherland-Hodgman,
+  8 vertices at most). Its area centroid is the impulse centroid; z is the middle of the
+  boxes' vertical overlap, [z - cg_height, z - cg_height + height] of each.
+- Degenerate overlap (no wider than ~1e3 machine epsilons of the vehicles' size: its area below
+  that length times half its perimeter, e.g. when penetration_time = 0 and the exchange is at the
+  instant of touching): the centroid is the
+  middle of the touching features (the contact manifold along the axis of least penetration),
+  which is the limit of the area centroid as penetration_time -> 0. Its derivative in
+  penetration_time is the growing overlap's (``_overlap_growth``: for a corner entering a side,
+  the centroid of a growing triangle, a third of the way in, which the corner does not give);
+  at the touch itself (penetration_time 0, point and normal automatic) both crushes are 0, with
+  the growing overlap's derivative too. These are the one-sided derivatives from
+  penetration_time > 0; the derivatives in every other input are those of the touching
+  configuration, which stays touching.
+- Normal: perpendicular to the line through the two points where the outlines cross,
+  horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where footprint
+  1's centre lies relative to footprint 2's (n . (c_1 - c_2) > 0; the axis of least penetration
+  decides only if that product is exactly 0), then tilted up by ``normal_pitch``:
+  n = (cos p n_x, cos p n_y, sin p). The axis of least penetration would not do for the sign:
+  once a penetration is deeper than the overlap is wide, that axis turns across the line, and its
+  sign no longer says which way vehicle 1 lies (an inline rear-end came out "separating"). Nor
+  would the CGs: a CG may sit anywhere along its box, and one 1 ft behind the front face is
+  passed by the other's within a foot of penetration; the boxes' centres are passed only when
+  the penetration is half a box long. Where the outlines do not cross in exactly two points more
+  than ~1e-12 m inside both edges (collinear edges, also when rounding parts them by 1e-16 m;
+  containment; a degenerate overlap) n is the axis of least penetration.
+- Coordinates: the search and the geometry work about the CGs' midpoint, and the tolerances above
+  (~1e3 machine epsilons of the vehicles' size) grow with the scene's distance from the origin, so
+  that a scene given in survey coordinates (1e4-1e6 m) gives the contact of the same scene near the
+  origin: its edges collinear within the input's own rounding stay collinear.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import linalg as la
+from .first_contact import advance, edge_normals, footprint, least_penetration_normal, separation
+from .results import crush_depth
+
+MAX_VERTICES = 8  # two convex quadrilaterals overlap in at most an octagon
+
+
+class Contact2D(NamedTuple):
+    """The automatic contact at one instant: point (3,) m, normal (3,) horizontal unit
+    (from vehicle 2 into vehicle 1), overlap polygon (8, 2) m with ``count`` vertices,
+    ``area`` () m^2, ``crossings`` (2, 2) m and ``crossing_ok`` () bool (the two outline
+    crossings and whether the normal came from them), ``solid`` () bool (the area is above its
+    tolerance: the point is the area centroid, else the middle of the touching features)."""
+
+    point: jnp.ndarray
+    normal: jnp.ndarray
+    polygon: jnp.ndarray
+    count: jnp.ndarray
+    area: jnp.ndarray
+    crossings: jnp.ndarray
+    crossing_ok: jnp.ndarray
+    solid: jnp.ndarray
+
+
+# ---------------------------------------------------------------------------------------
+# overlap polygon
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _next_index(count):
+    idx = jnp.arange(MAX_VERTICES)
+    return idx, jnp.where(idx + 1 < count, idx + 1, 0)
+
+
+def _clip(poly, count, a, b):
+    """Clip the convex polygon (8, 2) with ``count`` vertices by the half-plane left of the
+    directed line a -> b (Sutherland-Hodgman step). Returns (poly, count)."""
+    idx, nxt = _next_index(count)
+    valid = idx < count
+    q = poly[nxt]
+    edge = b - a
+    d0 = _cross2(edge, poly - a)
+    d1 = _cross2(edge, q - a)
+    in0, in1 = d0 >= 0, d1 >= 0
+    crossing = valid & (in0 != in1)
+    s = la.safe_div(d0, d0 - d1)
+    x = poly + s[:, None] * (q - poly)
+    cand = jnp.stack([poly, x], 1).reshape(2 * MAX_VERTICES, 2)
+    keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * MAX_VERTICES)
+    pos = jnp.cumsum(keep) - 1
+    onehot = ((pos[:, None] == jnp.arange(MAX_VERTICES)[None, :]) & keep[:, None]).astype(poly.dtype)
+    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), MAX_VERTICES).astype(jnp.int32)
+
+
+def overlap_polygon(corners1, corners2):
+    """Footprint 1 clipped by footprint 2 (both (4, 2), counter-clockwise): (8, 2) vertices, of
+    which the first ``count`` () are used."""
+    poly = jnp.zeros((MAX_VERTICES, 2), corners1.dtype).at[:4].set(corners1)
+
+    def step(carry, edge):
+        return _clip(*carry, edge[0], edge[1]), None
+
+    edges = jnp.stack([corners2, jnp.roll(corners2, -1, 0)], 1)  # (4, 2 ends, 2)
+    (poly, count), _ = jax.lax.scan(step, (poly, jnp.int32(4)), edges)
+    return poly, count
+
+
+def polygon_area_centroid(poly, count):
+    """Area () m^2 and area centroid (2,) m of the polygon's first ``count`` vertices (the
+    vertex mean where the area is 0)."""
+    idx, nxt = _next_index(count)
+    valid = idx < count
+    w = jnp.where(valid[:, None], poly, 0.0)
+    origin = jnp.sum(w, 0) / jnp.maximum(count, 1)
+    p = jnp.where(valid[:, None], poly - origin, 0.0)
+    q = p[nxt]
+    cr = jnp.where(valid, _cross2(p, q), 0.0)
+    area = 0.5 * jnp.sum(cr)
+    moment = jnp.sum((p + q) * cr[:, None], 0) / 6.0
+    return area, origin + jnp.stack([la.safe_div(moment[0], area), la.safe_div(moment[1], area)])
+
+
+def outline_crossings(corners1, corners2, tol=0.0):
+    """Points where the two outlines cross: (16, 2) candidates (edge i of 1 x edge j of 2),
+    (16,) mask: proper crossings only, more than ``tol`` (m) inside both edges and between edges
+    more than ~tol / length from parallel, so that collinear edges and corners lying on edges do
+    not count, also where rounding moves them apart by far less than ``tol`` (a scene turned by
+    30 deg puts the corners of an inline crash 1e-16 m off each other's edges)."""
+    a = corners1
+    da = jnp.roll(corners1, -1, 0) - corners1
+    b = corners2
+    db = jnp.roll(corners2, -1, 0) - corners2
+    a, da = a[:, None, :], da[:, None, :]
+    b, db = b[None, :, :], db[None, :, :]
+    denom = _cross2(da, db)
+    ab = b - a
+    s = la.safe_div(_cross2(ab, db), denom)
+    t = la.safe_div(_cross2(ab, da), denom)
+    len_a, len_b = la.safe_norm(da), la.safe_norm(db)
+    inside = (s * len_a > tol) & ((1 - s) * len_a > tol) & (t * len_b > tol) & ((1 - t) * len_b > tol)
+    mask = (jnp.abs(denom) > tol * jnp.maximum(len_a, len_b)) & inside
+    pts = a + s[..., None] * da
+    return pts.reshape(16, 2), mask.reshape(16)
+
+
+def _first_two(points, mask):
+    pos = jnp.cumsum(mask) - 1
+    sel = ((pos[:, None] == jnp.arange(2)[None, :]) & mask[:, None]).astype(points.dtype)
+    return sel.T @ points
+
+
+def _manifold_point(corners1, corners2, n, tol):
+    """Middle of the touching features along the axis ``n`` (from 2 into 1): vehicle 1's
+    support toward -n, vehicle 2's toward +n, overlapped along the tangent."""
+    t = jnp.stack([-n[1], n[0]])
+    p1n, p2n = corners1 @ n, corners2 @ n
+    p1t, p2t = corners1 @ t, corners2 @ t
+    lo1, hi2 = jnp.min(p1n), jnp.max(p2n)
+    s1 = p1n <= lo1 + tol
+    s2 = p2n >= hi2 - tol
+    big = jnp.asarray(1e30, corners1.dtype)
+    lo = jnp.maximum(jnp.min(jnp.where(s1, p1t, big)), jnp.min(jnp.where(s2, p2t, big)))
+    hi = jnp.minimum(jnp.max(jnp.where(s1, p1t, -big)), jnp.max(jnp.where(s2, p2t, -big)))
+    return 0.5 * (lo1 + hi2) * n + 0.5 * (lo + hi) * t
+
+
+def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Contact2D:
+    """The automatic contact of docs/model.md, "Automatic contact" for the vehicles as they are in the given
+    states (no motion): centroid of the footprints' overlap (z: middle of the vertical
+    overlap) and the horizontal normal from vehicle 2 into vehicle 1. ``coordinates`` () m: how
+    far from the origin the scene was given (``automatic_contact`` passes the states moved to
+    the CGs' midpoint): the tolerances grow with it, so that edges the input's own rounding
+    parts are still collinear."""
+    dtype = state1.position.dtype
+    c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, manifold = _overlap(
+        vehicle1, state1, vehicle2, state2, coordinates)
+    xy = jnp.where(solid, centroid, manifold)
+
+    pts, mask = outline_crossings(c1, c2, len_tol)
+    two = _first_two(pts, mask)
+    chord = two[1] - two[0]
+    chord_len = la.safe_norm(chord)
+    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(len_tol * size))
+    n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
+    toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
+    side = jnp.where(n_line @ toward1 != 0, n_line @ toward1, n_line @ n_sat)
+    n_line = jnp.where(side < 0, -n_line, n_line)
+    n2 = jnp.where(crossing_ok, n_line, n_sat)
+
+    point = jnp.stack([xy[0], xy[1], _vertical_middle(vehicle1, state1, vehicle2, state2)])
+    normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
+    return Contact2D(point, normal, poly, count, area, two, crossing_ok, solid)
+
+
+def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
+    """What ``contact_geometry`` builds on: both footprints, the axis of least penetration, the
+    length tolerance, whether the overlap is solid (wider than the length tolerance: its area
+    above the tolerance times half its perimeter, the inradius of a triangle; the area's rounding
+    is about the coordinates' rounding times the perimeter), the overlap polygon (vertices, count),
+    its area and centroid, and the middle of the touching features (``_manifold_point``)."""
+    c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
+    c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
+    n_sat, _ = least_penetration_normal(c1, c2, edge_normals(state1.yaw, state2.yaw))
+    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
+    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    poly, count = overlap_polygon(c1, c2)
+    area, centroid = polygon_area_centroid(poly, count)
+    idx, nxt = _next_index(count)
+    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
+    solid = area > 0.5 * len_tol * perimeter
+    return c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, _manifold_point(c1, c2, n_sat, len_tol)
+
+
+@jax.custom_jvp
+def growing_overlap(penetration_time, probe):
+    """0 (4,), whose derivative with respect to ``penetration_time`` is ``_overlap_growth(*probe)``
+    (and 0 with respect to everything else). At the touch the overlap has no area and the centroid
+    is the middle of the touching features; the first two components, added to it, give it the
+    derivative of the growing overlap's centroid (for a corner entering a side: a triangle whose
+    centroid is a third of the way in and spreads along the side, where the corner itself only goes
+    in). The last two are the crushes' growth (at the touch both are 0, and AD of the distance to a
+    box's faces from a corner averages the two faces that meet there)."""
+    return jnp.zeros(4, probe[1].position.dtype)
+
+
+@growing_overlap.defjvp
+def _growing_overlap_jvp(primals, tangents):
+    penetration_time, probe = primals
+    rate = jax.lax.stop_gradient(_overlap_growth(*probe))
+    return jnp.zeros_like(rate), rate * tangents[0]
+
+
+def _overlap_growth(vehicle1, state1, vehicle2, state2, t_i, t_x, coordinates, normal_pitch):
+    """(4,): how fast, as the footprints (``state1``/``state2`` at t = 0, free motion) penetrate
+    after touching at t_i, the overlap's area centroid moves away from the middle of the touching
+    features (x, y; m/s), and the crushes grow (along the axis of least
+    penetration tilted by ``normal_pitch``; m/s), measured at t_x (>= t_i). Each is its value at a
+    probe instant at which the penetration has grown by sqrt(machine epsilon) of the vehicles' size
+    (about 1e-7 m in float64, 3 mm in float32), divided by the time since t_i: all move linearly
+    with that time while neither vehicle turns (the overlap of a corner and a side is a triangle of
+    fixed shape, growing), so this is then the derivative to rounding; a turning vehicle adds an
+    error of the order of the angle turned before the probe. 0 where the footprints are not closing."""
+    _, closing = jax.jvp(lambda t: -separation(vehicle1, state1, vehicle2, state2, t), (t_x,), (jnp.ones_like(t_x),))
+    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    depth = jnp.sqrt(jnp.finfo(t_x.dtype).eps) * size
+    grows = closing > 0
+    t_probe = t_x + jnp.where(grows, depth / jnp.where(grows, closing, 1.0), 0.0)
+    a1, a2 = advance(state1, t_probe), advance(state2, t_probe)
+    _, _, n_sat, _, _, _, _, area, centroid, manifold = _overlap(vehicle1, a1, vehicle2, a2, coordinates)
+    point = jnp.concatenate([centroid, _vertical_middle(vehicle1, a1, vehicle2, a2)[None]])
+    n = tilt(jnp.concatenate([n_sat, jnp.zeros(1, n_sat.dtype)]), normal_pitch)
+    crush = jnp.stack([crush_depth(point, sign * n, a.position, la.rotation(a.yaw, a.pitch, a.roll), v)
+                       for sign, a, v in ((-1.0, a1, vehicle1), (1.0, a2, vehicle2))])
+    since = t_probe - t_i
+    ok = grows & (area > 0) & (since > 0)
+    return jnp.where(ok, jnp.concatenate([centroid - manifold, crush]) / jnp.where(ok, since, 1.0), 0.0)
+
+
+def _vertical_middle(vehicle1, state1, vehicle2, state2):
+    """() m: the middle of the boxes' vertical overlap (z of the automatic centroid)."""
+    bottom = jnp.maximum(state1.position[2] - vehicle1.cg_height, state2.position[2] - vehicle2.cg_height)
+    top = jnp.minimum(state1.position[2] - vehicle1.cg_height + vehicle1.height,
+                      state2.position[2] - vehicle2.cg_height + vehicle2.height)
+    return 0.5 * (bottom + top)
+
+
+def tilt(normal, pitch):
+    """Horizontal unit normal (3,) tilted up by ``pitch`` (rad): (cos p n_x, cos p n_y, sin p)."""
+    cp = jnp.cos(pitch)
+    return jnp.stack([cp * normal[0], cp * normal[1], jnp.sin(pitch) * jnp.ones_like(normal[0])])

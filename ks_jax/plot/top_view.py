@@ -1,0 +1,208 @@
+"""The top view of a solved contact: footprints, overlap, centroid, plane, normal, impulse, friction cone.
+
+matplotlib is imported only inside the functions (it is the ``plot`` extra). Everything drawn is
+computed here in NumPy from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints
+move freely from the case state (docs/model.md, "Automatic contact", as ``ks_jax.model.first_contact``
+moves them), so no picture needs a JAX call.
+
+What the top view draws (global frame, metres; a second axis in feet):
+- outlines at first contact t_i (dashed; automatic contact only) and at the exchange (solid),
+  the front face thicker; the overlap polygon at the exchange (grey);
+- the impulse centroid P, the contact plane (red line through P, perpendicular to n), the normal
+  n (red arrow, from vehicle 2 into vehicle 1), the friction cone (blue wedge about n,
+  half-angle atan(mu));
+- the impulse on each vehicle (J on vehicle 1, -J on vehicle 2, drawn at P), and each vehicle's
+  CG velocity before (dotted) and after (solid). Arrow scales are given in the legend.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import units as U
+
+COLORS = ("tab:blue", "tab:orange")
+
+
+def _box(length, width, cg_to_front, xy, yaw):
+    a, b, h = cg_to_front - length, cg_to_front, 0.5 * width
+    body = np.array([[a, -h], [b, -h], [b, h], [a, h]])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.asarray(xy)[:2] + body @ np.array([[c, s], [-s, c]])
+
+
+def clip_polygon(subject, clip):
+    """Sutherland-Hodgman in NumPy: convex ``subject`` (k, 2) clipped by the counter-clockwise
+    convex polygon ``clip`` (m, 2). Returns (j, 2) (j may be 0)."""
+    out = [np.asarray(p, float) for p in subject]
+    for i in range(len(clip)):
+        a, b = np.asarray(clip[i], float), np.asarray(clip[(i + 1) % len(clip)], float)
+        e = b - a
+        side = lambda p: e[0] * (p[1] - a[1]) - e[1] * (p[0] - a[0])  # noqa: E731
+        pts, out = out, []
+        for k, p in enumerate(pts):
+            q = pts[(k + 1) % len(pts)]
+            dp, dq = side(p), side(q)
+            if dp >= 0:
+                out.append(p)
+            if (dp >= 0) != (dq >= 0):
+                out.append(p + dp / (dp - dq) * (q - p))
+        if not out:
+            break
+    return np.array(out).reshape(-1, 2)
+
+
+def _vehicle_boxes(inputs, t):
+    """Footprint corners of both vehicles after free motion for ``t`` s, and their CGs (2,)."""
+    boxes, cgs = [], []
+    for v in inputs.vehicles:
+        vel = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
+        xy = np.asarray(v.position, float)[:2] + vel * t
+        yaw = float(v.yaw) + float(np.asarray(v.angular_velocity)[2]) * t
+        boxes.append(_box(float(v.length), float(v.width), float(v.cg_to_front), xy, yaw))
+        cgs.append(xy)
+    return boxes, cgs
+
+
+def _draw_box(ax, corners, color, style, label=None, alpha=1.0):
+    closed = np.vstack([corners, corners[:1]])
+    ax.plot(closed[:, 0], closed[:, 1], style, color=color, lw=1.4, label=label, alpha=alpha)
+    ax.plot(corners[1:3, 0], corners[1:3, 1], style, color=color, lw=3.0, alpha=alpha)  # front face
+
+
+def _arrow(ax, tip, tail, props, **kw):
+    """An arrow from ``tail`` to ``tip`` (data coordinates) that the axes' limits take in: matplotlib
+    leaves an annotation out of the autoscaling, and does not draw it at all where its tip is outside."""
+    ax.annotate("", tip, tail, arrowprops=props, **kw)
+    ax.update_datalim(np.array([tip, tail], float))
+
+
+def top_view(solution, ax=None):
+    """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
+    Returns the axes."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon, Wedge
+    from matplotlib.transforms import offset_copy
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 7))
+    case, res = solution.case, solution.result
+    names = case.vehicle_names
+    ax.set_title(f"{case.name}\nstatus: {solution.status}", fontsize=9)
+    if case.inputs is None or res is None or solution.status.startswith("invalid"):
+        ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
+        return ax
+    inputs = case.inputs
+    auto = case.auto_point or case.auto_normal
+    c = res.contact
+    t_i = float(c.time)
+    no_contact = solution.status == "no_contact"
+    t_x = 0.0 if (no_contact or not auto) else t_i + float(inputs.contact.penetration_time)
+
+    if auto and not no_contact:
+        first, _ = _vehicle_boxes(inputs, t_i)
+        for i in range(2):
+            _draw_box(ax, first[i], COLORS[i], "--", alpha=0.6,
+                      label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
+    boxes, cgs = _vehicle_boxes(inputs, t_x)
+    when = ("at the case state (no contact)" if no_contact else f"at the exchange, t = {t_x:.4f} s" if auto
+            else "at the case state (explicit contact)")
+    for i in range(2):
+        _draw_box(ax, boxes[i], COLORS[i], "-", label=f"{names[i]} {when}")
+
+    extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles)
+    v_scale = None
+    if not no_contact:
+        overlap = clip_polygon(boxes[0], boxes[1])
+        if len(overlap) >= 3:
+            ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5,
+                                 label="overlap of the footprints"))
+        p = np.asarray(c.point, float)[:2]
+        n3 = np.asarray(c.normal, float)
+        n = n3[:2] / max(np.linalg.norm(n3[:2]), 1e-12)
+        tang = np.array([-n[1], n[0]])
+        half = 0.45 * extent
+        ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
+        _arrow(ax, p + 0.4 * extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.8), zorder=5)
+        ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
+        mu = float(inputs.contact.friction)
+        half_angle = math.degrees(math.atan(mu))
+        az = math.degrees(math.atan2(n[1], n[0]))
+        ax.add_patch(Wedge(p, 0.3 * extent, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
+                           edgecolor="tab:blue", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
+        j = np.asarray(c.impulse, float)[:2]
+        j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
+        total = float(c.impulse_magnitude)
+        if j_mag > 0:
+            k = 0.35 * extent / j_mag  # m per N s
+            shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
+            vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
+            for i, sign in enumerate((1.0, -1.0)):
+                _arrow(ax, p + sign * k * j, p, dict(arrowstyle="-|>", color=COLORS[i], lw=2.5))
+                ax.plot([], [], color=COLORS[i], lw=2.5,
+                        label=f"impulse on {names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
+        ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
+
+    speeds = []
+    for i, v in enumerate(inputs.vehicles):
+        speeds.append(float(v.speed))
+        speeds.append(float(np.linalg.norm(np.asarray(res.vehicles[i].velocity_after, float)[:2])))
+    vmax = max(speeds)
+    if vmax > 0:
+        v_scale = 0.5 * extent / vmax  # m per m/s
+        for i, v in enumerate(inputs.vehicles):
+            before = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
+            after = np.asarray(res.vehicles[i].velocity_after, float)[:2]
+            for vec, style, side in ((before, ":", 1.0), (after, "-", -1.0)):
+                length = float(np.linalg.norm(vec))
+                if length == 0:
+                    continue
+                # before on the left of the arrow's line, after on its right, so that they never hide
+                # each other or the impulse arrows of an inline impact
+                shift = side * 0.05 * extent * np.array([-vec[1], vec[0]]) / length
+                _arrow(ax, cgs[i] + shift + v_scale * vec, cgs[i] + shift,
+                       dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
+            ax.plot(*cgs[i], "o", color=COLORS[i], ms=4)
+        unit = f"1 m = {1 / v_scale:.2f} m/s = {1 / v_scale / U.MPH:.2f} mph"
+        ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
+        ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
+    if no_contact:
+        ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
+
+    ax.autoscale_view()  # with the arrows' ends in the data limits
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, lw=0.3)
+    sec = ax.secondary_xaxis("top", functions=(lambda m: m / U.FT, lambda f: f * U.FT))
+    sec.set_xlabel("x (ft)", fontsize=8)
+    sec = ax.secondary_yaxis("right", functions=(lambda m: m / U.FT, lambda f: f * U.FT))
+    sec.set_ylabel("y (ft)", fontsize=8)
+    # below the x label whatever the axes' height: a fixed offset in points, not in axes fractions
+    below = offset_copy(ax.transAxes, fig=ax.figure, y=-34, units="points")
+    ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, 0.0), bbox_transform=below, ncol=2,
+              frameon=False)
+    return ax
+
+
+def save_top_view(solutions, path):
+    """Write the top views of one ``Solution`` or a list of them (one panel each) to ``path``
+    (PNG, PDF, SVG: by the file name). Returns the path."""
+    from matplotlib.figure import Figure  # no pyplot: works without a display, leaves no state
+
+    if not isinstance(solutions, (list, tuple)):
+        solutions = [solutions]
+    n = len(solutions)
+    cols = min(n, 2)
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(8.5 * cols, 9.0 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax, sol in zip(axes.flat, solutions):
+        top_view(sol, ax)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return path

@@ -1,0 +1,377 @@
+"""``sweep``: one case solved at every point of a grid or a list of samples of some of its inputs, in
+chunks, with only the requested results kept (docs/sweeps.md)."""
+
+from __future__ import annotations
+
+import math
+import operator
+import os
+import time
+from collections.abc import Mapping
+from functools import lru_cache
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..batch import CHUNK_ROWS
+from ..batch.stages import run
+from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
+from ..case import input_ties, set_input, undefined_kind
+from ..case.errors import CaseError
+from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
+from ..compilation import compiler_options
+from ..model.types import STATUS_TEXT, status_text
+from ..progress import Progress
+from ..solve import stages
+from .columns import invalid_rows
+from .result import SweepResult
+
+
+DEFAULT_OUTPUTS = (
+    "contact.impulse_magnitude",
+    "contact.energy_loss",
+    "contact.sliding",
+    "vehicles[0].delta_v_magnitude",
+    "vehicles[1].delta_v_magnitude",
+    "vehicles[0].pdof",
+    "vehicles[1].pdof",
+    "vehicles[0].speed_after",
+    "vehicles[1].speed_after",
+)
+
+
+DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk
+# a sweep of at most this many points compiles quickly (``compilation.quick_jit``): its one short chunk runs in
+# milliseconds, and compiling is most of its time; a larger one keeps XLA's defaults, where running counts
+QUICK_POINTS = DEFAULT_CHUNK
+PROGRESS_DELAY = 2.0  # s: with progress=None a sweep that runs longer than this shows a bar
+
+
+def _row_inputs(base, paths, values, ties=()):
+    """``base`` with ``values`` at ``paths``, and at each tied path (``case.input_ties``) the value of
+    the path it follows."""
+    inputs = base
+    for p, v in zip(paths, values):
+        inputs = set_input(inputs, p, v)
+    for k, p in ties:
+        inputs = set_input(inputs, p, values[k])
+    return inputs
+
+
+def _bucket(n):
+    """A length rounded up to a power of two (at least 8): the length of the axes' value arrays and of a
+    short sweep's one chunk in the compiled programs, so that a sweep of another size in the same bucket
+    (41 speeds instead of 33, a 7 x 3 grid instead of 5 x 4) runs the programs already compiled."""
+    return max(8, 1 << (max(int(n), 1) - 1).bit_length())
+
+
+def _padded(values, dtype):
+    """An axis' values padded to ``_bucket`` of its length with its last value (never read: a row's index
+    on an axis is below the axis' size)."""
+    values = np.asarray(values, dtype)
+    fill = values[-1] if len(values) else 0.0
+    return jnp.asarray(np.concatenate([values, np.full(_bucket(len(values)) - len(values), fill, dtype)]))
+
+
+def _chunk_values(start, axes, mode, sizes, n_rows, total):
+    """The swept values of rows start .. start + n_rows (clamped to the last point); ``sizes``: the
+    axes' sizes, numbers or an array."""
+    idx = start + jnp.arange(n_rows, dtype=start.dtype)
+    idx = jnp.minimum(idx, total - 1)
+    if mode == "zip":
+        return [a[idx] for a in axes]
+    out = []
+    rest = idx
+    for k in range(len(axes) - 1, -1, -1):  # row-major: the last axis varies fastest
+        out.append(axes[k][rest % sizes[k]])
+        rest = rest // sizes[k]
+    return out[::-1]
+
+
+@lru_cache(maxsize=32)
+def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing, out_dtype, devices,
+             quick=False):
+    """The jitted program of one chunk of ``n_rows`` points, sharded over ``devices`` along the rows.
+
+    Called as ``(start, axes, sizes, total, base)``: it makes each row's swept values from its flat index
+    (grid: the index unravelled into one position per axis; zip: the k-th sample of every path), solves the
+    rows through the case's pipeline (``solve.stages``, run by ``batch.stages.run``: each stage rebuilds
+    the rows' inputs from ``base`` and the values, which costs less than storing them), and returns only
+    the requested outputs (NaN where undefined) and the status. ``static_sizes``: the axes' sizes compiled
+    in (a sweep of several chunks: dividing by a constant is cheaper), or None: read from ``sizes`` (a whole
+    sweep in one chunk: a sweep of another size in the same ``_bucket`` runs the same program). ``quick``:
+    compiled quickly (``QUICK_POINTS``)."""
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    pipeline = stages(auto_point, auto_normal, smoothing)
+
+    def chunk(start, axes, sizes, total, base):
+        vals = _chunk_values(start, axes, mode, sizes if static_sizes is None else static_sizes, n_rows, total)
+        vals = tuple(jax.lax.with_sharding_constraint(v, rows) for v in vals)
+
+        def on_values(stage, last=False):
+            def one(vals, *earlier):
+                out = stage(_row_inputs(base, paths, vals, ties), *earlier)
+                return _selected(out, outputs, out_dtype) if last else out
+            return one
+
+        return run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
+
+    return jax.jit(chunk, in_shardings=(replicated,) * 5, out_shardings=rows,
+                   compiler_options=compiler_options(quick))
+
+
+def _selected(result, outputs, out_dtype):
+    """The requested outputs of a row's result (NaN where undefined: no stand-in number in a file), and its
+    status as int8."""
+    out = {}
+    for p in outputs:
+        x = defined_output(result, p)
+        out[p] = x if x.dtype == jnp.bool_ else x.astype(out_dtype)
+    out["status"] = result.contact.status.astype(jnp.int8)
+    return out
+
+
+def _memory_bytes():
+    """This machine's physical memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes, what, advice):
+    """CaseError where ``what`` needs more bytes than the machine has (before numpy's MemoryError)."""
+    memory = _memory_bytes()
+    if memory is not None and nbytes > memory:
+        raise CaseError(f"{what} needs {nbytes / 2**30:.3g} GiB, more than this machine's {memory / 2**30:.3g} GiB: "
+                        f"{advice}")
+
+
+def _whole_number(value, what):
+    try:
+        return operator.index(value)
+    except TypeError:
+        raise CaseError(f"{what} = {value!r}: must be a whole number") from None
+
+
+def _check_values(path, values):
+    if np.asarray(values).dtype == bool:
+        raise CaseError(f"sweep over '{path}': the values are booleans (True, False); give numbers (SI)")
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise CaseError(f"sweep over '{path}': the values must be numbers (SI): {err}") from None
+    if arr.ndim != 1 or arr.size == 0:
+        raise CaseError(f"sweep over '{path}': give a non-empty 1-D list of values (SI), got shape {arr.shape}")
+    return arr
+
+
+def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0, progress=None, devices=None,
+          output_dtype=None, on_chunk=None, keep=True, index_range=None) -> SweepResult:
+    """Solve ``case`` at every point of a grid or a list of samples of some of its inputs.
+
+    case: a ``Case`` (``ks_jax.load_case``). over: {input path: values}, values SI (m, kg, s,
+    rad, rad/s), e.g. {"vehicles[1].speed": np.linspace(5, 30, 51), "contact.restitution": [0, .1]}.
+    Any input path of ``ks_jax.case`` (``vehicles[i].mass``, ``.inertia[k]``, ``.position[k]``,
+    ``.yaw``, ``.speed``, ``.course``, ``.yaw_rate``, ``contact.point[k]``, ``contact.normal``
+    (azimuth), ``contact.restitution``, ``contact.friction``, ...).
+    outputs: output paths of docs/model.md (components by index, e.g.
+    ``vehicles[0].delta_v[0]``; one path may be a plain string); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
+    mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
+    "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
+    chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
+    progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
+    (from the start) or False; tqdm if installed, else a line on stderr.
+    devices: the devices to shard every chunk over (default ``jax.devices()``).
+    output_dtype: dtype of the stored float results (default: the compute dtype). In float32, a scene
+    more than 1 km from the origin is solved about its CGs' midpoint (``case.scale.scene_origin``), and its
+    ``contact.point[0]``/``[1]`` outputs are float64.
+    on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
+    NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
+    only status counts are kept; use with ``on_chunk`` for reductions of any size).
+    index_range: (lo, hi) solve only these flat indices (row-major over the grid), e.g. one
+    process's share of a multi-host sweep; the result is then flat, shape (hi - lo,).
+    """
+    if not isinstance(case, Case):
+        raise CaseError(f"sweep needs a Case (ks_jax.load_case), got {type(case).__name__}")
+    if not case.valid:
+        raise CaseError(case.error)
+    if mode not in ("grid", "zip"):
+        raise CaseError(f"sweep mode = {mode!r}: mode must be 'grid' or 'zip'")
+    if not isinstance(over, Mapping):
+        raise CaseError(f"sweep over: give a mapping {{path: values}}, got {type(over).__name__}")
+    if not over:
+        raise CaseError("sweep needs at least one input path to vary: over={path: values}")
+    for p in over:
+        if not isinstance(p, str):
+            raise CaseError(f"sweep over {p!r}: an input path is a string, e.g. 'vehicles[1].speed'")
+    check_distinct(tuple(over), "sweep over")
+    over = {canonical_path(p): v for p, v in over.items()}  # "vehicles[0]. yaw" is "vehicles[0].yaw"
+    paths = tuple(over)
+    for p in paths:
+        name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
+        if name:
+            raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
+                            f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
+                            "to vary it")
+    axes = {p: _check_values(p, over[p]) for p in paths}
+    outputs = tuple(DEFAULT_OUTPUTS if outputs is None else [outputs] if isinstance(outputs, str) else outputs)
+    for p in outputs:
+        if not isinstance(p, str):
+            raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
+        if p != "status":
+            check_output_path(p)
+    outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
+    for p in outputs:
+        if p in axes:
+            raise CaseError(f"output '{p}' is also a swept input: its values are the input's column already "
+                            "(leave it out of the outputs)")
+    if "contact.time" in outputs and not (case.auto_point or case.auto_normal):
+        raise CaseError("output 'contact.time' is the first-contact time of automatic contact (docs/model.md); "
+                        "this case gives contact.point and contact.normal, so its exchange is at the case state "
+                        "(leave contact.time out)")
+    if not 0.0 <= float(smoothing) < 1.0:
+        raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    sizes = tuple(len(a) for a in axes.values())
+    shape = result_shape(dict(zip(paths, sizes)), mode)
+    total = math.prod(shape)
+    if total > np.iinfo(np.int64).max:
+        raise CaseError(f"the sweep has {total:.3g} points, more than a 64-bit index counts ({np.iinfo(np.int64).max:.3g}): "
+                        "sweep fewer values")
+    if index_range is None:
+        lo, hi = 0, total
+    else:
+        if isinstance(index_range, (str, bytes)) or not hasattr(index_range, "__len__") or len(index_range) != 2:
+            raise CaseError(f"index_range = {index_range!r}: give two whole numbers (lo, hi)")
+        try:
+            lo, hi = (operator.index(v) for v in index_range)
+        except TypeError:
+            raise CaseError(f"index_range = {tuple(index_range)}: lo and hi must be whole numbers") from None
+    if not 0 <= lo <= hi <= total:
+        raise CaseError(f"index_range = {index_range}: must satisfy 0 <= lo <= hi <= {total}")
+    n_points = hi - lo
+
+    devices = tuple(jax.devices() if devices is None else devices)
+    per_device = DEFAULT_CHUNK if chunk_size is None else _whole_number(chunk_size, "chunk_size")
+    if per_device <= 0:
+        raise CaseError(f"chunk_size = {chunk_size}: must be positive")
+    n_rows = per_device * len(devices)
+    # small sweeps: one short chunk, of a length rounded up (``_bucket``) so that other sizes reuse its programs
+    n_rows = min(n_rows, _bucket(-(-max(n_points, 1) // len(devices))) * len(devices))
+
+    # float32 far from the origin: the scene, swept positions included, is solved about the CGs' midpoint
+    # (case.scene_origin), and contact.point outputs are moved back, in float64
+    origin = scene_origin(case.inputs, [v for p, v in axes.items() if xy_index(p) is not None])
+    moved = {} if origin is None else {p: origin_offset(p, origin) for p in (*paths, *outputs)}
+    moved = {p: float(off) for p, off in moved.items() if off is not None}
+    inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
+    swept = {p: a - moved.get(p, 0.0) for p, a in axes.items()}
+    warn_far_from_origin(inputs, [v for p, v in swept.items() if p in moved], what="the swept scene",
+                         about="the origin" if origin is None else "its CGs' midpoint", auto_point=case.auto_point)
+    base = as_arrays(inputs)
+    dtype = jnp.result_type(float)
+    out_dtype = np.dtype(output_dtype or dtype)
+    quick = n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices)
+    # a whole sweep in one chunk: its axes padded and its sizes an argument, for any size in the same buckets;
+    # a larger one (or a range of one) keeps its exact axes (a zip of 10^8 samples is not padded) and sizes
+    one_chunk = total <= n_rows
+    static_sizes = None if one_chunk else sizes
+    program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes,
+                                                   case.auto_point, case.auto_normal, float(smoothing), out_dtype,
+                                                   devices, quick)
+    index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
+    if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
+        raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
+    dev_axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
+    dev_sizes = jnp.asarray(sizes, dtype=index_dtype)
+    total_arr = jnp.asarray(total, dtype=index_dtype)
+
+    store = {}
+    if keep:
+        itemsize = sum(1 if p.endswith(".sliding") else 8 if p in moved else out_dtype.itemsize for p in outputs)
+        check_memory(n_points * (itemsize + 1), f"keeping {n_points} points of {len(outputs)} outputs",
+                      "pass keep=False and on_chunk (ks-jax sweep --out writes chunk by chunk), index_range, "
+                      "output_dtype=np.float32 or fewer outputs")
+        for p in outputs:
+            store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved
+                                else out_dtype)
+        store["status"] = np.empty(n_points, dtype=np.int8)
+    counts = np.zeros(256, dtype=np.int64)
+    undefined = {p: 0 for p in outputs if undefined_kind(p)}
+
+    show = n_points > n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
+    bar = Progress(n_points, "ks-jax sweep", "pt", show, PROGRESS_DELAY if progress is None else 0.0)
+    t0 = time.perf_counter()
+
+    def launch(start):
+        s = jnp.asarray(start, dtype=index_dtype)
+        return start, program(s, dev_axes, dev_sizes, total_arr, base)
+
+    def collect(item):
+        start, out = item
+        n = min(n_rows, hi - start)
+        chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
+        for p in outputs:
+            if p in moved:
+                chunk[p] = chunk[p].astype(np.float64) + moved[p]
+        counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
+        if undefined:
+            solved = ~invalid_rows(chunk["status"])
+            for p in undefined:
+                undefined[p] += int(np.count_nonzero(np.isnan(chunk[p]) & solved))
+        a, b = start - lo, start - lo + n
+        if keep:
+            for k, v in chunk.items():
+                store[k][a:b] = v
+        if on_chunk is not None:
+            on_chunk(start, start + n, chunk)
+        bar.update(n)
+
+    try:
+        pending = None
+        for start in range(lo, hi, n_rows):
+            item = launch(start)  # dispatched asynchronously: overlaps the previous transfer
+            if pending is not None:
+                collect(pending)
+            pending = item
+        if pending is not None:
+            collect(pending)
+    finally:
+        bar.close()
+    seconds = time.perf_counter() - t0
+
+    final_shape = shape if (index_range is None) else (n_points,)
+    if keep:
+        store = {k: v.reshape(final_shape) for k, v in store.items()}
+    status_counts = {STATUS_TEXT.get(c, status_text(c)): int(counts[c]) for c in np.flatnonzero(counts)}
+    return SweepResult(store, axes, final_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs,
+                       undefined=undefined)
+
+
+def check_distinct(paths, what):
+    """Refuse two paths that name one input ("vehicles[0].yaw_rate" is "vehicles[0].angular_velocity[2]";
+    spaces do not count): the later would override the earlier, under the earlier's name."""
+    seen = {}
+    for p in paths:
+        group, vi, name, idx = input_leaf(p)
+        key = (group, vi, name, tuple(sorted(idx)) if name == "inertia" else idx)  # [0][1] is [1][0]
+        if key in seen:
+            same = "twice" if seen[key] == p else f"and '{seen[key]}'"
+            raise CaseError(f"{what} '{p}' {same}: both name the same input, so one would override the other; "
+                            "give it once")
+        seen[key] = p
+
+
+def result_shape(sizes, mode):
+    """A sweep's result shape from {path: number of values}: one axis per path ("grid") or one axis
+    ("zip", which needs the same number for every path)."""
+    counts = tuple(sizes.values())
+    if mode != "zip":
+        return counts
+    if len(set(counts)) != 1:
+        raise CaseError("sweep mode 'zip' needs the same number of values for every path, got "
+                        + ", ".join(f"{p}: {n}" for p, n in sizes.items()))
+    return counts[:1]
