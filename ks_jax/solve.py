@@ -36,8 +36,14 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
     otherwise the exchange is at the case state. A negative ``speed`` (reachable by ``set_input``, a sweep
     or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN results (``speed_status``),
-    unless another input breaks a rule first."""
-    return run(stages(auto_point, auto_normal, smoothing), (inputs,), in_axes=None)
+    unless another input breaks a rule first.
+
+    Of the pipeline's stages (``stages``) only automatic contact's first, the input rules, is fenced off
+    (``batch.stages.run``): every later loop reads the rules, and XLA would derive them again inside each
+    loop that reads a stand-in input, in a program over twice the size to compile. The others are fused
+    freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``."""
+    return run(stages(auto_point, auto_normal, smoothing), (inputs,), in_axes=None,
+               fenced=1 if auto_point or auto_normal else False)
 
 
 def stages(auto_point: bool, auto_normal: bool, smoothing=0.0):

@@ -6,6 +6,7 @@ Tests get everything through the ``kit`` fixture so that nothing imports conftes
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
 import tempfile
@@ -14,7 +15,7 @@ import types
 import jax
 
 # ks_jax.cli.main keeps compiled programs in ~/.cache/ks-jax unless told otherwise; the tests that call
-# it write nothing there (tests/test_cli.py runs the command line with a cache of its own)
+# it write nothing there (tests/test_compilation.py runs the command line with a cache of its own)
 os.environ["KS_JAX_CACHE"] = "off"
 
 jax.config.update("jax_enable_x64", True)
@@ -23,8 +24,8 @@ jax.config.update("jax_enable_x64", True)
 # the same programs: they share one persistent compile cache, made for the run by the first process
 # that loads this file (the controller, before it starts the workers, which inherit the variable) and
 # deleted when that process ends. JAX keys each entry by the program, the compile options and its own
-# version, so a loaded program is the one a compile would give. In-process only: a subprocess that a
-# test starts (the command line, the notebooks) keeps its own settings.
+# version, so a loaded program is the one a compile would give. Every program compiles with the settings
+# users get: XLA's defaults, or ``ks_jax.compilation.QUICK_CPU`` where the library chooses it.
 _OWN_CACHE = "KS_JAX_TEST_COMPILE_CACHE" not in os.environ
 if _OWN_CACHE:
     os.environ["KS_JAX_TEST_COMPILE_CACHE"] = tempfile.mkdtemp(prefix="ks-jax-test-xla-")
@@ -37,36 +38,12 @@ def pytest_unconfigure(config):
         shutil.rmtree(os.environ.pop("KS_JAX_TEST_COMPILE_CACHE"), ignore_errors=True)
 
 
-# The rest of the compile time is XLA's, and on CPU its cheaper settings (the classic CPU emitters
-# instead of the fusion emitters, LLVM optimisation level 0) take about half as long for the same IEEE
-# arithmetic: the suite ran in 370 s with them and 649 s without (2026-11-24, benchmarks/RESULTS.md). So
-# every program of the test processes is compiled with them (XLA_FLAGS, read when the backend starts,
-# inherited by the workers and by the subprocesses the tests start), except where a test needs what
-# users get: the single-case program below, the notebooks and the tests that solve a case alone, in
-# a batch and in a sweep (``xla_default_env``). KS_JAX_TEST_XLA_DEFAULTS=1 runs the whole suite with
-# XLA's defaults.
-XLA_CHEAP_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0")
-XLA_DEFAULTS = {"xla_cpu_use_fusion_emitters": True, "xla_backend_optimization_level": 3}  # XLA's own
-XLA_CHEAP = os.environ.get("KS_JAX_TEST_XLA_DEFAULTS") != "1"
-if XLA_CHEAP:
-    _flags = os.environ.get("XLA_FLAGS", "").split()
-    os.environ["XLA_FLAGS"] = " ".join(_flags + [f for f in XLA_CHEAP_FLAGS if f not in _flags])
-
-
-def xla_default_env(**extra):
-    """This process's environment for a subprocess that compiles with XLA's defaults (the user's
-    own XLA_FLAGS kept), plus ``extra``."""
-    env = dict(os.environ, **extra)
-    flags = [f for f in env.get("XLA_FLAGS", "").split() if f not in XLA_CHEAP_FLAGS]
-    env["XLA_FLAGS"] = " ".join(flags)
-    return env
-
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
-from ks_jax import types as kt  # noqa: E402
+from ks_jax.model import types as kt  # noqa: E402
 import reference as ref  # noqa: E402
 
 CONTACT_RESULTS = ks_jax.ContactResult._fields
@@ -185,11 +162,7 @@ def _grad(args, weights, smoothing):
 # inertia shape and dtype: batches are padded to a fixed number of rows, and ``smoothing`` is
 # a traced argument (tau = 0 takes the exact branch; test_transforms checks that it equals the
 # static ``smoothing=0.0`` path bit for bit).
-# The single-case program is compiled with XLA's defaults (what users get; ``XLA_DEFAULTS``
-# overrides the cheaper settings above), and test_transforms checks it against the eager path and
-# against the batch rows.
-_ON_CPU = jax.default_backend() == "cpu"
-EXCHANGE = jax.jit(_single, compiler_options=XLA_DEFAULTS if _ON_CPU else None)
+EXCHANGE = jax.jit(_single)
 BATCH_JIT = jax.jit(_batch)
 GRAD_JIT = jax.jit(_grad)
 BATCH_ROWS = 160
@@ -332,7 +305,6 @@ def kit():
         batch_exchange=batch_exchange, value_and_grad=value_and_grad, output_vector=output_vector,
         outputs=OUTPUTS, output_slices=OUTPUT_SLICES, n_outputs=N_OUTPUTS, traces=TRACES,
         jitted={"single": EXCHANGE, "batch": BATCH_JIT, "grad": GRAD_JIT},
-        xla_default_env=xla_default_env, xla_cheap=XLA_CHEAP, xla_defaults=XLA_DEFAULTS if _ON_CPU else None,
         rtol_float32=RTOL_FLOAT32,
     )
 
@@ -345,3 +317,27 @@ def random_cases():
     principal = [ref.random_case(rng, full_inertia=False) for _ in range(150)]
     full = [ref.random_case(rng, full_inertia=True) for _ in range(150)]
     return {"principal": principal, "full": full}
+
+
+try:
+    _TRIM = ctypes.CDLL("libc.so.6").malloc_trim  # glibc: give freed memory back to the system
+except (OSError, AttributeError):
+    _TRIM = None
+
+
+@pytest.fixture(autouse=True)
+def _return_freed_memory():
+    """XLA frees what a compile allocated, but the C library keeps it in this process: after each test it is
+    given back, so that a worker's memory is that of one test's programs, not the sum of all of them."""
+    yield
+    if _TRIM is not None:
+        _TRIM(0)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _free_compiled_programs():
+    """Each test file's compiled programs are freed when it ends (the run's compile cache keeps them on disk)."""
+    yield
+    jax.clear_caches()
+    if _TRIM is not None:
+        _TRIM(0)

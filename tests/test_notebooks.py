@@ -10,11 +10,10 @@ NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.i
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs(path, monkeypatch, kit):
+def test_notebook_runs(path, monkeypatch):
     nbformat = pytest.importorskip("nbformat")
-    # the kernel (a subprocess) compiles with XLA's defaults, as a reader's would, into the run's shared
-    # compile cache (tests/conftest.py): the notebooks build several of the same programs
-    monkeypatch.setenv("XLA_FLAGS", kit.xla_default_env()["XLA_FLAGS"])
+    # the kernel (a subprocess) compiles into the run's shared compile cache (tests/conftest.py): the
+    # notebooks build several of the same programs
     monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", os.environ["KS_JAX_TEST_COMPILE_CACHE"])
     monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     nbclient = pytest.importorskip("nbclient")

@@ -37,10 +37,11 @@ def cut(args, start, size, in_axes=0):
         lambda x, a: x if a is None else jax.lax.dynamic_slice_in_dim(x, start, size, 0), args, in_axes)
 
 
-def in_chunks(stages, n, args, in_axes, size=CHUNK_ROWS):
+def in_chunks(stages, n, args, in_axes, size=None):
     """The pipeline ``stages`` over the n rows of ``args`` in a loop over chunks of ``size`` rows, inside
     one program. The last chunk ends at row n (it computes again some rows of the one before, which
-    get the same values), so that every chunk has the same shape."""
+    get the same values), so that every chunk has the same shape. ``size``: default ``CHUNK_ROWS``."""
+    size = CHUNK_ROWS if size is None else size
 
     def chunk(i, out):
         start = jnp.minimum(i * size, n - size)

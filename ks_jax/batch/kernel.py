@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compilation import compiler_options
 from ..model import collision
 from ..model.checks import check_smoothing
 from ..model.types import Contact, ExchangeResult, State, Vehicle
@@ -43,10 +44,11 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
 
 
 @functools.lru_cache(maxsize=32)
-def _chunk_program(size, smoothing):
-    """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart."""
+def _chunk_program(size, smoothing, quick):
+    """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart.
+    ``quick``: compiled quickly (a batch of one chunk runs in milliseconds; compiling is most of its time)."""
     stages = exchange_stages(smoothing)
-    return jax.jit(lambda args, start: run(stages, cut(args, start, size)))
+    return jax.jit(lambda args, start: run(stages, cut(args, start, size)), compiler_options=compiler_options(quick))
 
 
 def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
@@ -58,7 +60,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     ``exchange``; a batch of no rows, results of no rows. The rows are computed in chunks of ``chunk``
     rows (one program per chunk size, the last chunk aligned to the end of the batch), each chunk
     copied into the results while the next is computed, so that no batch-sized array is ever held by
-    XLA. For values only: to differentiate, vmap ``exchange``.
+    XLA. A batch of at most ``CHUNK_ROWS`` rows is compiled quickly (``compilation.quick_jit``), a larger
+    one with XLA's defaults. For values only: to differentiate, vmap ``exchange``.
 
     out: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an earlier
     result of a batch of the same size), written in place and returned: a loop over batches then touches
@@ -86,7 +89,7 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         _checked_out(target, empty, 0, given)
         return target
     size = min(int(chunk), n)
-    program = _chunk_program(size, float(smoothing))
+    program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS)
     leaves, treedef, pending = None, None, None
 
     def store(lo, start, result):  # rows lo.. of the batch from a chunk that starts at ``start``

@@ -26,16 +26,20 @@ def run(stages, args, in_axes=0, fenced=True):
 
     args: a tuple of pytrees; in_axes: 0 (every leaf has the rows first), or a tuple of the same
     structure as ``args`` holding 0 or None per leaf (None: the same for every row). None in place of
-    the whole ``in_axes``: one row, unbatched. fenced: on a CPU, each stage in a fence of its own
-    (``fence``); elsewhere, and with fenced False, one program that XLA may fuse freely."""
+    the whole ``in_axes``: one row, unbatched. fenced: True, each stage in a fence of its own on a CPU
+    (``fence``); a number k, the first k stages only; False, none (one program that XLA may fuse freely,
+    as it is everywhere but on a CPU). A fence costs tracing time under transformations (a fit's
+    ``jax.jacfwd`` traces each conditional's branches again), so a caller that differentiates a few rows
+    fences only what pays for itself."""
+    count = len(stages) if fenced is True else int(fenced)
     outs = ()
-    for stage in stages:
+    for k, stage in enumerate(stages):
         if in_axes is None:
             fn = stage
         else:
             axes = (in_axes,) * len(args) if in_axes == 0 else tuple(in_axes)
             fn = jax.vmap(stage, in_axes=axes + (0,) * len(outs))
-        outs += (fence(fn, *args, *outs) if fenced else fn(*args, *outs),)
+        outs += (fence(fn, *args, *outs) if k < count else fn(*args, *outs),)
     return outs[-1]
 
 

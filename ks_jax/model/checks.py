@@ -96,7 +96,10 @@ def input_status(vehicle1, state1, vehicle2, state2, contact, smoothing=0.0):
     code = jnp.int32(OK)
     for ok, bad in reversed(checks):  # the first failing rule wins
         code = jnp.where(ok, code, jnp.int32(bad))
-    return code
+    # stored once per row: every later step reads the code (``benign`` keys every input on it), and XLA's
+    # fusion would otherwise copy the checks above into each of hundreds of loops, in a program many
+    # times the size to compile
+    return la.materialize(code)[0]
 
 
 def check_smoothing(smoothing):

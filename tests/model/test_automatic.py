@@ -21,10 +21,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
-from ks_jax import geometry as G  # noqa: E402
+from ks_jax.model import automatic as G  # noqa: E402
+from ks_jax.model import first_contact  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import as_arrays, load_case, set_input, to_pytrees  # noqa: E402
-from ks_jax.types import NO_CONTACT, OK  # noqa: E402
+from ks_jax.model.types import NO_CONTACT, OK  # noqa: E402
 
 BATCH = 96
 TIME_TOL = 1e-9  # s: closed form and bisection are both far below the 1e-6 s asked for
@@ -268,7 +269,7 @@ def test_spinning_car_reaches_a_parked_one(res):
 def test_never_touching(res):
     r = res["never"]
     assert r.contact.status == NO_CONTACT and ks_jax.status_text(r.contact.status) == "no_contact"
-    assert r.contact.time == G.HORIZON
+    assert r.contact.time == first_contact.HORIZON
     assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
     np.testing.assert_array_equal(r.contact.impulse, 0.0)
     for v, s in zip(r.vehicles, (CASES["never"][1], CASES["never"][3])):
@@ -475,7 +476,7 @@ def test_never_touching_case_reads_as_such(tmp_path):
             assert d["contact"]["impulse_magnitude"] == 0.0 and d["contact"]["energy_loss"] == 0.0
             assert [v["crush"] for v in d["vehicles"]] == [0.0, 0.0]
         else:
-            assert f"none within {G.HORIZON:g} s of free motion" in out and "o'clock" not in out
+            assert f"none within {first_contact.HORIZON:g} s of free motion" in out and "o'clock" not in out
             assert out.count("undefined (no impulse)") == 2
             assert [line.split() for line in out.splitlines() if line.strip().startswith("EES")] == [
                 ["EES", "undefined"]] * 2
@@ -597,7 +598,7 @@ def test_spinning_car_reached_late_and_out_of_reach():
     assert 7.0 < want < 10.0
     assert late.contact.status == OK and abs(late.contact.time - want) < 1e-9
     for r in (too_late, beside):
-        assert r.contact.status == NO_CONTACT and r.contact.time == G.HORIZON
+        assert r.contact.status == NO_CONTACT and r.contact.time == first_contact.HORIZON
         assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
 
 
@@ -628,7 +629,7 @@ def test_first_contact_of_turning_vehicles_against_dense_sampling():
     touching one; where they never do, it reports none."""
     rng = np.random.default_rng(11)
     step = 2e-4
-    ts = np.arange(0.0, G.HORIZON + step / 2, step)
+    ts = np.arange(0.0, first_contact.HORIZON + step / 2, step)
     rows, refs = [], []
     for k in range(60):
         dims = [(rng.uniform(3.5, 6.0), rng.uniform(1.5, 2.2)) for _ in range(2)]
@@ -670,10 +671,10 @@ def test_refine_ends_on_the_touching_side_within_its_tolerance():
     roots, slopes = [0.3, 0.4 + 1e-7, 0.25], [1.9, 0.5, None]
     for f, root, slope in zip(fns, roots, slopes):
         lo, hi = jnp.float64(0.0), jnp.float64(0.6)
-        t = float(jax.jit(lambda lo, hi: G._refine(f, lo, hi, f(lo), f(hi), tol, True))(lo, hi))
+        t = float(jax.jit(lambda lo, hi: first_contact._refine(f, lo, hi, f(lo), f(hi), tol, True))(lo, hi))
         assert -tol <= float(f(t)) <= 0.0, (root, t, float(f(t)))
         assert t >= root - 1e-15 and (slope is None or t - root <= tol / slope + 1e-15), (root, t)
-        assert float(G._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
+        assert float(first_contact._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
 
 
 def test_a_scene_far_from_the_origin_gives_the_same_contact():
@@ -757,12 +758,11 @@ def test_centroid_derivative_in_penetration_time_at_the_touch_is_the_growing_tri
     np.testing.assert_allclose(out[0][1:3], [0.3, -0.9], atol=LEN_TOL)  # at the corner
     np.testing.assert_allclose(tan[0][1:4], want, rtol=1e-6)
 
-    def point(penetration_time, k):
+    def point(penetration_time):
         args = build(jnp.asarray(theta).at[5].set(penetration_time), base)
-        return G.automatic_contact(*args, auto_point=True, auto_normal=True).contact.point[k]
+        return G.automatic_contact(*args, auto_point=True, auto_normal=True).contact.point
 
-    grad = jax.jit(jax.grad(point), static_argnums=1)
-    np.testing.assert_allclose([float(grad(0.0, k)) for k in range(3)], want, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(jax.jit(jax.jacrev(point))(0.0), want, rtol=1e-6, atol=1e-12)  # reverse mode
 
 
 @pytest.mark.parametrize("name, h", [("oblique", 1e-6), ("tbone", 1e-6), ("spin", 1e-4)])

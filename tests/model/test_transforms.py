@@ -8,16 +8,13 @@ import importlib
 import math
 import os
 import re
-import subprocess
-import sys
 
 import jax
 import numpy as np
 import pytest
-from jaxlib import xla_client
 
 import ks_jax
-from ks_jax.case import load_case, to_pytrees
+from ks_jax.case import load_case
 import reference as ref
 
 RTOL_JIT = 1e-13  # jit vs eager, vmap vs single: the same arithmetic, fused differently
@@ -103,55 +100,12 @@ def test_no_recompilation_for_new_values(kit, few_cases):
     assert single >= 1 and batch >= 1  # the counters do count
 
 
-# The seed chapter's exchange compiled in a subprocess with XLA's defaults: the optimisation level that
-# XLA's flags give, then the compiled program's text.
-_AS_USERS_GET_IT = r"""
-import sys
-import jax
-jax.config.update("jax_enable_x64", True)
-from jaxlib import xla_client
-import ks_jax
-from ks_jax.case import load_case, to_pytrees
-print(xla_client.CompileOptions().executable_build_options.debug_options.xla_backend_optimization_level)
-print(jax.jit(ks_jax.exchange).lower(*to_pytrees(load_case(sys.argv[1]).inputs)).compile().as_text())
-"""
-
-
 def _program(text):
     """A compiled program's text without its source locations (which name the calling files)."""
     head, rest = text.split("\n", 1)
     if "StackFrames" in rest:
         rest = rest[rest.index("\n\n", rest.index("StackFrames")):]
     return (head + re.sub(r",? metadata=\{[^}]*\}", "", rest)).rstrip()
-
-
-@pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
-def test_the_single_case_program_is_compiled_as_users_get_it(kit):
-    """The test processes compile with XLA's cheaper settings, the single-case program with
-    ``XLA_DEFAULTS`` instead (tests/conftest.py). Those are XLA's defaults: a subprocess with XLA's own
-    settings compiles the seed chapter's exchange to the same program, at the same optimisation level.
-    Unless KS_JAX_TEST_XLA_DEFAULTS=1, the cheaper settings are in effect here: the program compiled
-    with them is another, at level 0."""
-    seed = os.path.join(os.path.dirname(ks_jax.__file__), "cases", "seed_000_saturn_pontiac.json")
-    done = subprocess.run([sys.executable, "-c", _AS_USERS_GET_IT, seed], capture_output=True, text=True,
-                          env=kit.xla_default_env(JAX_PLATFORMS="cpu"), timeout=300)
-    assert done.returncode == 0, done.stderr[-3000:]
-    users_level, users_text = done.stdout.split("\n", 1)
-    users = _program(users_text)
-    assert "fusion" in users and "metadata" not in users
-    args = to_pytrees(load_case(seed).inputs)
-
-    def program(options):
-        return _program(jax.jit(ks_jax.exchange, compiler_options=options).lower(*args).compile().as_text())
-
-    assert program(kit.xla_defaults) == users
-    assert kit.xla_defaults["xla_backend_optimization_level"] == int(users_level)
-    level = xla_client.CompileOptions().executable_build_options.debug_options.xla_backend_optimization_level
-    if kit.xla_cheap:
-        assert program(None) != users and level == 0
-    else:
-        assert program(None) == users and level == int(users_level)
-
 
 
 # the same operations compiled at LLVM level 0 with XLA's classic emitters and at XLA's defaults: rounding apart
@@ -162,42 +116,20 @@ RTOL_QUICK, ATOL_QUICK = 1e-12, 1e-12
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
 @pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json"])
 def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit, name):
-    """``ks_jax.solve``'s programs (a file's few cases) are compiled with ``ks_jax.quick.QUICK_CPU``, not
+    """``ks_jax.solve``'s program (a file's few cases) is compiled with ``ks_jax.compilation.QUICK_CPU``, not
     with XLA's defaults (another program), and give the values of the programs compiled at XLA's defaults:
     the seed chapter (explicit contact) and its staging with automatic contact, solved as a file of two
     cases (the case and the same one with the bullet car 3 mph faster), every result of every stage."""
-    from ks_jax.quick import QUICK_CPU
-
     sv = importlib.import_module("ks_jax.solve")  # the module (ks_jax.solve is the function)
     case = load_case(os.path.join(os.path.dirname(ks_jax.__file__), "cases", name))
     faster = ks_jax.set_input(case.inputs, "vehicles[1].speed", ks_jax.get_input(case.inputs, "vehicles[1].speed")
                               + 3 * ks_jax.units.MPH)
     inputs = ks_jax.case.as_arrays(jax.tree_util.tree_map(lambda *x: np.stack(x), case.inputs, faster))
-    auto = (case.auto_point, case.auto_normal)
-
-    def solve_with(options):  # ``solve._solve_batch``, each of its programs compiled with ``options``
-        def jitted(name):
-            fn = getattr(sv, name)
-            return jax.jit(fn.__wrapped__, compiler_options=options, **fn.jit_kwargs)
-
-        if not any(auto):
-            explicit = jitted("_solve_explicit")
-            return explicit(inputs, 0.0), [(explicit, (inputs, 0.0))]
-        status_fn, contact_fn, exchange_fn = (jitted(n) for n in ("_auto_status", "_auto_contact", "_auto_exchange"))
-        status = status_fn(inputs)
-        contact = contact_fn(inputs, status, *auto)
-        calls = [(status_fn, (inputs,)), (contact_fn, (inputs, status, *auto)),
-                 (exchange_fn, (inputs, status, contact, 0.0))]
-        return exchange_fn(inputs, status, contact, 0.0), calls
-
-    quick, quick_calls = solve_with(QUICK_CPU)
-    defaults, default_calls = solve_with(kit.xla_defaults)
-    names = ("_auto_status", "_auto_contact", "_auto_exchange") if any(auto) else ("_solve_explicit",)
-    plain = [getattr(sv, n).plain._cache_size() for n in names]
-    used = sv._solve_batch(inputs, 0.0, *auto)  # what ks_jax.solve runs: the quick programs, not the plain ones
-    assert [getattr(sv, n).plain._cache_size() for n in names] == plain
-    assert all(getattr(sv, n).quick._cache_size() >= 1 for n in names)
-    assert_trees_close(used, quick, 0.0, "solve.")
+    args = (inputs, case.auto_point, case.auto_normal, 0.0)
+    plain = sv._solve.plain._cache_size()
+    quick = sv._solve(*args)  # what ks_jax.solve runs: the quick program, not the plain one
+    assert sv._solve.plain._cache_size() == plain and sv._solve.quick._cache_size() >= 1
+    defaults = sv._solve.plain(*args)
     named = jax.tree_util.tree_flatten_with_path(_as_np(quick))[0]
     for (path, x), y in zip(named, jax.tree_util.tree_leaves(_as_np(defaults))):
         name = jax.tree_util.keystr(path)
@@ -208,9 +140,8 @@ def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit
         else:
             np.testing.assert_allclose(x, y, rtol=RTOL_QUICK, atol=ATOL_QUICK, equal_nan=True, err_msg=name)
     assert np.all(np.asarray(quick.contact.status) == 0)
-    # another program (the exchange's at least; a stage as short as the status check may compile alike)
-    assert any(_program(fn_q.lower(*args).compile().as_text()) != _program(fn_d.lower(*args).compile().as_text())
-               for (fn_q, args), (fn_d, _) in zip(quick_calls, default_calls))
+    assert _program(sv._solve.quick.lower(*args).compile().as_text()) != \
+        _program(sv._solve.plain.lower(*args).compile().as_text())  # another program
 
 
 # --------------------------------------------------------------------------- scene symmetries

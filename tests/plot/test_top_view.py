@@ -19,6 +19,7 @@ from matplotlib.patches import Polygon, Wedge  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax import plot  # noqa: E402
+from ks_jax.plot.top_view import clip_polygon  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
 
@@ -109,15 +110,15 @@ def test_explicit_contact_drawing_and_two_panels(tmp_path):
 
 def test_clip_polygon_against_the_engine():
     """plot's NumPy clipping and the engine's fixed-size clipping give the same overlap."""
-    from ks_jax import geometry as G
+    from ks_jax.model import overlap
 
     a = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 2.0], [0.0, 2.0]])
     c, s = math.cos(0.4), math.sin(0.4)
     b = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) @ np.array([[c, s], [-s, c]]) + [3.5, 1.6]
-    mine = plot.clip_polygon(a, b)
+    mine = clip_polygon(a, b)
     with jax.disable_jit():
-        poly, count = G.overlap_polygon(np.asarray(a), np.asarray(b))
-        area, centroid = G.polygon_area_centroid(poly, count)
+        poly, count = overlap.overlap_polygon(np.asarray(a), np.asarray(b))
+        area, centroid = overlap.polygon_area_centroid(poly, count)
     assert int(count) == len(mine)
     assert float(area) == pytest.approx(shoelace(mine), rel=1e-12)
     x, y = mine[:, 0], mine[:, 1]

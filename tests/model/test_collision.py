@@ -12,7 +12,7 @@ import pytest
 
 import ks_jax
 import reference as ref
-from ks_jax import types as t
+from ks_jax.model import types as t
 from ks_jax import units as U
 
 # Named tolerances (float64 unless said otherwise).
@@ -493,8 +493,8 @@ def test_crush_depth_by_hand_for_a_ray_nearly_along_the_sides(tilt, dtype):
     ray leaves through the front (2.0 - 0.5) / d_x, or through the side (0.9 - 0.3) / d_y if nearer
     (tilt 0.05: 1.5 |d| < 0.6 / 0.05 |d|, the front still). A component of rounding size meets no face;
     its derivative is finite. By hand: depth = 1.5 sqrt(1 + tilt^2) and d depth / d point = -(R e_x) / d_x."""
-    from ks_jax import linalg as la
-    from ks_jax.derived import crush_depth
+    from ks_jax.model import linalg as la
+    from ks_jax.model.results import crush_depth
 
     vehicle = ks_jax.Vehicle(*(np.asarray(x, dtype) for x in (1500.0, [500.0, 2000.0, 2200.0], 4.5, 1.8, 1.4, 2.0, 0.5)))
     position = np.asarray([10.0, 5.0, 0.5], dtype)

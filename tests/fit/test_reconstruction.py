@@ -23,13 +23,14 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import fit  # noqa: E402
+import ks_jax  # noqa: E402
 from fit.problem import to_x, to_z, wrap  # noqa: E402
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
 
-CASES = Path(__file__).resolve().parents[1] / "ks_jax" / "cases"
+CASES = Path(ks_jax.__file__).parent / "cases"
 SEED = CASES / "seed_001_lucid_kia.toml"
 FIT_SEED = CASES / "fit_seed_001.json"
 RECOVER = 1e-5
@@ -394,7 +395,7 @@ def test_friction_of_a_contact_that_sticks_is_bounded_below_only():
     assert d["std"]["contact.friction"] is None
     assert all(d["monte_carlo"]["percentiles"][q]["contact.friction"] is None for q in ("5", "50", "95"))
     assert all(d["monte_carlo"]["percentiles"][q]["vehicles[1].speed"] is not None for q in ("5", "50", "95"))
-    from fit.cli import text_report
+    from fit.report import text_report
 
     assert re.search(r"\n  contact\.friction +no interval: not determined by the evidence", text_report(r))
 
@@ -463,11 +464,12 @@ def test_a_prior_on_the_friction_of_a_sticking_contact_fixes_it():
     """The sticking T-bone of the test above with a prior of 0.5 +/- 0.1 on friction: the evidence still
     bounds it below only, and the prior alone fixes it: its standard error is the prior's 0.1."""
     case = load_case(CASES / "auto_tbone.json")
-    paths = ["vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude"]
-    evidence = _evidence_of(case, paths, [0.45, 0.45])
+    paths = ["vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude", "vehicles[0].speed_after",
+             "vehicles[1].speed_after"]  # as above: the same compiled solver, the prior being data
+    evidence = _evidence_of(case, paths, [0.45, 0.45, 0.9, 0.9])
     unknowns = {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]},
                 "contact.friction": {"bounds": [0.1, 1.0], "prior": {"mean": 0.5, "sigma": 0.1}}}
-    r = fit.reconstruct(case, unknowns, evidence)
+    r = fit.reconstruct(case, unknowns, evidence, monte_carlo=16)
     assert r.std["contact.friction"] == pytest.approx(0.1) and "contact.friction" not in r.not_determined
     (words,) = [s for s in r.unidentified if "friction" in s]
     assert "bounded below only" in words and "Only the prior on contact.friction fixes it" in words

@@ -1,0 +1,192 @@
+"""``jax.vmap(ks_jax.exchange)`` over more rows than a chunk runs in chunks on a CPU (``ks_jax.batch.chunks``):
+the values are the single solves' and the independent reference's, across chunk boundaries (a last chunk
+that overlaps the one before) and with bad rows; the derivatives are ``jax.vmap``'s, as through any batch."""
+
+from __future__ import annotations
+
+import copy
+import importlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax.model import types as t
+
+CHUNKS = importlib.import_module("ks_jax.batch.chunks")
+
+
+def _leaves(result):
+    return jax.tree_util.tree_leaves(result)
+
+
+def _assert_same(batched, reference):
+    for a, b in zip(_leaves(batched), _leaves(reference)):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.fixture
+def small_chunks(monkeypatch):
+    """``jax.vmap(exchange)`` over more than CHUNK_ROWS rows runs in chunks on one CPU device;
+    64-row chunks exercise that path on small batches."""
+    monkeypatch.setattr(CHUNKS, "CHUNK_ROWS", 64)
+    return 64
+
+
+def _with_bad_rows(cases):
+    bad = copy.deepcopy(cases[63])  # the last row of the first chunk
+    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
+    wild = copy.deepcopy(cases[100])  # a row the end-aligned last chunk computes again (restitution > 1)
+    wild["contact"]["restitution"] = 1.5
+    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
+
+
+def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
+    cases = _with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
+    args = kit.inputs(cases)
+    fn = jax.jit(jax.vmap(ks_jax.exchange))
+    assert "scan" in str(jax.make_jaxpr(fn)(*args))  # the loop over chunks, not the whole-batch program
+    batched = fn(*args)
+    singles = [kit.exchange(*kit.inputs(c)) for c in cases]
+    stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
+    _assert_same(batched, stacked)
+    status = np.asarray(batched.contact.status)
+    assert status[63] == t.INVALID_INERTIA_1 and status[100] == t.INVALID_RESTITUTION
+    good = np.ones(len(cases), bool)
+    good[[63, 100]] = False
+    kit.assert_matches(kit.engine_dict(jax.tree_util.tree_map(lambda x: np.asarray(x)[good], batched)),
+                       kit.reference_batch([c for c, g in zip(cases, good) if g]), 1e-9,
+                       [c for c, g in zip(cases, good) if g])
+    # a batch of at most one chunk is one whole-batch program
+    assert "scan" not in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*kit.inputs(cases[:64])))
+
+
+def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, random_cases, small_chunks):
+    """Both vehicles the same in every row (unbatched), a smooth cone: the rows of the last chunk, which starts
+    at row 66 so as to end at row 130, equal the whole-batch program of those 64 rows."""
+    v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:130])
+    first = jax.tree_util.tree_map(lambda x: x[0], (v1, v2))
+    fn = jax.jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
+    batched = fn(s1, s2, c)
+    for rows in (slice(0, 64), slice(66, 130)):  # one chunk: the whole-batch program
+        _assert_same(jax.tree_util.tree_map(lambda x: x[rows], batched),
+                     fn(*jax.tree_util.tree_map(lambda x: x[rows], (s1, s2, c))))
+
+
+def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
+    """Reverse and forward mode through a batch whose values run in chunks, with an unbatched input (one
+    vehicle 2 in every row: its gradient is the sum over the rows) and rows with invalid inputs (zero
+    gradient, nothing NaN): the per-row gradients, and central differences along vehicle 1's speed."""
+    cases = _with_bad_rows(random_cases["full"][:150])
+    v1, s1, v2, s2, c = kit.inputs(cases)
+    shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+
+    def row_loss(v2, v1, s1, s2, c):
+        r = ks_jax.exchange(v1, s1, v2, s2, c)
+        return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
+                         + 1e-4 * r.contact.energy_loss, 0.0)
+
+    def loss(v2, s1, c):
+        return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, v1, s1, s2, c))
+
+    assert "scan[" in str(jax.make_jaxpr(loss)(shared, s1, c))  # the forward's loop over chunks
+    grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
+    per_row = jax.jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
+        shared, v1, s1, s2, c)
+    reference = (jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[0]), *per_row[1:])
+    for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-10)
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
+    for bad in (63, 100):
+        assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves(grads[1:]))
+
+    direction = np.zeros_like(np.asarray(s1.velocity))  # vehicle 1's speed in every row at once
+    direction[:, 0] = 1.0
+    h = 1e-5
+
+    @jax.jit
+    def shifted(step):
+        return loss(shared, s1._replace(velocity=s1.velocity + step * direction), c)
+
+    fd = (shifted(h) - shifted(-h)) / (2 * h)
+    np.testing.assert_allclose(float(np.sum(np.asarray(grads[1].velocity) * direction)), float(fd), rtol=1e-6)
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, s1)
+    _, along = jax.jit(lambda s, t: jax.jvp(lambda x: loss(shared, x, c), (s,), (t,)))(
+        s1, zeros._replace(velocity=jnp.asarray(direction)))  # forward mode (a fit uses jax.jacfwd)
+    np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
+
+
+def test_a_batch_of_one_row_is_the_row(kit, random_cases):
+    """``jax.vmap(exchange)`` over one row computes the row unbatched: its values are those of ``exchange``
+    of the row, and its gradient with one vehicle shared (unbatched) is the row's to rounding, for a valid row
+    and for one with invalid inputs."""
+    good = random_cases["full"][5]
+    bad = copy.deepcopy(good)
+    bad["vehicles"][0]["mass"] = 0.0
+
+    def row_loss(v2, s1, c, v1, s2):
+        r = ks_jax.exchange(v1, s1, v2, s2, c)
+        return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
+                         + 1e-4 * r.contact.energy_loss, 0.0)
+
+    def loss(v2, s1, c, v1, s2):  # one row, batched
+        return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, s1, c, v1, s2))
+
+    batch = jax.jit(jax.vmap(ks_jax.exchange))
+    grad_batch, grad_row = jax.jit(jax.grad(loss, argnums=(0, 1, 2))), jax.jit(jax.grad(row_loss, argnums=(0, 1, 2)))
+    for case in (good, bad):
+        v1, s1, v2, s2, c = kit.inputs([case])
+        shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+        row = jax.tree_util.tree_map(lambda x: x[0], (v1, s1, v2, s2, c))
+        _assert_same(batch(v1, s1, v2, s2, c), jax.tree_util.tree_map(lambda x: np.asarray(x)[None],
+                                                                      kit.exchange(*row)))
+        grads = grad_batch(shared, s1, c, v1, s2)
+        reference = grad_row(shared, row[1], row[4], row[0], row[3])
+        # to rounding: a batch's JVP is jax.vmap's of the row's. Rounding in the loss's units: each derivative
+        # times its input (at least 1 SI unit), against the sum of them all
+        triples = [(np.asarray(a), np.reshape(np.asarray(b), np.shape(a)), np.maximum(np.abs(np.reshape(x, np.shape(a))), 1))
+                   for a, b, x in zip(*(jax.tree_util.tree_leaves(t) for t in (grads, reference, (shared, row[1], row[4]))))]
+        total = sum(np.sum(np.abs(b) * x) for _, b, x in triples)
+        for a, b, x in triples:
+            assert np.all(np.abs(a - b) * x <= 1e-12 * total), (a, b)
+        assert any(np.any(np.asarray(x) != 0) for x in jax.tree_util.tree_leaves(grads)) == (case is good)
+
+
+def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
+    """Forward over reverse (``jax.hessian``) through a batch whose values run in chunks: the columns of the
+    Hessian are central differences of the gradient."""
+    v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
+
+    def loss(p):
+        r = jax.vmap(ks_jax.exchange)(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2,
+                                       c._replace(friction=c.friction * p[1]))
+        return jnp.sum(jnp.where(r.contact.status == 0, r.vehicles[0].delta_v_magnitude ** 2
+                                 + r.vehicles[1].speed_after, 0.0))
+
+    p = jnp.array([1.0, 0.9])
+    hessian = np.asarray(jax.jit(jax.hessian(loss))(p))
+    grad, h = jax.jit(jax.grad(loss)), 1e-6
+    for k in range(2):
+        step = h * np.eye(2)[k]
+        column = (np.asarray(grad(p + step)) - np.asarray(grad(p - step))) / (2 * h)
+        np.testing.assert_allclose(hessian[:, k], column, rtol=1e-5, atol=1e-6 * np.abs(hessian).max())
+    assert abs(float(hessian[0, 1])) > 1.0  # the two parameters interact
+
+
+def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
+    """With 64-bit types enabled (as in these tests, the CLI and the benchmarks), float32 inputs give
+    float32 results computed in float32: no float64 constant may promote them (the stand-ins of
+    invalid rows once did). Values against the float64 reference at float32 tolerance."""
+    cases = random_cases["full"][:100]
+    args = kit.inputs(cases, np.float32)
+    for result in (jax.jit(jax.vmap(ks_jax.exchange))(*args), ks_jax.exchange_batch(*args, chunk=64)):
+        floats = [x for x in _leaves(result) if np.asarray(x).dtype.kind == "f"]
+        assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
+        kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.rtol_float32, cases)

@@ -1,0 +1,116 @@
+"""``ks_jax.exchange_batch``: the values of ``jax.vmap(exchange)``, row for row, in chunks (a last chunk
+that overlaps the one before), with bad rows, into NumPy arrays or into earlier results (``out=``)."""
+
+from __future__ import annotations
+
+import copy
+
+import jax
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax.model import types as t
+
+
+def _leaves(result):
+    return jax.tree_util.tree_leaves(result)
+
+
+def _assert_same(batched, reference):
+    for a, b in zip(_leaves(batched), _leaves(reference)):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("kind", ["principal", "full"])
+def test_exchange_batch_equals_vmap(kit, random_cases, kind):
+    cases = random_cases[kind][:150]
+    # rows with invalid inputs among them: each keeps its own status, the others are solved
+    bad = copy.deepcopy(cases[7])
+    bad["vehicles"][1]["mass"] = -5.0
+    nan = copy.deepcopy(cases[40])
+    nan["contact"]["point"] = np.array([0.0, np.nan, 0.0])
+    cases = cases[:7] + [bad] + cases[8:40] + [nan] + cases[41:]
+    args = kit.inputs(cases)
+    reference = kit.batch_exchange(args)  # jax.vmap(exchange) (the test kit's program)
+    # 150 rows in chunks of 64: 64, 64, then a last chunk aligned to the end (rows 86..149)
+    for chunk in (64, 150, 1000):
+        batched = ks_jax.exchange_batch(*args, chunk=chunk)
+        _assert_same(batched, reference)
+    assert all(isinstance(x, np.ndarray) for x in _leaves(batched))  # NumPy results, like sweep's
+    one = ks_jax.exchange_batch(*jax.tree_util.tree_map(lambda x: x[3:4], args))  # a batch of one row
+    _assert_same(one, jax.tree_util.tree_map(lambda x: x[3:4], reference))
+    status = np.asarray(batched.contact.status)
+    assert status[7] == t.INVALID_MASS_2 and status[40] == t.INVALID_NONFINITE
+    assert np.all(np.isnan(np.asarray(batched.vehicles[0].delta_v)[[7, 40]]))
+    good = np.ones(len(cases), bool)
+    good[[7, 40]] = False
+    assert np.all(np.isfinite(np.asarray(batched.contact.impulse)[good]))
+    # and against the independent NumPy reference
+    kit.assert_matches(kit.engine_dict(jax.tree_util.tree_map(lambda x: x[good], batched)),
+                       kit.reference_batch([c for c, g in zip(cases, good) if g]), 1e-9,
+                       [c for c, g in zip(cases, good) if g])
+
+
+def test_exchange_batch_smoothing_matches_vmap(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:40])
+    reference = kit.batch_exchange(args, 0.05)
+    _assert_same(ks_jax.exchange_batch(*args, smoothing=0.05, chunk=16), reference)
+
+
+def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:10])
+    short = args[4]._replace(friction=args[4].friction[:9])
+    with pytest.raises(ValueError, match="same leading batch axis"):
+        ks_jax.exchange_batch(*args[:4], short)
+    with pytest.raises(ValueError, match="smoothing must be in"):
+        ks_jax.exchange_batch(*args, smoothing=1.5)
+    with pytest.raises(ValueError, match="chunk must be a positive"):
+        ks_jax.exchange_batch(*args, chunk=0)
+    with pytest.raises(TypeError, match="jax.vmap"):  # values only: not under a transformation
+        jax.jit(lambda *a: ks_jax.exchange_batch(*a).contact.impulse_magnitude)(*args)
+
+
+def test_exchange_batch_writes_into_out(kit, random_cases):
+    """``out``: the results of another batch of the same size are overwritten in place (chunks of 16
+    over 40 rows, the last one aligned to the end) and equal a fresh call; a wrong ``out`` is refused,
+    naming the field."""
+    a, b = (kit.inputs(random_cases["principal"][k:k + 40]) for k in (0, 40))
+    fresh = ks_jax.exchange_batch(*a, chunk=16)
+    out = ks_jax.exchange_batch(*b, chunk=16)
+    before = [np.copy(x) for x in _leaves(out)]
+    got = ks_jax.exchange_batch(*a, chunk=16, out=out)
+    assert all(x is y for x, y in zip(_leaves(got), _leaves(out)))
+    _assert_same(got, fresh)
+    assert any(not np.array_equal(x, y) for x, y in zip(before, _leaves(got)) if x.dtype.kind == "f")
+    wrong = out._replace(vehicles=(out.vehicles[0]._replace(pdof=np.zeros(39)), out.vehicles[1]))
+    with pytest.raises(ValueError, match=r"out\.vehicles\[0\]\.pdof = ndarray float64\[39\].*float64\[40\]"):
+        ks_jax.exchange_batch(*a, out=wrong)
+    frozen = [np.copy(x) for x in _leaves(out)]
+    frozen[0].flags.writeable = False
+    with pytest.raises(ValueError, match="writeable"):
+        ks_jax.exchange_batch(*a, out=jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(out), frozen))
+    numpy_inputs = jax.tree_util.tree_map(np.array, a)
+    aliased = out._replace(contact=out.contact._replace(energy_loss=numpy_inputs[4].friction))
+    with pytest.raises(ValueError, match="out.contact.energy_loss shares memory with an input"):
+        ks_jax.exchange_batch(*numpy_inputs, out=aliased)
+
+
+def test_exchange_batch_of_no_rows(kit, random_cases):
+    """An empty batch (a filtered batch may be) gives empty results with the fields, trailing shapes and
+    dtypes of a one-row batch's; an ``out`` of that shape is returned as it is."""
+    one = kit.inputs(random_cases["principal"][:1])
+    none = jax.tree_util.tree_map(lambda x: np.asarray(x)[:0], one)
+    got, row = ks_jax.exchange_batch(*none), ks_jax.exchange_batch(*one)
+    assert jax.tree_util.tree_structure(got) == jax.tree_util.tree_structure(row)
+    for a, b in zip(_leaves(got), _leaves(row)):
+        assert isinstance(a, np.ndarray) and a.shape == (0,) + b.shape[1:] and a.dtype == b.dtype
+    assert ks_jax.exchange_batch(*none, out=got) is got
+    wrong = got._replace(contact=got.contact._replace(impulse=np.zeros((1, 3))))
+    with pytest.raises(ValueError, match=r"out\.contact\.impulse = ndarray float64\[1, 3\]"):
+        ks_jax.exchange_batch(*none, out=wrong)

@@ -1,0 +1,107 @@
+"""``ks_jax.sum_over_rows``: a batched loss that sums rows, whose gradient is computed chunk by chunk: its
+value, gradient, forward mode and second derivatives are those of the plain sum, and per-row gradients."""
+
+from __future__ import annotations
+
+import copy
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ks_jax
+
+
+def _with_bad_rows(cases):
+    bad = copy.deepcopy(cases[63])  # the last row of the first chunk
+    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
+    wild = copy.deepcopy(cases[100])  # a row the end-aligned last chunk computes again (restitution > 1)
+    wild["contact"]["restitution"] = 1.5
+    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
+
+
+def _evidence_row_loss(v1, s1, v2, s2, c, target):
+    r = ks_jax.exchange(v1, s1, v2, s2, c)
+    ok = r.contact.status == 0
+    delta_v = jnp.where(ok, r.vehicles[0].delta_v_magnitude, target)  # NaN in a bad row: no NaN times the target
+    return jnp.where(ok, (delta_v - target) ** 2 + r.vehicles[1].speed_after ** 2 + 1e-4 * r.contact.energy_loss, 0.0)
+
+
+def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
+    """Chunks of 64 rows over 150 (the last chunk padded), a vehicle and an evidence target shared by
+    every row, rows with invalid inputs: the value is the plain sum, the gradients are the per-row
+    gradients (summed over the rows for the shared inputs), zero and finite in the bad rows, and a
+    central difference agrees."""
+    cases = _with_bad_rows(random_cases["full"][:150])
+    v1, s1, v2, s2, c = kit.inputs(cases)
+    shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+    axes = (0, 0, None, 0, 0, None)
+    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64)
+    target = jnp.asarray(4.0)
+
+    traced = jax.jit(jax.value_and_grad(loss, argnums=(1, 2, 4, 5))).trace(v1, s1, shared, s2, c, target)
+    assert "cond[" in str(traced.jaxpr)
+    value, grads = traced.lower().compile()(v1, s1, shared, s2, c, target)
+    plain = jax.jit(lambda *a: jnp.sum(jax.vmap(_evidence_row_loss, in_axes=axes)(*a)))(v1, s1, shared, s2, c, target)
+    np.testing.assert_allclose(float(value), float(plain), rtol=1e-13)
+    loss_jit = jax.jit(loss)
+    np.testing.assert_allclose(float(loss_jit(v1, s1, shared, s2, c, target)), float(plain), rtol=1e-13)
+    per_row = jax.jit(jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes))(
+        v1, s1, shared, s2, c, target)
+    reference = (per_row[0], jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[1]), per_row[2],
+                 np.sum(np.asarray(per_row[3])))
+    for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-10)
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
+    for bad in (63, 100):
+        assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves((grads[0], grads[2])))
+    h = 1e-6
+    fd = (loss_jit(v1, s1, shared, s2, c, target + h) - loss_jit(v1, s1, shared, s2, c, target - h)) / (2 * h)
+    np.testing.assert_allclose(float(grads[3]), float(fd), rtol=1e-6)
+
+
+def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
+    """Forward mode (the gradient dotted with the tangent) against central differences, and the
+    Hessian of the chunked sum against that of the plain sum."""
+    v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
+    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None), chunk=32)
+
+    def scaled(p, fn):
+        return fn(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2, c._replace(friction=c.friction * p[1]), 3.0)
+
+    def plain(*args):
+        return jnp.sum(jax.vmap(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None))(*args))
+
+    p = jnp.array([1.0, 0.9])
+    _, along = jax.jit(lambda p: jax.jvp(lambda q: scaled(q, loss), (p,), (jnp.array([1.0, 0.0]),)))(p)
+    h = 1e-6
+    plain_jit = jax.jit(lambda q: scaled(q, plain))
+    fd = (plain_jit(p + jnp.array([h, 0.0])) - plain_jit(p - jnp.array([h, 0.0]))) / (2 * h)
+    np.testing.assert_allclose(float(along), float(fd), rtol=1e-6)
+    chunked = jax.jit(jax.hessian(lambda q: scaled(q, loss)))(p)
+    whole = jax.jit(jax.hessian(lambda q: scaled(q, plain)))(p)
+    np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-10)
+    assert abs(float(whole[0, 1])) > 1.0  # the two parameters interact
+
+
+def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
+    args = kit.inputs(random_cases["principal"][:10])
+    with pytest.raises(ValueError, match=r"chunk = 0: chunk must be a positive number of rows"):
+        ks_jax.sum_over_rows(_evidence_row_loss, chunk=0)
+    with pytest.raises(ValueError, match=r"in_axes\[5\] = 1: each entry must be 0 \(batched\) or None"):
+        ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, 1))(*args, 3.0)
+    with pytest.raises(ValueError, match=r"in_axes = \(0, None\) has 2 entries for 6 arguments"):
+        ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, None))(*args, 3.0)
+    with pytest.raises(TypeError, match=r"fn returns shape \(3,\) per row; it must return a scalar"):
+        ks_jax.sum_over_rows(lambda *a: ks_jax.exchange(*a).vehicles[0].delta_v)(*args)
+
+
+def test_sum_over_rows_forward_mode_with_a_python_number():
+    """jvp and jacfwd with a Python float as the shared argument (as docs/sweeps.md passes a measured value):
+    d/dt sum_k (x_k - t)^2 = -2 sum_k (x_k - t), by hand."""
+    loss = ks_jax.sum_over_rows(lambda x, t: (x - t) ** 2, in_axes=(0, None))
+    x = jnp.arange(5.0)
+    value, slope = jax.jvp(lambda t: loss(x, t), (3.0,), (1.0,))
+    assert float(value) == 15.0 and float(slope) == 10.0
+    assert float(jax.jacfwd(lambda t: loss(x, t))(3.0)) == 10.0 == float(jax.grad(lambda t: loss(x, t))(3.0))

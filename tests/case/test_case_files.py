@@ -1,0 +1,194 @@
+"""Case files (``ks_jax.case``): units at the edge, every class of bad input refused with the case, the field,
+the value and the rule, a bad case in a file costing only that case, and the paths of single inputs and
+results."""
+
+import contextlib
+import copy
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ks_jax
+from ks_jax.case import CaseError, CaseWarning, at_rest_after, case_from_dict, defined_output
+from samples import US_CASE, run_cli, si_twin
+
+
+def test_unit_strings_equal_si_numbers():
+    a = ks_jax.solve(case_from_dict(US_CASE)).to_dict()
+    b = ks_jax.solve(case_from_dict(si_twin())).to_dict()
+    assert a["contact"]["status"] == "ok"
+    np.testing.assert_allclose(a["contact"]["impulse"], b["contact"]["impulse"], rtol=1e-12)
+    for va, vb in zip(a["vehicles"], b["vehicles"]):
+        np.testing.assert_allclose(va["velocity_after"], vb["velocity_after"], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(va["angular_velocity_after"], vb["angular_velocity_after"], rtol=1e-12, atol=1e-12)
+
+
+def _bad(mutate):
+    d = copy.deepcopy(US_CASE)
+    mutate(d)
+    return d
+
+
+BAD = {
+    "mass <= 0": (lambda d: d["vehicles"][0].update(weight="-1200 lbf"), r"vehicles\[0\]\.weight = '-1200 lbf'.*positive"),
+    "zero mass": (lambda d: d["vehicles"][1].update(mass=0), r"vehicles\[1\]\.mass = 0: mass must be positive"),
+    "inertia <= 0": (lambda d: d["vehicles"][0].update(inertia=[400, -5, 2000]), r"vehicles\[0\]\.inertia\[1\].*positive"),
+    "inertia tensor not PD": (lambda d: d["vehicles"][1].update(inertia=[[1, 2, 0], [2, 1, 0], [0, 0, 1]]),
+                              r"vehicles\[1\]\.inertia.*positive definite"),
+    "restitution": (lambda d: d["contact"].update(restitution=1.5), r"contact\.restitution = 1\.5.*\[-1, 1\]"),
+    "friction": (lambda d: d["contact"].update(friction=-0.1), r"contact\.friction = -0\.1.*>= 0"),
+    "nan": (lambda d: d["vehicles"][1].update(speed=float("nan")), r"vehicles\[1\]\.speed = nan.*finite"),
+    "inf": (lambda d: d["vehicles"][0]["position"].__setitem__(0, float("inf")), r"vehicles\[0\]\.position\[0\].*finite"),
+    "wrong dimension": (lambda d: d["vehicles"][0].update(length="3 kg"), r"vehicles\[0\]\.length = '3 kg'.*dimension"),
+    "unknown unit": (lambda d: d["vehicles"][1].update(speed="30 zorks"), r"vehicles\[1\]\.speed = '30 zorks'.*unknown unit"),
+    "missing field": (lambda d: d["vehicles"][0].pop("width"), r"vehicles\[0\]\.width: missing field"),
+    "missing restitution": (lambda d: d["contact"].pop("restitution"), r"contact\.restitution: missing field"),
+    "one vehicle": (lambda d: d["vehicles"].pop(), r"exactly two vehicles"),
+    "three vehicles": (lambda d: d["vehicles"].append(copy.deepcopy(d["vehicles"][0])), r"exactly two vehicles"),
+    "zero normal": (lambda d: d["contact"].update(normal=[0, 0, 0]), r"contact\.normal.*non-zero"),
+    "misspelt required field": (lambda d: d["vehicles"][1].update(sped=d["vehicles"][1].pop("speed")),
+                                r"vehicles\[1\]\.speed: missing field"),
+}
+
+
+# inputs of BAD that also warn: a misspelt field is reported as unknown, the warning that points at the typo
+WARNS = {"misspelt required field": r"vehicles\[1\]\.sped: unknown field"}
+
+
+@pytest.mark.parametrize("label", list(BAD))
+def test_bad_input_is_refused_with_field_value_and_rule(label, tmp_path, capsys):
+    mutate, pattern = BAD[label]
+    d = _bad(mutate)
+    warns = pytest.warns(CaseWarning, match=WARNS[label]) if label in WARNS else contextlib.nullcontext()
+    with warns, pytest.raises(CaseError, match=pattern) as err:
+        case_from_dict(d)
+    assert "case 'units check'" in str(err.value)
+    # the CLI: one line on stderr, no traceback, exit status 2
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(d))
+    code, out, errtext = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 2 and out == ""
+    # one error line (after any warning about an ignored field, which points at a typo), no traceback
+    assert errtext.splitlines()[-1].startswith("ks-jax: error: case 'units check'") and "Traceback" not in errtext
+
+
+def test_bad_case_in_a_batch_is_reported_and_the_others_solved(tmp_path, capsys):
+    good = copy.deepcopy(US_CASE)
+    bad = _bad(BAD["restitution"][0])
+    bad["name"] = "bad one"
+    other = copy.deepcopy(US_CASE)
+    other["name"] = "second good"
+    other["vehicles"][1]["speed"] = "40 mph"
+    path = tmp_path / "many.json"
+    path.write_text(json.dumps({"cases": [good, bad, other]}))
+    code, out, err = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 1  # solved what could be, and says (exit status) that a case was not
+    res = json.loads(out)["cases"]
+    assert [r["contact"]["status"] for r in res][0] == "ok"
+    assert res[1]["contact"]["status"].startswith("invalid: ") and "restitution" in res[1]["contact"]["status"]
+    assert res[2]["contact"]["status"] == "ok"
+    # the good cases equal their single solves
+    for r, d in ((res[0], good), (res[2], other)):
+        single = ks_jax.solve(case_from_dict(d)).to_dict()
+        np.testing.assert_allclose(r["contact"]["impulse"], single["contact"]["impulse"], rtol=1e-12)
+    assert "bad one" in err
+
+
+def test_toml_case_and_unreadable_file(tmp_path, capsys):
+    path = tmp_path / "c.toml"
+    path.write_text('name = "t"\n[[vehicles]]\nmass = 1000\n')
+    code, _, err = run_cli(capsys, "solve", str(path))
+    assert code == 2 and "exactly two vehicles" in err
+    path = tmp_path / "broken.json"
+    path.write_text("{not json")
+    code, _, err = run_cli(capsys, "solve", str(path))
+    assert code == 2 and "cannot be read" in err
+    code, _, err = run_cli(capsys, "solve", str(tmp_path / "missing.json"))
+    assert code == 2 and "no such file" in err
+
+
+def test_paths_refuse_unknown_names():
+    case = case_from_dict(US_CASE)
+    with pytest.raises(CaseError, match="not a vehicle input"):
+        ks_jax.get_input(case.inputs, "vehicles[0].sped")
+    with pytest.raises(CaseError, match="not a contact result"):
+        ks_jax.get_output(ks_jax.solve(case).result, "contact.impulse_size")
+    new = ks_jax.set_input(case.inputs, "vehicles[1].yaw_rate", 0.5)
+    assert float(ks_jax.get_input(new, "vehicles[1].angular_velocity[2]")) == 0.5
+    for path in ("vehicles[1].inertia[3]", "contact.point[3]"):
+        with pytest.raises(CaseError, match=r"index out of range \(0..2\)"):
+            ks_jax.get_input(case.inputs, path)
+    with pytest.raises(CaseError, match=r"index out of range \(0..2\)"):
+        ks_jax.get_output(ks_jax.solve(case).result, "vehicles[0].delta_v[5]")
+    with pytest.raises(CaseError, match=r"the status is a code.*read result.contact.status"):
+        ks_jax.get_output(ks_jax.solve(case).result, "contact.status")
+    for value in ("20 mph", None, [1.0, 2.0]):
+        with pytest.raises(CaseError, match="the value must be one number, in SI units"):
+            ks_jax.set_input(case.inputs, "vehicles[1].speed", value)
+
+
+def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
+    d = _bad(lambda d: d["vehicles"][1].update(year=2021))
+    with pytest.warns(ks_jax.case.CaseWarning, match=r"case 'units check': vehicles\[1\]\.year: unknown field"):
+        case = case_from_dict(d)
+    # the case is solved as without the field
+    a = ks_jax.solve(case).to_dict()
+    b = ks_jax.solve(case_from_dict(US_CASE)).to_dict()
+    assert a["contact"]["impulse"] == b["contact"]["impulse"]
+    path = tmp_path / "extra.json"
+    path.write_text(json.dumps(d))
+    code, out, err = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 0 and json.loads(out)["cases"][0]["contact"]["status"] == "ok"
+    assert "ks-jax: warning: case 'units check': vehicles[1].year: unknown field, ignored" in err
+
+
+def test_a_bad_reference_costs_its_case_only(tmp_path, capsys):
+    """``reference`` (reported values printed beside ks-jax's) is read with its case: a bad entry makes that
+    case invalid, naming it, and the other cases are solved and printed, with or without --json."""
+    good = copy.deepcopy(US_CASE)
+    good["reference"] = {"contact.impulse_magnitude": "1000 lbf*s", "vehicles[0].pdof": 359}
+    bads = [{"vehicles[0].bogus": 5}, [1, 2], {"contact.impulse_magnitude": "5,946.847 N*s"},
+            {"contact.status": "ok"}]
+    cases = [good] + [dict(copy.deepcopy(US_CASE), name=f"bad {k}", reference=ref) for k, ref in enumerate(bads)]
+    path = tmp_path / "refs.json"
+    path.write_text(json.dumps({"cases": cases}))
+    for flags in ((), ("--json",)):
+        code, out, err = run_cli(capsys, "solve", str(path), *flags)
+        assert code == 1 and "Traceback" not in err
+        for k in range(len(bads)):
+            line = next(t for t in err.splitlines() if f"'bad {k}'" in t)
+            assert "invalid: case" in line and "reference" in line, line
+    res = json.loads(run_cli(capsys, "solve", str(path), "--json")[1])["cases"]
+    assert res[0]["contact"]["status"] == "ok" and all(r["contact"]["status"].startswith("invalid") for r in res[1:])
+    out = run_cli(capsys, "solve", str(path))[1]
+    # a PDOF is compared on the circle: the hand value, in degrees, from the JSON
+    pdof = res[0]["vehicles"][0]["pdof"]
+    assert f"{(pdof - 359 + 180) % 360 - 180:+.4f} deg" in out.split("vehicles[0].pdof")[1].splitlines()[0]
+
+
+def test_undefined_outputs_are_masked_alike_on_numpy_and_on_jax_results():
+    """``defined_output`` and ``at_rest_after`` compute with NumPy on a solved case's NumPy results (a report
+    compiles no XLA program for them) and with jax.numpy on JAX arrays (a sweep's traced rows): the same
+    numbers and NaN in the same places, for a case that exchanges an impulse and for one at rest (no
+    approach: the impulse's directions and both courses after are undefined)."""
+    still = copy.deepcopy(US_CASE)
+    still["vehicles"][1].update(speed="0 mph", yaw_rate=0)
+    undefined = []
+    for d in (US_CASE, still):
+        result = ks_jax.solve(case_from_dict(d)).result
+        as_jax = jax.tree_util.tree_map(jnp.asarray, result)
+        paths = [f"contact.{name}" for name in result.contact._fields] + [
+            f"vehicles[{k}].{name}" for k in (0, 1) for name in result.vehicles[k]._fields]
+        for path in paths:
+            got, ref = defined_output(result, path), defined_output(as_jax, path)
+            assert isinstance(got, (np.ndarray, np.generic)) and isinstance(ref, jax.Array), path
+            np.testing.assert_array_equal(got, np.asarray(ref), err_msg=path)
+        for k in (0, 1):
+            assert isinstance(at_rest_after(result.vehicles[k]), (np.ndarray, np.generic))
+            assert bool(at_rest_after(result.vehicles[k])) == bool(at_rest_after(as_jax.vehicles[k]))
+        undefined.append({p for p in paths if np.isnan(np.asarray(defined_output(result, p), float)).any()})
+    assert not undefined[0]
+    assert {"vehicles[0].pdof", "vehicles[1].course_after", "contact.impulse_azimuth"} <= undefined[1]

@@ -1,0 +1,82 @@
+"""Case dicts shared by the tests: one written in US units and its SI twin written by hand from the exact
+unit definitions, a CLI runner, and a reader of results files."""
+
+import csv
+
+import numpy as np
+import pytest
+
+# A case written in US units; its SI twin below is written by hand from the exact unit definitions.
+US_CASE = {
+    "name": "units check",
+    "vehicles": [
+        {"name": "A", "weight": "3000 lbf", "inertia": ["400 kg*m^2", "1800 kg*m^2", "2000 kg*m^2"],
+         "length": "15 ft", "width": "6 ft", "height": "4.5 ft", "cg_to_front": "7 ft", "cg_height": "1.8 ft",
+         "position": ["0 ft", "0 ft"], "yaw": "90 deg", "speed": "0 mph"},
+        {"name": "B", "mass": "100 slug", "inertia": [[300, 0, 0], [0, 1500, 0], [0, 0, "1200 lbf*ft*s^2"]],
+         "length": "16 ft", "width": "6 ft", "height": "4.5 ft", "cg_to_front": "8 ft", "cg_height": "1.8 ft",
+         "position": ["-10 ft", "-2 ft"], "yaw": 0, "speed": "30 mph", "yaw_rate": "10 deg/s"},
+    ],
+    "contact": {"point": ["-1 ft", "-1.5 ft", "2 ft"], "normal": 15, "normal_pitch": "2 deg",
+                "restitution": 0.2, "friction": 0.4},
+}
+
+
+def si_twin():
+    ft, g0 = 0.3048, 9.80665
+    lbf = 0.45359237 * g0
+    return {
+        "name": "units check (SI)",
+        "vehicles": [
+            {"mass": 3000 * lbf / g0, "inertia": [400, 1800, 2000], "length": 15 * ft, "width": 6 * ft,
+             "height": 4.5 * ft, "cg_to_front": 7 * ft, "cg_height": 1.8 * ft, "position": [0, 0, 1.8 * ft],
+             "yaw": 90, "velocity": [0, 0]},
+            {"mass": 100 * lbf / ft, "inertia": [[300, 0, 0], [0, 1500, 0], [0, 0, 1200 * lbf * ft]],
+             "length": 16 * ft, "width": 6 * ft, "height": 4.5 * ft, "cg_to_front": 8 * ft, "cg_height": 1.8 * ft,
+             "position": [-10 * ft, -2 * ft], "yaw": 0, "speed": 30 * 1609.344 / 3600,
+             "angular_velocity": [0, 0, 10]},
+        ],
+        "contact": {"point": [-1 * ft, -1.5 * ft, 2 * ft], "normal": 15, "normal_pitch": 2,
+                    "restitution": 0.2, "friction": 0.4},
+    }
+
+
+def run_cli(capsys, *argv):
+    """``ks-jax ARGV`` in this process: (exit status, stdout, stderr)."""
+    from ks_jax.cli import main
+
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def read_table(path):
+    """Columns of a .csv or .parquet sweep file as NumPy arrays (status_text as str)."""
+    if path.suffix == ".parquet":
+        table = pytest.importorskip("pyarrow.parquet").read_table(path)
+        return {c: table[c].to_numpy(zero_copy_only=False) for c in table.column_names}
+    with path.open(newline="") as f:
+        names, *rows = list(csv.reader(f))
+
+    def column(values):
+        flags = {v.lower() for v in values}
+        if flags <= {"true", "false", ""} and flags != {""}:  # the csv module writes True, pyarrow true
+            read = np.array([{"true": True, "false": False}.get(v.lower()) for v in values], dtype=object)
+            return read if "" in flags else read.astype(bool)  # an empty field (invalid row): None
+        try:
+            return np.array(values, dtype=float)
+        except ValueError:
+            return np.array(values, dtype=str)
+
+    return {n: column([r[k] for r in rows]) for k, n in enumerate(names)}
+
+
+def assert_no_flag_on_invalid_rows(table, result):
+    """A flag (``contact.sliding``) of an invalid row is an empty field (.csv) or null (.parquet): its
+    numbers are NaN, and "false" would read as a result; every other row holds the sweep's flag."""
+    invalid = table["status"] >= 10
+    assert invalid.any() and not invalid.all()
+    flags = table["contact.sliding"]
+    assert all(f is None for f in flags[invalid])
+    assert [bool(f) for f in flags[~invalid]] == np.ravel(result["contact.sliding"])[~invalid].tolist()
+    assert all(isinstance(f, (bool, np.bool_)) for f in flags[~invalid])
