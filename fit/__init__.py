@@ -1,24 +1,26 @@
-"""Inverse reconstruction with ks_jax (MODEL.md section 6, `ks-jax fit`): ``import fit``.
+"""Inverse reconstruction with ks_jax (docs/fit.md, `ks-jax fit`): ``import fit``.
 
 ``reconstruct(case, unknowns, evidence, ...)`` fits unknown inputs (speeds, restitution,
 friction, the impulse centroid, any scalar input path) to measured results (delta-V, yaw rates,
-speeds after, crush, PDOF, energy, EDR speeds: any scalar output path of MODEL.md section 4 or
+speeds after, crush, PDOF, energy, EDR speeds: any scalar result path (docs/model.md, "Paths") or
 a pre-impact speed), each with a sigma, by weighted least squares through the engine's
 gradients (the smooth friction cone, ``smoothing`` > 0, keeps the loss differentiable).
 
 Solver: a damped Gauss-Newton (Levenberg-Marquardt) step on the whitened residual vector,
-with the Jacobian from ``jax.jacfwd`` (``fit.solvers``). It was measured against optax's
-L-BFGS and Adam on the same problems (``benchmarks/bench_fit.py --compare``; the figures, and how
-many times faster it is, are in docs/fit.md and benchmarks/RESULTS_fit.md): much faster for about the
-same success rate (LM can afford many more starts in the same time).
-With a handful of unknowns and a residual vector, Gauss-Newton uses the curvature that the
-residuals give for free (J^T J), converges in a median of ~15 iterations (figures in
-benchmarks/RESULTS_fit.md), and its J at the optimum is the one the Laplace covariance needs
-anyway. optax stays available (``solver="lbfgs"`` / ``"adam"``).
+with the Jacobian from ``jax.jacfwd`` (``fit.solvers``). With a handful of unknowns and a residual
+vector, Gauss-Newton uses the curvature that the residuals give for free (J^T J), needs few
+iterations, and its J at the optimum is the one the Laplace covariance needs anyway; it can afford
+many starts. It was measured against optax's L-BFGS and Adam on the same problems
+(``benchmarks/bench_fit.py --compare``; docs/performance.md), which stay available
+(``solver="lbfgs"`` / ``"adam"``).
 
 Multi-start: ``starts`` starts (the first at each unknown's ``start`` or the middle of its bounds,
 the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept.
 ``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
+
+The package: ``problem`` (unknowns, evidence, the residual vector), ``solvers`` (Levenberg-Marquardt, optax),
+``rows`` (the compiled solver over cases x starts), ``starts``, ``reconstruction`` (``reconstruct`` and what a
+fit says), ``uncertainty``, ``monte_carlo``, ``report`` (the text report), ``synthetic`` (cases with known truth).
 
 Uncertainty (``fit.uncertainty``): standard errors and correlations from the Gauss-Newton
 (Laplace) covariance (J^T W J + prior)^-1 at the optimum, in the physical units (the delta

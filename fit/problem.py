@@ -1,7 +1,7 @@
-"""Unknowns, evidence and the weighted residual vector (MODEL.md section 6).
+"""Unknowns, evidence and the weighted residual vector (docs/fit.md).
 
 An ``Unknown`` is one scalar input path with bounds (SI), an optional start and an optional
-Gaussian prior. An ``Evidence`` is one scalar output path of MODEL.md section 4 (or a
+Gaussian prior. An ``Evidence`` is one scalar result path (docs/model.md, "Paths"; or a
 pre-impact input such as ``vehicles[1].speed``) with a measured value and a sigma, in the
 units the results use: SI, degrees for ``pdof``, ``impulse_azimuth``, ``impulse_elevation``
 and ``course_after``; radians for angle *inputs* used as evidence (``vehicles[0].yaw``).
@@ -80,7 +80,7 @@ class Unknown:
 
 @dataclass(frozen=True)
 class Evidence:
-    """A measured result. ``path``: an output path of MODEL.md section 4 with a component index
+    """A measured result. ``path``: a result path (docs/model.md, "Paths") with a component index
     for vectors ("vehicles[0].delta_v_body[0]") or a pre-impact input ("vehicles[0].speed");
     ``value`` and ``sigma`` in the result's units (SI; degrees for pdof, impulse_azimuth,
     impulse_elevation, course_after; rad for angle inputs)."""
@@ -226,7 +226,7 @@ def _evidence_value(case, path, value, where):
 
 
 def parse_unknowns(case: Case, spec) -> list[Unknown]:
-    """Unknowns from the file format of MODEL.md section 6: a map path -> {"bounds": [lo, hi],
+    """Unknowns from the file format of docs/fit.md: a map path -> {"bounds": [lo, hi],
     "start": x, "prior": {"mean": x, "sigma": s}} (quantities as numbers or unit strings; bare
     numbers are SI except angles in degrees and rates in deg/s). ``Unknown`` objects pass as
     they are (SI). A list of paths or of ``Unknown`` is accepted too."""

@@ -1,96 +1,36 @@
 """``reconstruct`` and ``reconstruct_batch``: multi-start weighted least squares, one jitted call.
 
-All starts of all cases go through one compiled, doubly vmapped solver (cases x starts); the
-best start of each case is kept, and the Jacobian of the whitened residuals with respect to the
-physical unknowns is evaluated there (in the same call) for the Laplace covariance
-(``fit.uncertainty``). Monte Carlo refits perturbed evidence the same way, through the same compiled
-program: with refits, the fit and the refits go to it in calls of one row count (``ROWS_PER_CALL``).
+All starts of all cases go through one compiled, doubly vmapped solver (cases x starts; ``rows``); the best
+start of each case is kept, and the Jacobian of the whitened residuals with respect to the physical unknowns is
+evaluated there (in the same call) for the Laplace covariance (``uncertainty``). Monte Carlo refits perturbed
+evidence the same way, through the same compiled program (``monte_carlo``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.case import Case, CaseError, get_input, input_kind
+from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
 from ks_jax.model.types import OK, status_text
-from ks_jax.progress import Progress
 
-from .problem import (
-    Problem,
-    make_problem,
-    output_units,
-    parse_evidence,
-    parse_unknowns,
-    predict,
-    to_x,
-    to_z,
-    wrap,
-)
+from .monte_carlo import linearisation_notes, refit_perturbed
+from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
+from .rows import best_start, rows_per_call, run_rows, stack
 from .solvers import SOLVERS
-from .uncertainty import analyse, default_rtol, fmt
-
-PERCENTILES = (5, 50, 95)
-
-
-Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
-
-
-@partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
-def _fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
-              z0, smoothing):
-    """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
-    lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
-    x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
-    with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
-    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled.
-    A start is "stalled", and not converged, where it ends without an exchange (status not "ok":
-    separating, no contact) and no unknown moves any evidence there: its gradient is zero because
-    nothing collides, not because it reached a fit."""
-
-    def fun(z, d):
-        x = to_x(z, d["lo"], d["hi"])
-        pred, flags = predict(problem, d["inputs"], x, smoothing)
-        dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
-        r = jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]])
-        return r, (pred, flags)
-
-    data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
-            "pw": prior_weight}
-    z_min = jnp.where(jnp.isfinite(lo), -Z_LIMIT, -jnp.inf)
-    z_max = jnp.where(jnp.isfinite(hi), Z_LIMIT, jnp.inf)
-    sol = SOLVERS[solver](fun, z0, data, max_iter, z_min, z_max)
-    x = to_x(sol.z, lo, hi)
-    # dr/dx = dr/dz / (dx/dz): the transforms are elementwise; dx/dz >= ~4e-18 thanks to Z_LIMIT
-    dxdz = jax.jvp(lambda z: to_x(z, lo, hi), (sol.z,), (jnp.ones_like(sol.z),))[1]
-    jac = jnp.where(dxdz[:, None, :] > 0, sol.jacobian / jnp.where(dxdz > 0, dxdz, 1.0)[:, None, :], 0.0)
-    pred, (status, sliding, stick_ratio) = sol.aux
-    m = len(problem.evidence)
-    stalled = (status != OK) & jnp.all(jac[:, :m] == 0, axis=(1, 2))
-    return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged & ~stalled, "iterations": sol.iterations,
-            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
-            "stick_ratio": stick_ratio, "stalled": stalled}
-
-
-def _best(cost, converged):
-    """Index of the best start: the lowest cost, preferring a converged start whose cost ties it."""
-    cost = np.where(np.isfinite(cost), cost, np.inf)
-    lowest = cost.min()
-    tie = cost <= lowest + 1e-9 * max(abs(lowest), 1.0) + 1e-12
-    pick = tie & converged
-    return int(np.flatnonzero(pick)[np.argmin(cost[pick])]) if pick.any() else int(np.argmin(cost))
+from .starts import first_starts
+from .uncertainty import analyse, default_rtol
 
 
 @dataclass
 class FitResult:
-    """One reconstruction (MODEL.md section 6). Values are SI (rad for angles, rad/s for rates);
+    """One reconstruction (docs/fit.md). Values are SI (rad for angles, rad/s for rates);
     evidence-side values (``fitted``) are in the result's units (degrees for pdof, ...).
 
     status: the exchange's status at the estimate, or "invalid: ..." where nothing could be fitted
@@ -136,7 +76,7 @@ class FitResult:
         return 2.0 * self.cost
 
     def to_dict(self) -> dict:
-        """JSON-ready (MODEL.md section 6): SI values, inf/nan -> null."""
+        """JSON-ready (docs/fit.md, "JSON"): SI values, inf/nan -> null."""
 
         def num(v):
             v = float(v)
@@ -181,44 +121,6 @@ def _keys(evidence):
     return keys
 
 
-# the least spread (SI) of the starts of an unknown without two bounds, by its kind: a speed of 0 with
-# starts within +-1 m/s of it would all stay where the vehicles do not collide
-START_SPREAD = {"velocity": 10.0, "angular_velocity": 0.5, "angle": 0.5, "length": 1.0, "time": 0.05,
-                "mass": 300.0, "inertia": 500.0}
-
-
-def _starts(unknowns, inputs_value, n_starts: int, rng) -> np.ndarray:
-    """(S, n) starts in x (SI): the first at each unknown's start (else the middle of its
-    bounds, else the case value), the others a Latin hypercube within the bounds (2% margins),
-    or normal draws around the first start where a bound is missing (spread: the prior's sigma,
-    else |first start|, at least ``START_SPREAD`` of its kind)."""
-    n = len(unknowns)
-    x0 = np.empty((n_starts, n))
-    k = n_starts - 1
-    for j, u in enumerate(unknowns):
-        lo, hi = u.lower, u.upper
-        base = inputs_value[j]
-        if math.isfinite(lo) and math.isfinite(hi):
-            first = 0.5 * (lo + hi) if u.start is None else u.start
-            strata = (rng.permutation(k) + rng.random(k)) / max(k, 1)  # Latin hypercube in [0, 1)
-            draws = lo + (hi - lo) * (0.02 + 0.96 * strata)
-        else:
-            first = u.start if u.start is not None else (u.prior[0] if u.prior else base)
-            if math.isfinite(lo):
-                first = max(first, lo + 1e-3)
-            if math.isfinite(hi):
-                first = min(first, hi - 1e-3)
-            s = u.prior[1] if u.prior else max(abs(first), START_SPREAD.get(input_kind(u.path), 1.0))
-            draws = first + s * rng.standard_normal(k)
-            if math.isfinite(lo):
-                draws = lo + np.abs(draws - lo)
-            if math.isfinite(hi):
-                draws = hi - np.abs(hi - draws)
-        x0[0, j] = first
-        x0[1:, j] = draws
-    return x0
-
-
 def _prepare(case: Case, unknowns, evidence):
     if not isinstance(case, Case):
         raise TypeError(f"reconstruct needs a ks_jax Case, got {type(case).__name__}")
@@ -236,7 +138,7 @@ def _prepare(case: Case, unknowns, evidence):
 
 def _arrays(case, unknowns, evidence, dtype):
     """The fit's arrays, SI, float64. In float32 with a scene more than 1 km from the origin, the scene is
-    fitted about its CGs' midpoint (``ks_jax.case.scene_origin``): ``inputs``, the bounds, priors and
+    fitted about its CGs' midpoint (``ks_jax.case.scale.scene_origin``): ``inputs``, the bounds, priors and
     evidence values of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
     from each unknown and each piece of evidence) move the results back. ``current`` (the case's values of
     the unknowns, for the starts) stays unmoved."""
@@ -255,75 +157,6 @@ def _arrays(case, unknowns, evidence, dtype):
     inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
     return {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": pm, "pw": pw,
             "current": current, "x_offset": x_offset, "e_offset": e_offset}
-
-
-def _first_starts(unknowns, arrays, n_starts, rng) -> np.ndarray:
-    """``_starts`` in the fit's coordinates (moved as ``arrays``)."""
-    return _starts(unknowns, arrays["current"], n_starts, rng) - arrays["x_offset"]
-
-
-def _stack(trees):
-    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
-
-
-# Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, at most. The fit and
-# its refits then run in calls of one row count (the last call of each padded with copies of its last row), so
-# that they share one compiled program instead of compiling one for each row count: at XLA's defaults on the
-# 2-core CPU a program took about 5 s to compile for a case with its contact given and 16-21 s with automatic
-# contact, much longer than the calls themselves (benchmarks/RESULTS_fit.md, 2026-11-25). A fit without refits
-# is one call of exactly its rows. On a CPU, calls of 500 rows fitted 8000 rows (1000 cases x 8 starts) in
-# 1.0-1.25x the time of one call, calls of 128 or 256 rows in 1.3-2.0x (benchmarks/bench_fit_blocks.py). Not
-# a power of two: 512 rows per call took 1.2-1.3x and 8192 rows 2.8-3.1x the time of 500 and 8000 rows. On
-# other devices (not measured) a call's rows run side by side and its latency counts more, hence a larger
-# block.
-ROWS_PER_CALL = {"cpu": 500}
-ROWS_PER_CALL_ELSEWHERE = 8000
-
-
-# On a CPU, calls of at most this many rows compile with XLA's quicker settings (``ks_jax.quick``): their compile
-# is most of their time. ``ks-jax fit fit_seed_001.json`` took 5.3-6.4 s against 7.0-8.5 s, with 500 refits
-# 6.1-6.8 s against 7.8-8.8 s; 1000 cases x 8 starts in one call of 8000 rows ran 1.37x slower once compiled
-# (9.2 against 6.7 s), so larger calls keep XLA's defaults (benchmarks/RESULTS.md, 2026-11-26).
-QUICK_ROWS = 500
-
-
-def _solver_for(block: int):
-    """The compiled solver for calls of ``block`` rows: quick to compile up to ``QUICK_ROWS`` rows on a CPU."""
-    quick = jax.default_backend() == "cpu" and block <= QUICK_ROWS
-    return _fit_rows.quick if quick else _fit_rows.plain
-
-
-def rows_per_call(rows: int) -> int:
-    """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
-    ``ROWS_PER_CALL`` of the default backend."""
-    return min(rows, ROWS_PER_CALL.get(jax.default_backend(), ROWS_PER_CALL_ELSEWHERE))
-
-
-def _run(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None):
-    """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw
-    (B, n); z0 (B, S, n). The B x S rows go to the solver in calls of ``block`` rows (default: one call of
-    them all), the last padded: a row's fit does not depend on the others in its call. Returns NumPy arrays
-    shaped (B, S, ...)."""
-    B = np.asarray(values).shape[0]
-    rows = B * starts
-    block = block or rows
-    total = -(-rows // block) * block
-
-    def padded(a, per_case=True):  # (B, ...) per case, or (B * S, ...) per row -> (total, ...)
-        a = np.asarray(a, np.float64)
-        a = np.repeat(a, starts, axis=0) if per_case else a
-        return np.concatenate([a, np.repeat(a[-1:], total - rows, axis=0)]) if total > rows else a
-
-    args = [jax.tree_util.tree_map(padded, inputs)] + [padded(a) for a in (values, sigmas, lo, hi, pm, pw)]
-    args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
-    smoothing = jnp.asarray(smoothing, dtype)
-    parts, fit_rows = [], _solver_for(block)
-    for start in range(0, total, block):
-        part = jax.tree_util.tree_map(lambda a: jnp.asarray(a[start:start + block], dtype), args)
-        out = fit_rows(problem, solver, max_iter, *part, smoothing)
-        parts.append({k: np.asarray(v) for k, v in out.items()})
-    return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
-            for k in parts[0]}
 
 
 def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
@@ -400,7 +233,9 @@ def _stick_threshold(problem, arrays, x, smoothing, dtype) -> float:
 
 
 STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
-_predict = quick_jit(predict, static_argnums=0)  # one row (``ks_jax.quick``)
+
+
+_predict = quick_jit(predict, static_argnums=0)  # one row: quick to compile (``compilation.quick_jit``)
 
 
 def _friction_bounded_below(info, j, least, prior=None, sliding=None):
@@ -437,6 +272,8 @@ def _friction_bounded_below(info, j, least, prior=None, sliding=None):
 
 
 NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
+
+
 CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quantile is a note
 
 
@@ -491,7 +328,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None) -> FitResult:
-    """Fit unknown inputs of ``case`` to ``evidence`` (MODEL.md section 6).
+    """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
     "start", "prior"} as in case files (unit strings, bare numbers SI except angles in degrees),
@@ -548,95 +385,28 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                             f"in every case (differs from case '{cases[0].name}')")
     arrays = [_arrays(c, u, e, dtype) for c, (u, e, _) in zip(cases, prepared)]
     rng = np.random.default_rng(seed)
-    x0 = np.stack([_first_starts(u, a, starts, rng) for (u, _, _), a in zip(prepared, arrays)])
+    x0 = np.stack([first_starts(u, a, starts, rng) for (u, _, _), a in zip(prepared, arrays)])
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
     stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
-    inputs = _stack([a["inputs"] for a in arrays])
+    inputs = stack([a["inputs"] for a in arrays])
     # with refits, the fit runs in calls of the refits' row count (``ROWS_PER_CALL``): one compiled program
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
-    out = _run(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
+    out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
         if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
             results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, starts))
             continue
-        best = _best(out["cost"][i], out["converged"][i])
+        best = best_start(out["cost"][i], out["converged"][i])
         row = {k: v[i, best] for k, v in out.items()}
         row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i])
         if "contact.friction" in problem.unknowns and row["status"] == OK and bool(row["sliding"]):
             row["stick_threshold"] = _stick_threshold(problem, a, row["x"], smoothing, dtype)
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
-            r.monte_carlo = _monte_carlo(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
+            r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
                                          smoothing, dtype, progress, chunk, block)
-            r.notes += _linearisation_notes(r)
+            r.notes += linearisation_notes(r)
         results.append(r)
     return results
-
-
-MC_CHECK_SAMPLES = 100  # fewer refits say too little: at 32, Gaussian refits of a linear fit crossed the bounds
-# below in 3.0% of unknowns (about one 6-unknown fit in six), at 64 in 0.14%, at 100 in 0.009% (200,000 draws of
-# N standard normal refits each, NumPy's percentiles)
-MC_SPREAD_RATIO = 1.6  # Monte Carlo 5-95% spread over 2 x 1.645 sigma: outside [1/1.6, 1.6] is a note
-MC_MEDIAN_SHIFT = 0.5  # |Monte Carlo median - estimate| in sigmas above which it is a note
-
-
-def _linearisation_notes(result: FitResult) -> list:
-    """Where the Monte Carlo refits contradict the linearised (Laplace) standard error of a determined
-    unknown: a 5-95% spread more than MC_SPREAD_RATIO times wider or narrower than +/- 1.645 sigma, or
-    a median more than MC_MEDIAN_SHIFT sigma from the estimate. Then the results are not linear in
-    that unknown over its uncertainty (or a bound cuts the refits off), and the standard error
-    misleads."""
-    mc = result.monte_carlo
-    if mc is None or mc["samples"] < MC_CHECK_SAMPLES:
-        return []
-    notes = []
-    for u in result.unknowns:
-        s = result.std[u.path]
-        if u.path in result.not_determined or not (math.isfinite(s) and s > 0):
-            continue
-        p5, p50, p95 = (mc["percentiles"][q][u.path] for q in ("5", "50", "95"))
-        ratio = (p95 - p5) / (2 * 1.645 * s)
-        shift = (p50 - result.estimate[u.path]) / s
-        if 1 / MC_SPREAD_RATIO <= ratio <= MC_SPREAD_RATIO and abs(shift) <= MC_MEDIAN_SHIFT:
-            continue
-        kind = input_kind(u.path)
-        notes.append(f"{u.path}: the Monte Carlo refits spread {fmt(p5, kind)} to {fmt(p95, kind)} (5-95%), median "
-                     f"{fmt(p50, kind)}, where the standard error gives {fmt(result.estimate[u.path] - 1.645 * s, kind)} "
-                     f"to {fmt(result.estimate[u.path] + 1.645 * s, kind)}: the results are not linear in it over its "
-                     f"uncertainty, or a bound cuts the refits off; read the Monte Carlo percentiles")
-    return notes
-
-
-def _monte_carlo(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
-                 chunk, block):
-    """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2); the first
-    start of each refit is the estimate, the others are drawn as for the fit. Calls of ``block`` rows."""
-    n_mc = int(samples)
-    noise = rng.standard_normal((n_mc, len(a["values"])))
-    values = a["values"] + a["sigmas"] * noise
-    x0 = np.stack([_first_starts(unknowns, a, starts, rng) for _ in range(n_mc)])
-    z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
-    z0[:, 0] = z_best
-    size = min(chunk, n_mc) if progress else n_mc
-    bar = Progress(n_mc, "monte carlo", "fit") if progress else None
-    xs, conv = [], []
-    for s in range(0, n_mc, size):
-        k = min(size, n_mc - s)
-        same = [np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pm", "pw")]
-        out = _run(problem, solver, max_iter, _stack([a["inputs"]] * k), values[s:s + k], *same, z0[s:s + k],
-                   smoothing, dtype, starts, block)
-        best = [_best(out["cost"][i], out["converged"][i]) for i in range(k)]
-        xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
-        conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))
-        if bar is not None:
-            bar.update(k)
-    if bar is not None:
-        bar.close()
-    xs = np.concatenate(xs) + a["x_offset"]
-    conv = np.concatenate(conv)
-    paths = [u.path for u in unknowns]
-    use = xs[conv] if conv.any() else xs
-    pct = {str(p): {path: float(v) for path, v in zip(paths, np.percentile(use, p, axis=0))} for p in PERCENTILES}
-    return {"samples": n_mc, "converged_fraction": float(conv.mean()), "percentiles": pct, "x": xs, "converged": conv}

@@ -1,4 +1,4 @@
-"""Reconstruction (fit/, MODEL.md section 6): truth -> evidence -> fit -> truth, honest uncertainty.
+"""Reconstruction (fit/, docs/model.md, "Case files"): truth -> evidence -> fit -> truth, honest uncertainty.
 
 Tolerances: RECOVER (relative, noise-free evidence: the fit must return the truth to solver
 precision); LAPLACE_FD (standard errors against finite-difference Laplace estimates: central
@@ -163,16 +163,16 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     Calls of 5 rows split cases between calls and pad the last: each result equals that of calls holding every
     row of the fit (9, padded to 12) and of the refits (12), and the solver was compiled once for the fit and
     its refits (twice before, one program per row count)."""
-    from fit import reconstruction as rc
+    from fit import rows as rc
 
     case = load_case(FIT_SEED)
     kw = dict(starts=3, seed=4, monte_carlo=4)
     one_call = fit.reconstruct_batch([case] * 3, **kw)
     assert rc.rows_per_call(4 * 3) == 12
     monkeypatch.setattr(rc, "ROWS_PER_CALL", {jax.default_backend(): 5})
-    programs = rc._solver_for(5)._cache_size()
+    programs = rc.solver_for(5)._cache_size()
     blocks = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc._solver_for(5)._cache_size() == programs + 1
+    assert rc.solver_for(5)._cache_size() == programs + 1
     for a, b in zip(blocks, one_call):
         assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std
         np.testing.assert_array_equal(a.monte_carlo["x"], b.monte_carlo["x"])
@@ -185,12 +185,12 @@ def test_monte_carlo_cut_off_by_a_bound_is_noted():
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
     half of the standard error's +/- 1.645 sigma. The report says so and points to the percentiles."""
     r = fit.reconstruct(load_case(FIT_SEED), {"vehicles[1].speed": {"bounds": ["0 mph", "20.02 mph"]}},
-                        monte_carlo=fit.reconstruction.MC_CHECK_SAMPLES, seed=3)
+                        monte_carlo=fit.monte_carlo.MC_CHECK_SAMPLES, seed=3)
     p5, p95 = (r.monte_carlo["percentiles"][q]["vehicles[1].speed"] for q in ("5", "95"))
     assert p95 == pytest.approx(20.02 * U.MPH, rel=1e-9)  # cut off by the bound
     s = r.std["vehicles[1].speed"]
     assert 0 < s and r.estimate["vehicles[1].speed"] < 20.02 * U.MPH and r.at_bound == []
-    assert (p95 - p5) / (2 * 1.645 * s) < 1 / fit.reconstruction.MC_SPREAD_RATIO
+    assert (p95 - p5) / (2 * 1.645 * s) < 1 / fit.monte_carlo.MC_SPREAD_RATIO
     (note,) = [n for n in r.notes if "Monte Carlo refits spread" in n]
     assert note.startswith("vehicles[1].speed:") and "20.02 mph" in note and "read the Monte Carlo percentiles" in note
 
@@ -299,7 +299,7 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
 
 
 def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsys):
-    """EES evidence where both crushes are 0 (the centroid 3 ft above both boxes: MODEL.md section 4
+    """EES evidence where both crushes are 0 (the centroid 3 ft above both boxes: docs/model.md, "Results"
     leaves EES undefined there): no start can be evaluated. That case is reported "not fitted", naming
     the evidence, with NaN numbers and no blame on the evidence's information; the other case of the
     batch is fitted; the command exits 1."""
@@ -510,7 +510,7 @@ def test_friction_just_below_sticking_is_bounded_below_only():
 def test_float32_fit_far_from_the_origin_equals_the_fit_at_the_origin(oblique):
     """In float32 a position 512 km out keeps ~3 cm: the same oblique fit there once came out 0.7 std off in
     the centroid and 0.2 std in a speed, its Monte Carlo refits stuck at the estimate. The exchange is the
-    same in a translated scene (MODEL.md section 3), so the fit 512 km out, with the centroid unknown and as
+    same in a translated scene (docs/model.md, "The impulse exchange"), so the fit 512 km out, with the centroid unknown and as
     evidence, gives the fit at the origin moved by as much: estimates, standard errors, fitted evidence
     and Monte Carlo percentiles."""
     cases, truths, unknowns, evidence, _ = oblique

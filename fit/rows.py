@@ -1,0 +1,123 @@
+"""The compiled solver over rows (a row: one start of one case): every start of every case in one jitted,
+vmapped call, or in calls of one row count where a fit and its Monte Carlo refits share the program."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ks_jax.compilation import quick_jit
+from ks_jax.model.types import OK
+
+from .problem import Problem, predict, to_x, wrap
+from .solvers import SOLVERS
+
+Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
+
+
+@partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
+def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
+              z0, smoothing):
+    """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
+    lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
+    x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
+    with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
+    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled.
+    A start is "stalled", and not converged, where it ends without an exchange (status not "ok":
+    separating, no contact) and no unknown moves any evidence there: its gradient is zero because
+    nothing collides, not because it reached a fit."""
+
+    def fun(z, d):
+        x = to_x(z, d["lo"], d["hi"])
+        pred, flags = predict(problem, d["inputs"], x, smoothing)
+        dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
+        r = jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]])
+        return r, (pred, flags)
+
+    data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
+            "pw": prior_weight}
+    z_min = jnp.where(jnp.isfinite(lo), -Z_LIMIT, -jnp.inf)
+    z_max = jnp.where(jnp.isfinite(hi), Z_LIMIT, jnp.inf)
+    sol = SOLVERS[solver](fun, z0, data, max_iter, z_min, z_max)
+    x = to_x(sol.z, lo, hi)
+    # dr/dx = dr/dz / (dx/dz): the transforms are elementwise; dx/dz >= ~4e-18 thanks to Z_LIMIT
+    dxdz = jax.jvp(lambda z: to_x(z, lo, hi), (sol.z,), (jnp.ones_like(sol.z),))[1]
+    jac = jnp.where(dxdz[:, None, :] > 0, sol.jacobian / jnp.where(dxdz > 0, dxdz, 1.0)[:, None, :], 0.0)
+    pred, (status, sliding, stick_ratio) = sol.aux
+    m = len(problem.evidence)
+    stalled = (status != OK) & jnp.all(jac[:, :m] == 0, axis=(1, 2))
+    return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged & ~stalled, "iterations": sol.iterations,
+            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
+            "stick_ratio": stick_ratio, "stalled": stalled}
+
+
+def best_start(cost, converged):
+    """Index of the best start: the lowest cost, preferring a converged start whose cost ties it."""
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    lowest = cost.min()
+    tie = cost <= lowest + 1e-9 * max(abs(lowest), 1.0) + 1e-12
+    pick = tie & converged
+    return int(np.flatnonzero(pick)[np.argmin(cost[pick])]) if pick.any() else int(np.argmin(cost))
+
+
+def stack(trees):
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
+
+
+# Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, at most. The fit and
+# its refits then run in calls of one row count (the last call of each padded with copies of its last row), so
+# that they share one compiled program instead of compiling one for each row count: compiling takes much longer
+# than the calls themselves. A fit without refits is one call of exactly its rows. On a CPU a call's rows run one
+# after another and calls of a few hundred rows lose little to one call of them all (docs/performance.md); on
+# other devices a call's rows run side by side and its latency counts more, hence a larger block.
+ROWS_PER_CALL = {"cpu": 500}
+
+
+ROWS_PER_CALL_ELSEWHERE = 8000
+
+
+# On a CPU, calls of at most this many rows compile with XLA's quicker settings (``compilation.quick_jit``): their
+# compile is most of their time. Larger calls keep XLA's defaults, which run faster once compiled.
+QUICK_ROWS = 500
+
+
+def solver_for(block: int):
+    """The compiled solver for calls of ``block`` rows: quick to compile up to ``QUICK_ROWS`` rows on a CPU."""
+    quick = jax.default_backend() == "cpu" and block <= QUICK_ROWS
+    return fit_rows.quick if quick else fit_rows.plain
+
+
+def rows_per_call(rows: int) -> int:
+    """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
+    ``ROWS_PER_CALL`` of the default backend."""
+    return min(rows, ROWS_PER_CALL.get(jax.default_backend(), ROWS_PER_CALL_ELSEWHERE))
+
+
+def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None):
+    """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw
+    (B, n); z0 (B, S, n). The B x S rows go to the solver in calls of ``block`` rows (default: one call of
+    them all), the last padded: a row's fit does not depend on the others in its call. Returns NumPy arrays
+    shaped (B, S, ...)."""
+    B = np.asarray(values).shape[0]
+    rows = B * starts
+    block = block or rows
+    total = -(-rows // block) * block
+
+    def padded(a, per_case=True):  # (B, ...) per case, or (B * S, ...) per row -> (total, ...)
+        a = np.asarray(a, np.float64)
+        a = np.repeat(a, starts, axis=0) if per_case else a
+        return np.concatenate([a, np.repeat(a[-1:], total - rows, axis=0)]) if total > rows else a
+
+    args = [jax.tree_util.tree_map(padded, inputs)] + [padded(a) for a in (values, sigmas, lo, hi, pm, pw)]
+    args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
+    smoothing = jnp.asarray(smoothing, dtype)
+    parts, fit_rows = [], solver_for(block)
+    for start in range(0, total, block):
+        part = jax.tree_util.tree_map(lambda a: jnp.asarray(a[start:start + block], dtype), args)
+        out = fit_rows(problem, solver, max_iter, *part, smoothing)
+        parts.append({k: np.asarray(v) for k, v in out.items()})
+    return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
+            for k in parts[0]}
