@@ -74,7 +74,7 @@ def text_report(sol, reference: bool = True) -> str:
                      "(the search horizon): no exchange.")
     elif not np.isfinite(v1.ees) and c.energy_loss < 0:
         lines.append("\n  note: EES is undefined: the energy loss is negative.")
-    elif not np.isfinite(v1.ees):  # derived.ees_pair: crushes of rounding size count as 0
+    elif not np.isfinite(v1.ees):  # model.results.ees_pair: crushes of rounding size count as 0
         lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
     ref = sol.case.raw.get("reference") if reference else None
     if ref:

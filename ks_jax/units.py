@@ -1,4 +1,4 @@
-"""Named unit constants and conversions (MODEL.md section 1).
+"""Named unit constants and conversions (docs/model.md, "Units and frames").
 
 Everything inside ks_jax is SI (m, kg, s, N, J, rad). This module is the only place
 that knows about feet, pounds and miles per hour. Multiply by a constant to go to SI,
@@ -66,7 +66,7 @@ BARE_NUMBER_SCALE = {"angle": DEG, "angular_velocity": DEG_S}
 
 
 # How a quantity of each kind is shown to a reconstructionist (plots): (SI value of one display unit,
-# its label). "degrees": results that MODEL.md section 4 already reports in degrees.
+# its label). "degrees": results already reported in degrees (docs/model.md, "Results").
 US_DISPLAY = {
     "length": (FT, "ft"),
     "mass": (LB, "lb"),
@@ -88,9 +88,8 @@ class UnitError(ValueError):
 
 
 # A folder where pint keeps its unit definitions, parsed, between runs (pint's ``cache_folder``), or None:
-# parse them in every process. The command line sets it (``ks_jax.cli``) before the first unit string is read:
-# pint's registry took 0.28-0.30 s to build from its definitions file, 0.035 s from the folder
-# (benchmarks/RESULTS.md).
+# parse them in every process. ``compilation.keep_programs`` sets it (the command line calls it) before the first
+# unit string is read: reading the parsed definitions back is several times faster than parsing them.
 REGISTRY_CACHE = None
 
 

@@ -1,7 +1,7 @@
-"""An independent plain-NumPy formulation of the KS impulse exchange (MODEL.md sections 3 and 4).
+"""An independent plain-NumPy formulation of the KS impulse exchange (docs/model.md, "The impulse exchange").
 
 This module is the test suite's second opinion. It never imports ``ks_jax``: it is written
-from the equations of MODEL.md with the most literal tools NumPy offers (``np.linalg.solve``,
+from the equations of docs/model.md with the most literal tools NumPy offers (``np.linalg.solve``,
 ``np.linalg.inv``, explicit cross-product matrices, Python ``if`` branches), so that a mistake
 in the engine's closed-form, branch-free kernel shows up as a disagreement.
 
@@ -54,7 +54,7 @@ def rot_z(a):
 
 
 def rotation(yaw, pitch, roll):
-    """R = Rz(yaw) Ry(pitch) Rx(roll), body (ISO 8855) -> global (MODEL.md section 1)."""
+    """R = Rz(yaw) Ry(pitch) Rx(roll), body (ISO 8855) -> global (docs/model.md, "Units and frames")."""
     return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
 
 
@@ -103,7 +103,7 @@ def box_bounds(veh):
 
 def crush(veh, point, direction):
     """Distance from ``point`` along ``direction`` (global, unit) until it leaves the vehicle's
-    bounding box, 0 if the point is outside (MODEL.md section 4). Found by bisection on the
+    bounding box, 0 if the point is outside (docs/model.md, "Results"). Found by bisection on the
     'inside' predicate (the box is convex, so the ray is inside on one interval [0, t_exit])."""
     rot = rotation(veh["yaw"], veh["pitch"], veh["roll"])
     lo, hi = box_bounds(veh)
@@ -164,7 +164,7 @@ def kinetic_energy(veh, velocity, angular_velocity):
 
 
 def stick_split(case):
-    """(u, n, K, J_c, N_c, T_c) of MODEL.md section 3, steps 1, 2 and 4."""
+    """(u, n, K, J_c, N_c, T_c) of docs/model.md, "The impulse exchange", steps 1, 2 and 4."""
     v1, v2 = case["vehicles"]
     c = case["contact"]
     n = np.asarray(c["normal"], dtype=float)
@@ -185,7 +185,7 @@ def stick_split(case):
 
 
 def ks_impulse(case):
-    """J on vehicle 1, sliding flag, branch name (MODEL.md section 3, steps 3-6)."""
+    """J on vehicle 1, sliding flag, branch name (docs/model.md, "The impulse exchange", steps 3-6)."""
     s = stick_split(case)
     eps, mu = float(case["contact"]["restitution"]), float(case["contact"]["friction"])
     u, n, K, n_c, t_c = s["u"], s["n"], s["K"], s["n_c"], s["t_c"]

@@ -97,7 +97,7 @@ def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched
 
 def test_a_centroid_on_both_faces_has_crush_zero_not_minus_zero(tmp_path, capsys):
     """A rear-end whose centroid lies on the lead car's rear face and the follower's front face: both
-    crushes are 0 (MODEL.md section 4: the distance from P to leaving the box), written 0.0, never -0.0,
+    crushes are 0 (docs/model.md, "Results": the distance from P to leaving the box), written 0.0, never -0.0,
     and the EES is undefined (null) with the report's note."""
     d = copy.deepcopy(US_CASE)
     a, b = d["vehicles"]
@@ -180,7 +180,7 @@ def test_ees_undefined_when_crush_is_rounding_error():
 
     e1, e2 = ees_pair(jnp.float64(2e4), jnp.float64(2.2e-16), jnp.float64(0.0), 1500.0, 1400.0, 9.0)
     assert np.isnan(e1) and np.isnan(e2)
-    # a real crush splits the energy in proportion (MODEL.md section 4): E_i = E C_i / (C_1 + C_2)
+    # a real crush splits the energy in proportion (docs/model.md, "Results"): E_i = E C_i / (C_1 + C_2)
     e1, e2 = ees_pair(jnp.float64(2e4), jnp.float64(0.3), jnp.float64(0.1), 1500.0, 1400.0, 9.0)
     assert float(e1) == pytest.approx(math.sqrt(2 * 2e4 * 0.75 / 1500.0), rel=1e-12)
     assert float(e2) == pytest.approx(math.sqrt(2 * 2e4 * 0.25 / 1400.0), rel=1e-12)
@@ -198,7 +198,7 @@ HEAD_ON = {
 
 
 def test_a_vehicle_brought_to_rest_has_no_course_after(tmp_path, capsys):
-    """Inline head-on, so the stick impulse (MODEL.md section 3, step 6): v' = vc (1 + eps) - eps v with
+    """Inline head-on, so the stick impulse (docs/model.md, "The impulse exchange", step 6): v' = vc (1 + eps) - eps v with
     vc = (1500 * 10 - 1800 * 10) / 3300 = -10/11 m/s. Vehicle 2 ends at 0 m/s: at rest, it has no course
     after (null, "undefined (at rest)", NaN in a sweep); vehicle 1 ends at -2 m/s, course 180 deg. At 9 and
     11 m/s vehicle 2 ends at +0.5 and -0.5 m/s: courses 0 and 180. An explicit contact has no first-contact
@@ -223,7 +223,7 @@ def test_a_vehicle_brought_to_rest_has_no_course_after(tmp_path, capsys):
 
 
 def test_directions_are_shown_in_0_to_360_and_clock_halves_go_clockwise():
-    """MODEL.md section 4: directions in [0, 360), so 359.97 shown to one digit is 0.0, not 360.0; and the
+    """docs/model.md, "Results": directions in [0, 360), so 359.97 shown to one digit is 0.0, not 360.0; and the
     clock is the nearest hour, a half hour going clockwise (15 deg is 1 o'clock, as 45 deg is 2)."""
     import jax.numpy as jnp
 

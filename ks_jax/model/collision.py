@@ -57,18 +57,19 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
     Works under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jacfwd``. ``ks_jax.exchange`` is this
     function with a batching rule for large batches on a CPU (``ks_jax.batch``).
 
-    Example (the Virtual CRASH chapter with the Saturn hit from behind; 5946.85 N s, 9.21 mph)::
+    Example (the Virtual CRASH chapter with the Saturn hit from behind)::
 
-        from ks_jax import Contact, State, Vehicle, exchange
-        from ks_jax.units import FT, G0, LBF, MPH
-        saturn = Vehicle.create(mass=3183.475 * LBF / G0, inertia=[480, 2250, 2400], length=15.87 * FT,
-                                width=5.71 * FT)
-        pontiac = Vehicle.create(mass=3496.531 * LBF / G0, inertia=[520, 2500, 2700], length=16.53 * FT,
-                                 width=6.05 * FT)
-        out = exchange(saturn, State.create([3.54, 0, 0.54], speed=5 * MPH), pontiac,
-                       State.create([-0.98, 0, 0.54], speed=21 * MPH),
-                       Contact.create([4 * FT, 0, 0.54], azimuth=0.0, restitution=0.1, friction=0.5))
-        out.contact.impulse_magnitude, out.vehicles[0].delta_v_magnitude / MPH
+        >>> from ks_jax import Contact, State, Vehicle, exchange
+        >>> from ks_jax.units import FT, G0, LBF, MPH
+        >>> saturn = Vehicle.create(mass=3183.475 * LBF / G0, inertia=[480, 2250, 2400], length=15.87 * FT,
+        ...                         width=5.71 * FT)
+        >>> pontiac = Vehicle.create(mass=3496.531 * LBF / G0, inertia=[520, 2500, 2700], length=16.53 * FT,
+        ...                          width=6.05 * FT)
+        >>> out = exchange(saturn, State.create([3.54, 0, 0.54], speed=5 * MPH), pontiac,
+        ...                State.create([-0.98, 0, 0.54], speed=21 * MPH),
+        ...                Contact.create([4 * FT, 0, 0.54], azimuth=0.0, restitution=0.1, friction=0.5))
+        >>> round(float(out.contact.impulse_magnitude), 2), round(float(out.vehicles[0].delta_v_magnitude / MPH), 2)
+        (5946.85, 9.21)
     """
     check_smoothing(smoothing)
     prepared = prepare(vehicle1, state1, vehicle2, state2, contact, smoothing)

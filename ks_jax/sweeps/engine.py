@@ -263,7 +263,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     n_rows = min(n_rows, _bucket(-(-max(n_points, 1) // len(devices))) * len(devices))
 
     # float32 far from the origin: the scene, swept positions included, is solved about the CGs' midpoint
-    # (case.scene_origin), and contact.point outputs are moved back, in float64
+    # (case.scale.scene_origin), and contact.point outputs are moved back, in float64
     origin = scene_origin(case.inputs, [v for p, v in axes.items() if xy_index(p) is not None])
     moved = {} if origin is None else {p: origin_offset(p, origin) for p in (*paths, *outputs)}
     moved = {p: float(off) for p, off in moved.items() if off is not None}

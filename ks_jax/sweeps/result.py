@@ -22,7 +22,7 @@ class SweepResult(Mapping):
     shape: the result shape. mode: "grid" or "zip". points: number of points solved.
     status_counts: status text -> number of points. seconds: wall time of the sweep.
     undefined: output path -> the number of solved points (status not "invalid") where it is NaN
-    because MODEL.md leaves it undefined there (``case.defined_output``: a PDOF or impulse direction
+    because the model leaves it undefined there (``case.defined_output``: a PDOF or impulse direction
     without an impulse, the time of a contact that never happens, EES without crush); ``summary`` says why.
     index_range: the flat indices solved (all of them unless ``index_range`` was given).
     strides: () for every point solved; (k0, k1, ...) for a thinned copy that holds every k-th

@@ -282,7 +282,7 @@ def test_undefined_results_are_nan_and_named(case, tmp_path, capsys):
     """Where a solved point has no impulse (restitution -1: (1 + eps) J_c = 0 by hand), its PDOF and impulse
     direction are undefined: NaN in the sweep, not the stand-in 0 (a frontal impact), as null in the JSON of
     ``ks-jax solve``; with the centroid 10 ft up, above both boxes, both crushes are 0 and EES is undefined
-    (MODEL.md section 4). The summary counts them and says why."""
+    (docs/model.md, "Results"). The summary counts them and says why."""
     over = {"contact.restitution": np.array([-1.0, 0.1]), "contact.point[2]": np.array([0.54, 10 * U.FT])}
     outs = ["vehicles[0].pdof", "vehicles[1].pdof_clock", "contact.impulse_azimuth", "vehicles[0].ees",
             "contact.impulse_magnitude"]

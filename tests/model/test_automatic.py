@@ -1,4 +1,4 @@
-"""Automatic contact (MODEL.md section 5): first-contact time, overlap centroid, normal, crush.
+"""Automatic contact (docs/model.md, "Automatic contact"): first-contact time, overlap centroid, normal, crush.
 
 Every case is worked by hand (or by a second formulation: ``ks_jax.exchange`` at the hand-made
 contact). One compiled program serves every test here: ``automatic_exchange`` and its JVP,
@@ -492,7 +492,7 @@ def _turned(row, degrees):
 
 
 def test_inline_crashes_of_equal_widths_in_a_turned_scene():
-    """Equal widths put the two boxes' sides on one line, where MODEL.md section 5 takes the axis of
+    """Equal widths put the two boxes' sides on one line, where docs/model.md, "Automatic contact" takes the axis of
     least penetration. Turned by any angle the sides miss each other by ~1e-16 m of rounding, which
     must not count as two crossings (their line is the overlap's diagonal: a normal 36 deg off the
     axis and a yaw from a symmetric head-on): the results turn with the scene (section 3).
@@ -678,7 +678,7 @@ def test_refine_ends_on_the_touching_side_within_its_tolerance():
 
 
 def test_a_scene_far_from_the_origin_gives_the_same_contact():
-    """MODEL.md section 3: translating the scene translates the results. Survey coordinates (3e5 m) round
+    """docs/model.md, "The impulse exchange": translating the scene translates the results. Survey coordinates (3e5 m) round
     at ~6e-11 m, above the geometry's ~1e-12 m tolerances: a corner meeting a turned side at the instant of
     touching (penetration_time 0) and an inline rear-end of equal widths (the collinear-edges rule) gave
     another centroid and normal there (|J| 33% and 9% off) until the geometry worked about the CGs' midpoint."""

@@ -1,5 +1,5 @@
 """The KS exchange against an independent NumPy reference, physical invariants, Brach's planar
-model, the seed chapters' worked examples, bad rows in a batch, and float32 (MODEL.md 3, 4, 7)."""
+model, the seed chapters' worked examples, bad rows in a batch, and float32 (docs/model.md 3, 4, 7)."""
 
 from __future__ import annotations
 
@@ -193,7 +193,7 @@ def test_swap_symmetry(kit, random_results):
 # --------------------------------------------------------------------------- Brach
 def test_planar_sliding_is_brach(kit):
     """Where Brach's model applies (compressive normal impulse: N_c > 0 and P_n0 > 0). In the
-    KS branch N_c <= 0 MODEL.md puts the friction impulse along T_c, while Brach's sign rule
+    KS branch N_c <= 0 docs/model.md puts the friction impulse along T_c, while Brach's sign rule
     (mu takes the sign of P_t0 / P_n0) would put it against T_c: those cases are skipped."""
     rng = np.random.default_rng(5)
     cases = [ref.planar_case(rng, restitution=float(e)) for e in np.r_[np.zeros(40), rng.uniform(0, 1, 80)]]
@@ -262,7 +262,7 @@ def test_seed_000_saturn_pontiac():
 def test_seed_001_lucid_kia():
     m1 = 155.75 * U.SLUG
     m2 = 100.38 * U.SLUG
-    # MODEL.md section 6's case file: Lucid at x = 0, Kia at x = -20 ft, P at (-5 ft, 0, CG height)
+    # docs/model.md, "Case files"'s case file: Lucid at x = 0, Kia at x = -20 ft, P at (-5 ft, 0, CG height)
     args = _inline_case(m1, m2, 5.0, 20.0, 0.0, -20.0, -5.0, (16.3, 8.1, 6.4), (16.0, 7.6, 6.1))
     r = ks_jax.exchange(*args)
     con, (a, b) = r.contact, r.vehicles
@@ -488,7 +488,7 @@ def test_create_refuses_two_ways_of_giving_one_thing():
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("tilt", [0.0, 1e-17, -1e-17, 1e-13, -1e-13, 1e-9, 0.05])
 def test_crush_depth_by_hand_for_a_ray_nearly_along_the_sides(tilt, dtype):
-    """Crush (MODEL.md section 4) of a box turned 180 degrees (its axes are the global ones up to
+    """Crush (docs/model.md, "Results") of a box turned 180 degrees (its axes are the global ones up to
     rounding, ~1e-16 off), the point at body (0.5, 0.3, 0.2) and the direction body (1, tilt, 0): the
     ray leaves through the front (2.0 - 0.5) / d_x, or through the side (0.9 - 0.3) / d_y if nearer
     (tilt 0.05: 1.5 |d| < 0.6 / 0.05 |d|, the front still). A component of rounding size meets no face;

@@ -1,4 +1,4 @@
-"""Gradients of the exchange (MODEL.md section 3, smooth mode): against central finite
+"""Gradients of the exchange (docs/model.md, "The impulse exchange", smooth mode): against central finite
 differences in every continuous input, an analytic head-on derivative, finiteness at the
 singular points in both modes, and the smooth -> exact limit.
 
@@ -307,7 +307,7 @@ def test_restitution_derivative_at_minus_one(kit, random_cases, smoothing):
 
 
 # --------------------------------------------------------------------------- smooth -> exact
-SMOOTHING_RATE_C = 10.0  # |J_tau - J_0| <= C tau |J_0| (MODEL.md 3): C depends on mu and K; measured up to 6.2 (mu = 3.7, on the cone)
+SMOOTHING_RATE_C = 10.0  # |J_tau - J_0| <= C tau |J_0| (docs/model.md 3): C depends on mu and K; measured up to 6.2 (mu = 3.7, on the cone)
 TAUS = (1e-1, 1e-2, 1e-3, 1e-4)
 
 

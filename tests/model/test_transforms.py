@@ -1,6 +1,6 @@
 """JAX transformations and scene symmetries: jit(exchange) == exchange, vmap(exchange) ==
 stacked single solves, no recompilation for new values, and results that rotate and translate
-with the scene (MODEL.md section 3, cross-checks; section 8)."""
+with the scene (docs/model.md, "The impulse exchange", cross-checks; section 8)."""
 
 from __future__ import annotations
 

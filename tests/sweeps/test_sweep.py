@@ -46,7 +46,7 @@ def single(case, point, path):
     inputs = case.inputs
     for p, v in point.items():
         inputs = set_input(inputs, p, v)
-        if p.endswith(".yaw"):  # the seed cases give no course: it follows the yaw (MODEL.md section 2)
+        if p.endswith(".yaw"):  # the seed cases give no course: it follows the yaw (docs/model.md, "Inputs")
             inputs = set_input(inputs, p.replace(".yaw", ".course"), v)
     res = _SOLVE(as_arrays(inputs), case.auto_point, case.auto_normal)
     return expected(res, path), int(res.contact.status)
@@ -313,7 +313,7 @@ def test_negative_speeds_get_their_status_others_match(case):
 
 def test_yaw_turns_the_course_where_the_case_gives_none(case):
     """Sweeping a yaw gives what solving the case file written with that yaw gives (its course
-    defaults to the yaw, MODEL.md section 2); with a course in the file, only the body turns."""
+    defaults to the yaw, docs/model.md, "Inputs"); with a course in the file, only the body turns."""
     yaws = np.radians([0.0, 20.0, -35.0])
     r = sweep(case, {"vehicles[1].yaw": yaws}, outputs=OUTPUTS)
     raw = json.loads(SEED0.read_text())
@@ -335,7 +335,7 @@ def test_yaw_turns_the_course_where_the_case_gives_none(case):
 
 
 def test_cg_height_moves_the_cg_where_the_case_gives_a_2d_position(case):
-    """A 2-D position puts the CG at z = cg_height (MODEL.md section 2): sweeping cg_height gives what
+    """A 2-D position puts the CG at z = cg_height (docs/model.md, "Inputs"): sweeping cg_height gives what
     solving the file with that cg_height gives (the Saturn's CG 0.24 m lower than the centroid: a pitch
     rate after); with the CG's z swept too, it stays where it is swept to."""
     heights = np.array([0.30, 0.54])
@@ -525,7 +525,7 @@ def _moved(d, dx, dy):
 
 def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
     """In float32 (JAX's default) a position 512 km out keeps ~3 cm, which once gave the seed chapter's
-    Pontiac an EES of 2.90 mph instead of 2.21. The exchange is the same in a translated scene (MODEL.md
+    Pontiac an EES of 2.90 mph instead of 2.21. The exchange is the same in a translated scene (docs/model.md
     section 3): solve and sweep, explicit and automatic contact, give 512 km out what they give at the
     origin, contact.point moved back (in float64), and no warning; a sweep of positions over 5 km still
     warns."""
