@@ -13,11 +13,11 @@ Public API:
 - sweeps: ``sweep`` (-> ``SweepResult``);
 - ``keep_programs`` (keep compiled programs between processes), ``units`` (conversions to SI).
 
-Also: ``ks_jax.plot`` (pictures, matplotlib), ``ks_jax.report`` (the text panel), and ``fit`` (the
-reconstruction package installed beside ``ks_jax``).
+Also: ``ks_jax.plot`` (pictures; matplotlib, the ``plot`` extra, is imported when a picture is drawn),
+``ks_jax.report`` (the text panel), and ``fit`` (the reconstruction package installed beside ``ks_jax``).
 """
 
-from . import units
+from . import plot, report, units
 from .batch import exchange, exchange_batch, sum_over_rows
 from .case import Case, CaseError, CaseInputs, get_input, get_output, load_case, load_cases, set_input
 from .compilation import keep_programs
@@ -46,6 +46,8 @@ __all__ = [
     "load_case",
     "load_cases",
     "normal_from_angles",
+    "plot",
+    "report",
     "set_input",
     "solve",
     "solve_inputs",
