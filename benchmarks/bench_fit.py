@@ -1,8 +1,7 @@
 """Benchmark: many reconstructions at once (fit.reconstruct_batch), and the solver comparison.
 
-    python benchmarks/bench_fit.py                     # 1000 cases x 8 starts, Levenberg-Marquardt
-    python benchmarks/bench_fit.py --compare --n 200   # lm vs optax L-BFGS vs optax Adam
-    python benchmarks/bench_fit.py --append            # also append the figures to benchmarks/RESULTS_fit.md
+    .venv/bin/python benchmarks/bench_fit.py                     # 1000 cases x 8 starts, Levenberg-Marquardt
+    .venv/bin/python benchmarks/bench_fit.py --compare --n 200   # lm vs optax L-BFGS vs optax Adam
 
 Cases: random oblique side impacts that slide at the centroid (vehicle 2's front into vehicle
 1's right side, 60-120 deg apart, friction 0.1-0.35, restitution 0.05-0.3, initial yaw rates
@@ -104,7 +103,6 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--solver", default="lm", choices=sorted(SOLVERS))
     ap.add_argument("--compare", action="store_true", help="run lm, lbfgs and adam")
-    ap.add_argument("--append", action="store_true", help="append the figures to benchmarks/RESULTS_fit.md")
     args = ap.parse_args(argv)
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {jax.devices()[0].device_kind}"
     cpu = ""
@@ -113,7 +111,7 @@ def main(argv=None):
     except (OSError, StopIteration):
         pass
     command = "python " + " ".join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])
-    date = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     print(f"machine: {cpu or machine} ({os.cpu_count()} cores, jax {jax.__version__}, {jax.default_backend()}, "
           "float64)")
     print(f"command: {command}\ndate: {date}")
@@ -130,16 +128,6 @@ def main(argv=None):
               "|---|---|---|---|---|---|---|---|---|")
     print(header)
     print("\n".join(rows))
-    if args.append:
-        path = Path(__file__).with_name("RESULTS_fit.md")
-        new = not path.exists()
-        with path.open("a") as f:
-            if new:
-                f.write("# fit benchmarks (benchmarks/bench_fit.py)\n\nColumns are explained in the script's "
-                        "docstring. Appended by `--append`; figures as run.\n")
-            f.write(f"\n## {date}: {cpu or machine}, {os.cpu_count()} cores, jax {jax.__version__}, "
-                    f"{jax.default_backend()}, float64\n\n`{command}`\n\n{header}\n" + "\n".join(rows) + "\n")
-        print(f"appended to {path}")
 
 
 if __name__ == "__main__":

@@ -1,53 +1,39 @@
-"""Benchmark of the batched KS kernel, side by side with its baselines. Not a test.
+"""The batched exchange beside its baselines: throughput, gradients of batched losses, sweeps. Not a test.
 
     .venv/bin/python benchmarks/bench_kernel.py [--rows 1048576] [--repeats 5] [--grid 1000]
+        [--memory-n 10000] [--sharded-n 1000] [--naive-rows 1048576]
 
-Prints the machine, the command and the date, then, measured in --repeats rounds that run every
-variant once in turn (rates: the median time; ratios: the median of the ratios within a round, so
-that a change in the machine's load moves both sides of a ratio alike):
-- the kernel's rate (exchanges/s, all section-4 results, float64 and float32) as the library
-  computes a batch: ``ks_jax.exchange_batch`` (batch-first inputs, chunks of 16384 rows, three
-  jitted calls per chunk: ``exchange.prepare``, which also copies the chunk's rows for the other
-  two, ``exchange.impulse_stage``, ``exchange.results_stage``, each chunk's results copied into
-  batch-sized NumPy arrays; and the same writing into the arrays of an earlier result (``out=``),
-  which needs no new memory;
-  ``ks_jax.sweep`` does the same per chunk); ``jit(vmap(exchange))``, batch-last and batch-first
-  (on one CPU device its vmap rule runs the same three stages in chunks inside one loop); and for
-  comparison the whole-batch program that vmap made of ``exchange`` before that rule (``jit(vmap)`` of
-  ``exchange_with_status`` after ``input_status``, batch-first);
-- a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py);
-- the memory-streaming rate of the same bytes: a jitted x * 1.0 + 0 over arrays as large as the
-  kernel's inputs and outputs together (one read and one write of each, as the kernel does), into
-  new arrays and, donated, over its own inputs (no new memory: against ``out=``);
-- the minor page faults per call (new memory touched), and jit(vmap(exchange)) / NumPy round by
-  round, with that call's CPU time per row and page faults (to tell what made a round slow);
-- the ratios kernel/NumPy and kernel/streaming; gradient / forward of two batched losses, each
-  against its own forward (``jax.value_and_grad`` of ``sum(vmap(exchange))`` over every input), with
-  the batch axis first (``jax.vmap``'s default) and last:
-  the sum of both delta-V magnitudes (the forward needs only the impulse) and a
-  reconstruction-style sum of squared residuals of delta-V, speed, course, PDOF and yaw rate
-  after impact, through ``exchange_with_status`` (one whole-batch program, forward and gradient
-  alike) and, batch-first, through ``exchange`` (forward and gradient in chunks, with the
-  whole-batch gradient / the chunked one, and the chunked gradient / ``jit(vmap(exchange))``
-  computing every result, timed in the same rounds: a loss's forward computes only what the loss
-  reads, the delta-V one little more than the impulse), and, batch-first, the same losses built by
-  ``ks_jax.sum_over_rows`` (the same forward; the gradient each chunk's value and gradient in one
-  program), with the gradient through ``exchange`` / this one; the first-call (compile) times;
-- a sweep of a 1000 x 1000 grid (``ks_jax.sweep``, default outputs; the median of ``--repeats`` calls,
-  at least 3);
-- in fresh processes, after everything above: the time and peak memory of a sweep of 10^8 points
-  (``bench_sweep_memory.py``, one output kept as float32, then nothing kept; ``--memory-n 0``
-  skips it) and a 1000 x 1000 grid sharded over two forced host devices against one device
-  (``bench_sweep_sharded.py`` under ``XLA_FLAGS=--xla_force_host_platform_device_count=2``;
-  ``--sharded-n 0`` skips it), and issue #5's naive baseline, ``jit(vmap)`` with batched 3x3 LAPACK
-  solves, beside NumPy, both streaming references and the library, with its gradient / forward
-  (``bench_naive.py``; ``--naive-rows 0`` skips it);
+Prints the machine, the command and the date, then, measured in --repeats rounds that run every variant
+once in turn (rates: the median time; ratios: the median of the ratios within a round, so that a change
+in the machine's load moves both sides of a ratio alike), over --rows random rows around the seed case
+(batch-first, every result computed):
+
+- exchanges/s of ``jax.jit(jax.vmap(ks_jax.exchange))`` (on one CPU device its vmap rule runs the
+  exchange's three stages in chunks of 16384 rows inside one program) and of ``ks_jax.exchange_batch``
+  (one program per chunk, each chunk copied into batch-sized NumPy arrays; and with ``out=`` an earlier
+  result, which touches no new memory), float64 and float32; and of the whole-batch program,
+  ``jax.jit(jax.vmap(ks_jax.model.collision.exchange))`` (the physics function without the chunked rule);
+- a plain vectorized NumPy implementation of the same equations (benchmarks/numpy_ks.py, float64);
+- memory streaming over the same bytes: a jitted x * 1.0 + 0 over arrays as large as the inputs and
+  results together (one read and one write of each), into new arrays and, donated, over its own inputs
+  (no new memory: the reference for ``out=``); each in float64, and in float32 for the float32 rows;
+- the ratios to NumPy and to streaming, and the minor page faults per call (new memory touched);
+- gradient / forward of two batched losses (the sum of both delta-V magnitudes, whose forward needs
+  little more than the impulse; a reconstruction-style sum of squared residuals of delta-V, speed,
+  course, PDOF and yaw rate after impact), rows whose status is not OK masked, ``jax.value_and_grad`` over
+  every input against the loss's own forward: built with ``ks_jax.sum_over_rows`` (each chunk's value
+  and gradient in one program), written over ``jax.vmap(ks_jax.exchange)`` (the derivatives of
+  ``jax.vmap`` over the whole batch) and over the whole-batch program; and the gradients against each
+  other and against ``jit(vmap(exchange))`` computing every result; first calls (compile + run);
+- a sweep of a --grid x --grid grid (``ks_jax.sweep``, default outputs; the median of at least 3 calls);
+- in fresh processes afterwards: the time and peak memory of a sweep of --memory-n^2 points
+  (``bench_sweep_memory.py``, one output kept as float32, then nothing kept), a --sharded-n^2 grid over
+  two forced host devices against one (``bench_sweep_sharded.py``), and the naive ``jit(vmap)`` with
+  batched 3x3 LAPACK solves (``bench_naive.py``); a size of 0 skips each;
 - the per-call cost of pycrash's planar impulse function ``impc_calcs`` if pycrash imports
-  (PYCRASH_PATH=dir adds a throwaway install, e.g. ``pip install --target dir pycrash``).
-Batch-last (every leaf (..., N)) makes each component of a vector one contiguous array, which is
-what XLA's elementwise loops want in the forward; the gradients' cotangents of (3, 3) inputs are
-then transposed (benchmarks/RESULTS.md: the delta-V gradient ran faster batch-first, the residual
-one did not).
+  (PYCRASH_PATH=DIR adds a throwaway install: ``pip install --target DIR pycrash``).
+
+It ends with a summary of the figures that benchmarks/README.md quotes.
 """
 
 from __future__ import annotations
@@ -59,9 +45,9 @@ import importlib.util
 import io
 import os
 import platform
-import re
 import resource
 import statistics
+import subprocess
 import sys
 import time
 import types
@@ -78,9 +64,7 @@ import numpy_ks  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.batch import exchange_batch  # noqa: E402
-from ks_jax.exchange import exchange, exchange_with_status, input_status, prepare, results_stage, values_impulse_stage  # noqa: E402
-from ks_jax.sweeps import sweep  # noqa: E402
+from ks_jax.model import collision  # noqa: E402
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 
@@ -102,11 +86,17 @@ def first_call(fn):
     return time.perf_counter() - t
 
 
+def process_usage():
+    """(CPU seconds, user and system, of all threads; minor page faults) of this process so far. A minor
+    fault is a new 4 KiB page touched for the first time (a batch-sized result in new memory)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime, r.ru_minflt
+
+
 def rounds(fns, repeats, usage=None):
-    """Times of each fn() (blocking), measured in ``repeats`` rounds that run every fn once, in
-    turn: a ratio of two of them is then taken round by round (``ratio``), so a change in the
-    machine's load during the run moves both sides of it alike. ``usage``: a dict that gets, per
-    fn, the (CPU seconds, minor page faults) of this process during each call (``process_usage``)."""
+    """Times of each fn() (blocking), in ``repeats`` rounds that run every fn once, in turn, so that a
+    ratio of two of them can be taken round by round (``ratio``). ``usage``: a dict that gets, per fn, the
+    (CPU seconds, minor page faults) of this process during each call."""
     times = {name: [] for name in fns}
     for _ in range(repeats):
         for name, fn in fns.items():
@@ -119,101 +109,66 @@ def rounds(fns, repeats, usage=None):
     return times
 
 
-def process_usage():
-    """(CPU seconds, user and system, of all threads; minor page faults) of this process so far.
-    A call whose CPU time grows with its wall time was slowed down while it ran (the machine is
-    shared: caches and memory bandwidth, not only cores). A minor fault is a new 4 KiB page touched for
-    the first time (a batch-sized result in new memory); whether a call gets new memory depends on
-    what the allocator kept from the calls before it."""
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime, r.ru_minflt
-
-
 def ratio(times, a, b):
     """Median over rounds of time[b] / time[a] (how many times faster a is than b)."""
     return statistics.median(tb / ta for ta, tb in zip(times[a], times[b]))
 
 
 def random_batch(n, seed=0):
-    """Rows around the seed case: speeds, angles, contact point, inertias, eps and mu varied;
-    batch-first NumPy dicts (for numpy_ks) and batch-last kernel pytrees."""
+    """n rows around the seed case (speeds, angles, contact point, (3, 3) inertias, restitution and
+    friction varied): batch-first NumPy dicts (for numpy_ks and naive_ks) and the same rows as
+    ``ks_jax`` pytrees of JAX arrays, batch-first."""
     rng = np.random.default_rng(seed)
-    v1, s1, v2, s2, c = (jax.tree_util.tree_map(np.asarray, t) for t in to_pytrees(as_arrays(ks_jax.load_case(CASE).inputs)))
+    v1, s1, v2, s2, c = (jax.tree_util.tree_map(np.asarray, t)
+                         for t in to_pytrees(as_arrays(ks_jax.load_case(CASE).inputs)))
 
     def rows(x, rel=0.1):
         x = np.asarray(x, dtype=np.float64)
         return x[None] * (1 + rel * rng.standard_normal((n,) + x.shape))
 
     def veh(v):
-        I = np.diag(np.diag(v.inertia))[None] * np.abs(1 + 0.2 * rng.standard_normal((n, 3, 3)))
+        inertia = np.diag(np.diag(v.inertia))[None] * np.abs(1 + 0.2 * rng.standard_normal((n, 3, 3)))
         off = 0.03 * rng.standard_normal((n, 3)) * np.diag(v.inertia).min()
         for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
-            I[:, i, j] = I[:, j, i] = off[:, k]
-        return {"mass": rows(v.mass), "inertia": I, "length": rows(v.length, 0.02), "width": rows(v.width, 0.02),
-                "height": rows(v.height, 0.02), "cg_to_front": rows(v.cg_to_front, 0.02),
-                "cg_height": rows(v.cg_height, 0.02)}
+            inertia[:, i, j] = inertia[:, j, i] = off[:, k]
+        return {"mass": rows(v.mass), "inertia": inertia, "length": rows(v.length, 0.02),
+                "width": rows(v.width, 0.02), "height": rows(v.height, 0.02),
+                "cg_to_front": rows(v.cg_to_front, 0.02), "cg_height": rows(v.cg_height, 0.02)}
 
     def st(s):
         yaw = s.yaw + 0.3 * rng.standard_normal(n)
         speed = np.linalg.norm(s.velocity) * (1 + 0.3 * rng.standard_normal(n))
         vel = np.stack([speed * np.cos(yaw), speed * np.sin(yaw), np.zeros(n)], -1)
         w = np.stack([np.zeros(n), np.zeros(n), 0.3 * rng.standard_normal(n)], -1)
-        return {"position": rows(s.position, 0.02), "velocity": vel, "yaw": yaw, "pitch": 0.01 * rng.standard_normal(n),
-                "roll": 0.01 * rng.standard_normal(n), "angular_velocity": w}
+        return {"position": rows(s.position, 0.02), "velocity": vel, "yaw": yaw,
+                "pitch": 0.01 * rng.standard_normal(n), "roll": 0.01 * rng.standard_normal(n),
+                "angular_velocity": w}
 
     az = 0.2 * rng.standard_normal(n)
     cn = {"point": rows(c.point, 0.05), "normal": np.stack([np.cos(az), np.sin(az), np.zeros(n)], -1),
-          "restitution": rng.uniform(0, 0.5, n), "friction": rng.uniform(0.1, 1.0, n), "penetration_time": np.zeros(n)}
+          "restitution": rng.uniform(0, 0.5, n), "friction": rng.uniform(0.1, 1.0, n),
+          "penetration_time": np.zeros(n)}
     nps = (veh(v1), st(s1), veh(v2), st(s2), cn)
     kinds = (ks_jax.Vehicle, ks_jax.State, ks_jax.Vehicle, ks_jax.State, ks_jax.Contact)
-    last = tuple(k(**{f: jnp.asarray(np.moveaxis(d[f], 0, -1)) for f in k._fields}) for k, d in zip(kinds, nps))
-    return nps, last
-
-
-def batch_first(last):
-    """``random_batch``'s batch-last pytrees with the batch axis first, as users hold a batch (JAX
-    arrays, computed before this returns)."""
-    return jax.block_until_ready(jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), last))
-
-
-def kernel_chunk():
-    """What ``ks_jax.sweep`` computes per chunk, on batch-last inputs already cut into chunks
-    (the sweep builds each chunk's inputs inside its first call): three jitted calls,
-    ``exchange.prepare``, ``exchange.impulse_stage``, ``exchange.results_stage``."""
-    v = lambda f: jax.vmap(f, in_axes=-1, out_axes=-1)  # noqa: E731
-    prep = jax.jit(v(prepare))
-    imp = jax.jit(v(values_impulse_stage(0.0)))
-    body = jax.jit(v(results_stage))
-
-    def run(args):
-        status, trig = prep(*args)
-        return body(*args, status, imp(*args, status, trig))
-
-    return run
-
-
-def kernel_one_call(axis=-1, whole=False):
-    """``jit(vmap(exchange))``; ``whole``: the whole-batch program (no chunks)."""
-    fn = (lambda *a: exchange_with_status(*a, 0.0, input_status(*a))) if whole else exchange
-    f = jax.jit(jax.vmap(fn, in_axes=axis, out_axes=axis))
-    return lambda args: f(*args)
+    first = tuple(k(**{f: jnp.asarray(d[f]) for f in k._fields}) for k, d in zip(kinds, nps))
+    return nps, jax.block_until_ready(first)
 
 
 def nbytes(tree):
     return sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(tree))
 
 
-def streaming_references(inputs, outputs):
-    """The two streaming references over the kernel's input and output arrays, as float64: (stream,
-    stream_in_place, bytes). ``stream`` computes x * 1.0 + 0 of every array into new ones;
+def streaming_references(inputs, outputs, dtype=jnp.float64):
+    """Two streaming references over the arrays of ``inputs`` and ``outputs``, cast to ``dtype``:
+    (stream, stream_in_place, bytes). ``stream`` computes x * 1.0 + 0 of every array into new ones;
     ``stream_in_place`` writes each result over its input (donated), with no new memory, as
-    ``exchange_batch(out=)``. Its 1 and 0 are arguments: as constants XLA would make the program the
+    ``exchange_batch(out=)`` does. The 1 and 0 are arguments: as constants XLA would make the program the
     identity, and a donated identity moves no bytes at all."""
-    flat = [jnp.asarray(x).astype(jnp.float64) for x in jax.tree_util.tree_leaves((inputs, outputs))]
+    flat = [jnp.asarray(x).astype(dtype) for x in jax.tree_util.tree_leaves((inputs, outputs))]
     copy = jax.jit(lambda xs: [x * 1.0 + 0 for x in xs])
     copy_in_place = jax.jit(lambda xs, a, b: [x * a + b for x in xs], donate_argnums=0)
     held = [[jnp.array(x) for x in flat]]
-    one_zero = jnp.float64(1.0), jnp.float64(0.0)
+    one_zero = jnp.asarray(1.0, dtype), jnp.asarray(0.0, dtype)
 
     def stream():
         return jax.block_until_ready(copy(flat))
@@ -221,7 +176,7 @@ def streaming_references(inputs, outputs):
     def stream_in_place():
         held[0] = jax.block_until_ready(copy_in_place(held[0], *one_zero))
 
-    return stream, stream_in_place, sum(x.size * 8 for x in flat)
+    return stream, stream_in_place, sum(x.size * x.dtype.itemsize for x in flat)
 
 
 def pycrash_rate(repeats):
@@ -231,8 +186,7 @@ def pycrash_rate(repeats):
         sys.path.insert(0, extra)
     spec = importlib.util.find_spec("pycrash")
     if spec is None:
-        return None, ("pycrash not available: not importable (pip install --target DIR pycrash, "
-                      "then PYCRASH_PATH=DIR)")
+        return None, "pycrash not available (pip install --target DIR pycrash, then PYCRASH_PATH=DIR)"
     path = Path(spec.submodule_search_locations[0]) / "impc.py"
     try:  # load impc.py alone: the package __init__ pulls plotting/dash dependencies
         mspec = importlib.util.spec_from_file_location("pycrash_impc", path)
@@ -260,30 +214,8 @@ def pycrash_rate(repeats):
     return statistics.median(runs), "pycrash.impc.impc_calcs (planar, scalar Python, prints redirected)"
 
 
-def batched_loss(row_loss, axis, chunked=False, summed=False):
-    """sum over valid rows of ``row_loss`` of the batch's results, as a function of (inputs, status):
-    through ``exchange`` (``chunked``: its own status; on one CPU device its values and derivatives
-    run in chunks), or through ``exchange_with_status`` (one whole-batch program, forward and
-    gradient alike); ``summed``: built by ``ks_jax.sum_over_rows`` (batch-first; the forward is
-    that of ``chunked``, the gradient each chunk's value and gradient in one program)."""
-    if summed:
-        def row(*a):
-            r = exchange(*a)
-            return jnp.where(r.contact.status == 0, row_loss(r), 0.0)
-        total = ks_jax.sum_over_rows(row)
-        return lambda args, status: total(*args)
-
-    def loss(args, status):  # trig inside the differentiated function (it depends on the angles)
-        if chunked:
-            r = jax.vmap(exchange, in_axes=axis, out_axes=axis)(*args)
-        else:
-            r = jax.vmap(lambda *a: exchange_with_status(*a[:5], 0.0, a[5]), in_axes=axis, out_axes=axis)(*args, status)
-        return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
-    return loss
-
-
 def delta_v(r):
-    """Both delta-V magnitudes (the forward needs only the impulse)."""
+    """Both delta-V magnitudes (the forward needs little more than the impulse)."""
     return r.vehicles[0].delta_v_magnitude + r.vehicles[1].delta_v_magnitude
 
 
@@ -295,6 +227,38 @@ def residuals(r):
             + (1 - jnp.cos(jnp.radians(v.course_after - 10.0))) \
             + (1 - jnp.cos(jnp.radians(v.pdof - 30.0 * k))) + (v.yaw_rate_after - 0.1) ** 2
     return total
+
+
+LOSSES = {"delta-V": delta_v, "residuals": residuals}
+WAYS = ("sum_over_rows", "vmap(exchange)", "whole-batch")
+
+
+def batched_loss(row_loss, way="vmap(exchange)"):
+    """The sum over the rows whose status is OK of ``row_loss`` of a row's results, as a function of the
+    five batch-first input pytrees: built with ``ks_jax.sum_over_rows`` ("sum_over_rows"), written over
+    ``jax.vmap(ks_jax.exchange)`` ("vmap(exchange)") or over ``jax.vmap(ks_jax.model.collision.exchange)``
+    ("whole-batch": no chunked vmap rule)."""
+    if way == "sum_over_rows":
+        def row(*a):
+            r = ks_jax.exchange(*a)
+            return jnp.where(r.contact.status == 0, row_loss(r), 0.0)
+        return ks_jax.sum_over_rows(row)
+    fn = {"vmap(exchange)": ks_jax.exchange, "whole-batch": collision.exchange}[way]
+
+    def loss(*args):
+        r = jax.vmap(fn)(*args)
+        return jnp.sum(jnp.where(r.contact.status == 0, row_loss(r), 0.0))
+    return loss
+
+
+def run_script(name, *argv, **env):
+    """The last line a benchmark script beside this one prints, run in a process of its own (its peak
+    memory is then its own, and XLA_FLAGS apply to it alone)."""
+    done = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / name), *argv],
+                          env=dict(os.environ, **env), capture_output=True, text=True)
+    if done.returncode != 0:
+        return f"failed (exit {done.returncode}): {done.stderr.strip().splitlines()[-1:]}"
+    return done.stdout.strip().splitlines()[-1]
 
 
 def main():
@@ -309,223 +273,183 @@ def main():
     n, reps = args.rows, args.repeats
 
     print("ks-jax kernel benchmark")
-    print(f"  date     {datetime.datetime.now().astimezone().isoformat(timespec='seconds')}")
+    print(f"  date     {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC")
     print(f"  command  {' '.join([Path(sys.executable).name, *sys.argv])}")
-    print(f"  machine  {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}")
+    print(f"  machine  {cpu_model()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
+          f"load average {os.getloadavg()[0]:.2f}")
     print(f"  jax      {jax.__version__}, backend {jax.default_backend()}, devices {jax.devices()}")
     print(f"  numpy    {np.__version__}")
-    print(f"  rows     {n} per batch, {reps} interleaved rounds (medians)\n")
+    print(f"  rows     {n} per batch, batch-first, {reps} interleaved rounds (medians)\n", flush=True)
 
-    nps, last = random_batch(n)
-    first = batch_first(last)
-    one, one_first, whole = kernel_one_call(), kernel_one_call(0), kernel_one_call(0, whole=True)
+    nps, first = random_batch(n)
+    first32 = jax.block_until_ready(jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first))
+    vmapped = jax.jit(jax.vmap(ks_jax.exchange))
+    whole = jax.jit(jax.vmap(collision.exchange))
 
-    # --- first calls (compile + run), then everything in interleaved rounds
-    first32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), first)
-    chunk = 1 << 14
-    chunks = [jax.tree_util.tree_map(lambda x: x[..., i:i + chunk], last) for i in range(0, n, chunk)]
-    per_chunk = kernel_chunk()
-    first64 = first_call(lambda: exchange_batch(*first))
-    first32_s = first_call(lambda: exchange_batch(*first32))
-    first1 = first_call(lambda: jax.block_until_ready(one(last)))
-    first1f = first_call(lambda: jax.block_until_ready(one_first(first)))
-    first_whole = first_call(lambda: jax.block_until_ready(whole(first)))
-    out = exchange_batch(*first)
-    io_bytes = nbytes(first) + nbytes(out)
+    # --- first calls (compile + run), then every forward in interleaved rounds
+    firsts = {
+        "batch64": first_call(lambda: ks_jax.exchange_batch(*first)),
+        "batch32": first_call(lambda: ks_jax.exchange_batch(*first32)),
+        "vmap64": first_call(lambda: jax.block_until_ready(vmapped(*first))),
+        "vmap32": first_call(lambda: jax.block_until_ready(vmapped(*first32))),
+        "whole": first_call(lambda: jax.block_until_ready(whole(*first))),
+    }
+    out = ks_jax.exchange_batch(*first)
+    out32 = ks_jax.exchange_batch(*first32)
     stream, stream_in_place, stream_bytes = streaming_references(first, out)
+    stream32, stream32_in_place, stream32_bytes = streaming_references(first32, out32, jnp.float32)
     fns = {
-        "kernel64": lambda: exchange_batch(*first),
-        "kernel32": lambda: exchange_batch(*first32),
-        "kernel64out": lambda: exchange_batch(*first, out=out),
-        "kernel1": lambda: jax.block_until_ready(one(last)),
-        "kernel1f": lambda: jax.block_until_ready(one_first(first)),
-        "whole": lambda: jax.block_until_ready(whole(first)),
-        "chunk": lambda: jax.block_until_ready([per_chunk(a) for a in chunks]),
+        "vmap64": lambda: jax.block_until_ready(vmapped(*first)),
+        "batch64": lambda: ks_jax.exchange_batch(*first),
+        "batch64out": lambda: ks_jax.exchange_batch(*first, out=out),
+        "vmap32": lambda: jax.block_until_ready(vmapped(*first32)),
+        "batch32": lambda: ks_jax.exchange_batch(*first32),
+        "whole": lambda: jax.block_until_ready(whole(*first)),
         "numpy": lambda: numpy_ks.exchange(*nps),
         "stream": stream,
         "stream_in_place": stream_in_place,
+        "stream32": stream32,
+        "stream32_in_place": stream32_in_place,
     }
     for fn in fns.values():  # warm
         fn()
     usage = {}
     times = rounds(fns, reps, usage)
-    res = {k: n / statistics.median(v) for k, v in times.items()}
-    t64 = statistics.median(times["kernel64"])
-    tstream = statistics.median(times["stream"])
+    rate = {k: n / statistics.median(v) for k, v in times.items()}
+    q = lambda a, b: ratio(times, a, b)  # noqa: E731
+
+    def largest_difference(a, b):
+        return max(float(np.nanmax(np.abs(np.asarray(x, np.float64) - np.asarray(y, np.float64))))
+                   for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b))
+                   if np.asarray(x).dtype.kind == "f")
+
+    same_vmap = largest_difference(out, vmapped(*first))
+    same_whole = largest_difference(out, whole(*first))
     statuses = np.bincount(np.asarray(out.contact.status).ravel())
-    one_out = one(last)
-    same = max(float(np.nanmax(np.abs(np.asarray(a) - np.moveaxis(np.asarray(b), -1, 0))))
-               for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(one_out))
-               if np.asarray(a).dtype.kind == "f")
-    # NumPy agrees with the kernel (the invalid rows, NaN in both, are left out)
     ref_c, ref_v = numpy_ks.exchange(*jax.tree_util.tree_map(lambda x: x[:4096], nps))
     valid = np.asarray(out.contact.status[:4096]) == 0
-    diff = max(
+    agree = max(
         np.max(np.abs(np.asarray(out.contact.impulse_magnitude[:4096]) - ref_c["impulse_magnitude"])[valid]
                / np.abs(ref_c["impulse_magnitude"])[valid]),
         np.max(np.abs(np.asarray(out.vehicles[1].delta_v_magnitude[:4096]) - ref_v[1]["delta_v_magnitude"])[valid]
                / np.abs(ref_v[1]["delta_v_magnitude"])[valid]),
     )
+    agree32 = max(float(np.nanmax(np.abs(np.asarray(a, np.float64) - np.asarray(b)) / np.maximum(np.abs(np.asarray(b)), 1.0)))
+                  for a, b in ((out32.contact.impulse_magnitude, out.contact.impulse_magnitude),
+                               (out32.vehicles[1].delta_v_magnitude, out.vehicles[1].delta_v_magnitude)))
 
-    # --- gradient / forward of two batched losses, in both layouts: batch-first (jax.vmap's default
-    # in_axes=0, how exchange_batch takes its inputs) and batch-last
-    gfns, firsts, finite = {}, {}, {}
-    for layout, data, axis, chunked in (("batch-first", first, 0, False), ("batch-last", last, -1, False),
-                                        ("exchange, batch-first", first, 0, True),
-                                        ("sum_over_rows, batch-first", first, 0, "summed")):
-        floats = tuple(data[:5])
-        st = jax.jit(jax.vmap(input_status, in_axes=axis, out_axes=axis))(*data)
-        for name, row_loss in (("delta-V", delta_v), ("residuals", residuals)):
-            key = (name, layout)
-            loss = batched_loss(row_loss, axis, bool(chunked), summed=chunked == "summed")
-            fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss))
-            first_call(lambda: jax.block_until_ready(fwd(floats, st)))
-            firsts[key] = first_call(lambda: jax.block_until_ready(grad(floats, st)))
-            g = grad(floats, st)[1]
-            finite[key] = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
+    w = 46
+    print(f"{'forward, ' + str(n) + ' rows':{w}} {'exchanges/s':>12}  {'/NumPy':>7}  {'/stream':>7}  first call")
+    for key, label, against in (("vmap64", "jit(vmap(exchange)) float64", "stream"),
+                                ("batch64", "exchange_batch float64", "stream"),
+                                ("batch64out", "exchange_batch float64, out= (no new memory)", "stream_in_place"),
+                                ("vmap32", "jit(vmap(exchange)) float32", "stream32"),
+                                ("batch32", "exchange_batch float32", "stream32"),
+                                ("whole", "whole-batch jit(vmap(collision.exchange))", "stream"),
+                                ("numpy", "NumPy vectorized (numpy_ks.py) float64", "stream"),
+                                ("stream", "stream x*1.0+0, float64, new arrays", "stream"),
+                                ("stream_in_place", "same, in place (donated)", "stream_in_place"),
+                                ("stream32", "stream x*1.0+0, float32, new arrays", "stream32"),
+                                ("stream32_in_place", "same, in place (donated)", "stream32_in_place")):
+        f = f"{firsts[key]:.2f} s" if key in firsts else ""
+        print(f"{label:{w}} {rate[key]:12.4g}  {q(key, 'numpy'):7.2f}  {q(key, against):7.3f}  {f}")
+    print(f"(/stream: against the streaming row of the same dtype, in place for out=; {nbytes(first) + nbytes(out)} "
+          f"bytes in + out, {(nbytes(first) + nbytes(out)) / n:.0f} B/row; streaming float64 "
+          f"{stream_bytes / statistics.median(times['stream']) / 1e9:.2f} GB/s read, as much written; "
+          f"float32 {stream32_bytes / statistics.median(times['stream32']) / 1e9:.2f} GB/s)")
+    print(f"jit(vmap(exchange)) / exchange_batch {q('vmap64', 'batch64'):.2f} (float64), {q('vmap32', 'batch32'):.2f} "
+          f"(float32); float32 / float64: jit(vmap) {q('vmap32', 'vmap64'):.2f}, exchange_batch "
+          f"{q('batch32', 'batch64'):.2f}; jit(vmap(exchange)) / whole-batch {q('vmap64', 'whole'):.2f}")
+    print(f"largest differences from exchange_batch: jit(vmap(exchange)) {same_vmap:.1e}, whole-batch {same_whole:.1e}; "
+          f"NumPy agrees to {agree:.1e} (relative, valid rows of the first 4096); float32 to float64 {agree32:.1e}")
+    faults = lambda k: f"{statistics.median(u[1] for u in usage[k]):.0f}"  # noqa: E731
+    print(f"page faults per call (medians): exchange_batch {faults('batch64')}, out= {faults('batch64out')}, "
+          f"jit(vmap(exchange)) {faults('vmap64')}, whole-batch {faults('whole')}, NumPy {faults('numpy')}, "
+          f"streaming {faults('stream')}, in place {faults('stream_in_place')}, float32 {faults('stream32')}, "
+          f"in place {faults('stream32_in_place')}; a float64 result is "
+          f"{nbytes(out) / 4096:.0f} pages of 4 KiB")
+    print(f"statuses in the random batch: {dict((int(k), int(v)) for k, v in enumerate(statuses) if v)}\n", flush=True)
+
+    # --- gradient / forward of the two batched losses, each way, batch-first; the forward section's arrays
+    # (float32 rows, results, streaming copies: gigabytes) freed first
+    every_result = fns["vmap64"]
+    del fns, stream, stream_in_place, stream32, stream32_in_place
+    first32 = out32 = None
+    gfns, gfirst, finite = {}, {}, {}
+    for name, row_loss in LOSSES.items():
+        for way in WAYS:
+            loss = batched_loss(row_loss, way)
+            fwd, grad = jax.jit(loss), jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2, 3, 4)))
+            first_call(lambda: jax.block_until_ready(fwd(*first)))
+            gfirst[(name, way)] = first_call(lambda: jax.block_until_ready(grad(*first)))
+            g = grad(*first)[1]
+            finite[(name, way)] = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g))
             del g
-            gfns[key + ("forward",)] = lambda fwd=fwd, floats=floats, st=st: jax.block_until_ready(fwd(floats, st))
-            gfns[key + ("gradient",)] = lambda grad=grad, floats=floats, st=st: jax.block_until_ready(grad(floats, st))
-    # the kernel's own forward (every result), in the same rounds: what the gradients cost against it
-    gfns[("every result",)] = fns["kernel1f"]
-    gt = rounds(gfns, reps)
-    grads = {key: (statistics.median(gt[key + ("forward",)]), statistics.median(gt[key + ("gradient",)]),
-                   ratio(gt, key + ("forward",), key + ("gradient",)), firsts[key], finite[key]) for key in firsts}
+            gfns[(name, way, "forward")] = lambda fwd=fwd: jax.block_until_ready(fwd(*first))
+            gfns[(name, way, "gradient")] = lambda grad=grad: jax.block_until_ready(grad(*first))
+    gfns[("every result",)] = every_result  # the forward computing every result, in the same rounds
+    gusage = {}
+    gt = rounds(gfns, reps, gusage)
+    gq = lambda a, b: ratio(gt, a, b)  # noqa: E731
+    print(f"{'gradient, ' + str(n) + ' rows':{w}} {'rows/s':>12}  {'grad/fwd':>8}  forward rows/s, first call of the gradient")
+    grads = {}
+    for name in LOSSES:
+        for way in WAYS:
+            f, g = (name, way, "forward"), (name, way, "gradient")
+            grads[(name, way)] = gq(f, g)
+            print(f"{name + ', ' + way:{w}} {n / statistics.median(gt[g]):12.4g}  {grads[(name, way)]:8.2f}  "
+                  f"{n / statistics.median(gt[f]):.4g}/s, {gfirst[(name, way)]:.2f} s, gradient finite: "
+                  f"{finite[(name, way)]}")
+        so, vm, wh = ((name, way, "gradient") for way in WAYS)
+        print(f"  {name}: page faults per gradient call (medians): " + ", ".join(
+            f"{way} {statistics.median(u[1] for u in gusage[(name, way, 'gradient')]):.0f}" for way in WAYS))
+        print(f"  {name}: gradient through vmap(exchange) / sum_over_rows {gq(so, vm):.2f}, whole-batch / "
+              f"sum_over_rows {gq(so, wh):.2f}; sum_over_rows gradient / jit(vmap(exchange)) every result "
+              f"{gq(('every result',), so):.2f}")
+    print(flush=True)
 
-    # --- sweep of a million-point grid
+    # --- a sweep of a grid
     case = ks_jax.load_case(CASE)
     over = {"vehicles[1].speed": np.linspace(2, 30, args.grid), "contact.friction": np.linspace(0, 1, args.grid)}
-    tsw_first = time.perf_counter()
-    sweep(case, over, progress=False)
-    tsw_first = time.perf_counter() - tsw_first
-    sweeps = [sweep(case, over, progress=False) for _ in range(max(reps, 3))]  # the median of several calls
-    r, tsw = sweeps[-1], statistics.median(x.seconds for x in sweeps)
-    tsw_range = (min(x.seconds for x in sweeps), max(x.seconds for x in sweeps))
+    tsw_first = first_call(lambda: ks_jax.sweep(case, over, progress=False))
+    sweeps = [ks_jax.sweep(case, over, progress=False) for _ in range(max(reps, 3))]
+    tsw = statistics.median(x.seconds for x in sweeps)
+    print(f"sweep {args.grid} x {args.grid}, {len(sweeps[-1].output_paths)} outputs + status: {tsw:.2f} s "
+          f"({sweeps[-1].points / tsw:.3g} points/s; median of {len(sweeps)} calls, "
+          f"{min(x.seconds for x in sweeps):.2f}-{max(x.seconds for x in sweeps):.2f} s; first call {tsw_first:.2f} s)",
+          flush=True)
 
     pc, pc_note = pycrash_rate(3)
-
-    w = 44
-    q = lambda a, b: ratio(times, a, b)  # noqa: E731
-    print(f"{'':{w}} {'exchanges/s':>14}  {'ratio':>8}")
-    print(f"{'kernel float64 (exchange_batch)':{w}} {res['kernel64']:14.4g}")
-    print(f"{'same, out= an earlier result (no new memory)':{w}} {res['kernel64out']:14.4g}  "
-          f"{q('kernel64out', 'kernel64'):8.2f}  (/kernel; kernel/NumPy {q('kernel64out', 'numpy'):.2f})")
-    print(f"{'kernel float32 (same)':{w}} {res['kernel32']:14.4g}  {q('kernel32', 'kernel64'):8.2f}  (f32/f64)")
-    print(f"{'jit(vmap(exchange)), batch-last':{w}} {res['kernel1']:14.4g}  {q('kernel1', 'kernel64'):8.2f}  "
-          f"(/kernel; largest difference {same:.1e}; first call {first1:.2f} s)")
-    print(f"{'same, batch-first (jax.vmap default)':{w}} {res['kernel1f']:14.4g}  {q('kernel1f', 'kernel64'):8.2f}  "
-          f"(/kernel; first call {first1f:.2f} s)")
-    print(f"{'whole-batch jit(vmap), batch-first':{w}} {res['whole']:14.4g}  {q('whole', 'kernel64'):8.2f}  "
-          f"(/kernel; jit(vmap(exchange)) batch-first is {q('kernel1f', 'whole'):.2f}x it; first call {first_whole:.2f} s)")
-    print(f"{'sweep path: chunks of 16384, batch-last':{w}} {res['chunk']:14.4g}  {q('chunk', 'kernel64'):8.2f}  "
-          f"(/kernel; the three calls on inputs already cut into chunks)")
-    print(f"{'NumPy vectorized, same equations, float64':{w}} {res['numpy']:14.4g}  "
-          f"{q('kernel64', 'numpy'):8.2f}  (kernel/NumPy; agree to {diff:.1e}; sweep path/NumPy "
-          f"{q('chunk', 'numpy'):.2f}; jit(vmap(exchange))/NumPy {q('kernel1', 'numpy'):.2f}, batch-first "
-          f"{q('kernel1f', 'numpy'):.2f}; whole-batch/NumPy {q('whole', 'numpy'):.2f})")
-    print(f"{'stream x*1.0+0 over in+out bytes':{w}} {res['stream']:14.4g}  {q('kernel64', 'stream'):8.2f}  "
-          f"(kernel/streaming; {io_bytes / n:.0f} B/row in+out, {stream_bytes / tstream / 1e9:.2f} GB/s read+write"
-          f" {2 * stream_bytes / tstream / 1e9:.2f}; sweep path/streaming {q('chunk', 'stream'):.2f}; "
-          f"jit(vmap(exchange))/streaming {q('kernel1', 'stream'):.2f}, batch-first {q('kernel1f', 'stream'):.2f})")
-    print(f"{'same, in place (donated: no new memory)':{w}} {res['stream_in_place']:14.4g}  "
-          f"{q('kernel64out', 'stream_in_place'):8.2f}  (kernel out= / this: both without new memory; "
-          f"kernel/this {q('kernel64', 'stream_in_place'):.2f}; jit(vmap(exchange)) batch-first/this "
-          f"{q('kernel1f', 'stream_in_place'):.2f})")
-    kf = lambda k: f"{statistics.median(u[1] for u in usage[k]):.0f}"  # noqa: E731
-    print(f"page faults per call (medians): exchange_batch {kf('kernel64')}, out= {kf('kernel64out')}, "
-          f"jit(vmap(exchange)) batch-first {kf('kernel1f')}, whole-batch {kf('whole')}, NumPy {kf('numpy')}, "
-          f"streaming {kf('stream')}, in place {kf('stream_in_place')}; a result of this batch is "
-          f"{nbytes(out) / 4096:.0f} pages of 4 KiB")
-    by_round = ", ".join(f"{tn / tk:.2f} ({cpu * 1e9 / n:.0f} ns, {faults})" for tk, tn, (cpu, faults)
-                         in zip(times["kernel1f"], times["numpy"], usage["kernel1f"]))
-    print(f"jit(vmap(exchange)) batch-first / NumPy, round by round (its CPU time per row, page faults): {by_round}")
-    for (name, layout), (tf, tg, gf, firstg, ok) in grads.items():
-        label = f"gradient/forward, {name}, {layout}"
-        versus = ""
-        if layout == "exchange, batch-first":  # its gradient in chunks against the whole-batch gradient
-            versus = (f"; whole-batch gradient (batch-first) / this gradient "
-                      f"{ratio(gt, (name, layout, 'gradient'), (name, 'batch-first', 'gradient')):.2f}; this "
-                      f"gradient / jit(vmap(exchange)) batch-first, every result "
-                      f"{ratio(gt, ('every result',), (name, layout, 'gradient')):.2f}")
-        if layout == "sum_over_rows, batch-first":  # the same loss, its gradient chunk by chunk
-            via = (name, "exchange, batch-first")
-            versus = (f"; the gradient through exchange / this gradient {ratio(gt, (name, layout, 'gradient'), via + ('gradient',)):.2f}"
-                      f"; this gradient / the forward through exchange {ratio(gt, via + ('forward',), (name, layout, 'gradient')):.2f}")
-        print(f"{label:{w}} {n / tg:14.4g}  {gf:8.2f}  (forward {n / tf:.4g}/s; grad finite: {ok}; "
-              f"first call {firstg:.2f} s{versus})")
-    print(f"first call (compile + run) exchange_batch float64: {first64:.2f} s (steady run {t64:.3f} s); "
-          f"float32: {first32_s:.2f} s; jit(vmap(exchange)): {first1f:.2f} s batch-first")
-    print(f"sweep {args.grid}x{args.grid} grid, {len(r.output_paths)} outputs + status: {tsw:.2f} s "
-          f"({r.points / tsw:.3g} points/s; median of {len(sweeps)} calls, {tsw_range[0]:.2f}-{tsw_range[1]:.2f} s; "
-          f"first call incl. compile {tsw_first:.2f} s)")
     if pc is None:
         print(pc_note)
     else:
-        print(f"pycrash impc_calcs: {pc * 1e6:.1f} us per call ({1 / pc:.3g} exchanges/s; kernel is "
-              f"{res['kernel64'] * pc:.0f}x) -- {pc_note}")
-    print(f"statuses in the random batch: {dict((int(k), int(v)) for k, v in enumerate(statuses) if v)}")
-    memory, sharded = [], None
+        print(f"pycrash impc_calcs: {pc * 1e6:.1f} us per call ({1 / pc:.3g} exchanges/s; exchange_batch is "
+              f"{rate['batch64'] * pc:.0f}x) -- {pc_note}")
+
+    extra = []
     if args.memory_n:
         for keep in ("float32", "none"):
-            memory.append(run_script("bench_sweep_memory.py", "--n", str(args.memory_n), "--keep", keep))
-            print("sweep, peak memory (bench_sweep_memory.py): " + memory[-1])
+            extra.append(("sweep memory", run_script("bench_sweep_memory.py", "--n", str(args.memory_n), "--keep", keep)))
+            print(f"bench_sweep_memory.py --n {args.memory_n} --keep {keep}: {extra[-1][1]}", flush=True)
     if args.sharded_n:
-        sharded = run_script("bench_sweep_sharded.py", "--n", str(args.sharded_n),
-                             XLA_FLAGS="--xla_force_host_platform_device_count=2")
-        print("sweep, sharded (bench_sweep_sharded.py, XLA_FLAGS=--xla_force_host_platform_device_count=2): " + sharded)
+        extra.append(("sharded", run_script("bench_sweep_sharded.py", "--n", str(args.sharded_n),
+                                            XLA_FLAGS="--xla_force_host_platform_device_count=2")))
+        print(f"bench_sweep_sharded.py --n {args.sharded_n} (2 forced host devices): {extra[-1][1]}", flush=True)
     if args.naive_rows:
-        print("naive baseline (bench_naive.py): "
-              + run_script("bench_naive.py", "--rows", str(args.naive_rows), "--repeats", str(reps)))
-    print_targets(q, grads, memory, sharded, (first64, first1f))
+        extra.append(("naive", run_script("bench_naive.py", "--rows", str(args.naive_rows), "--repeats", str(reps))))
+        print(f"bench_naive.py --rows {args.naive_rows}: {extra[-1][1]}", flush=True)
 
-
-def print_targets(q, grads, memory, sharded, firsts):
-    """Issue #5's numeric targets, each as this run measured it, and whether it holds in this run.
-    (One run decides nothing where a ratio sits near its bound: RESULTS.md keeps the runs.)"""
-    def verdict(value, bound, at_most=False):
-        return f"{value:.2f} ({'met' if (value <= bound if at_most else value >= bound) else 'NOT met'})"
-
-    print("\nissue #5 targets, this run:")
-    print(f"  kernel / NumPy >= 10:          exchange_batch {verdict(q('kernel64', 'numpy'), 10)}; "
-          f"jit(vmap(exchange)) batch-first {verdict(q('kernel1f', 'numpy'), 10)}")
-    print(f"  kernel / streaming >= 0.3:     exchange_batch {verdict(q('kernel64', 'stream'), 0.3)}; "
-          f"jit(vmap(exchange)) batch-first {verdict(q('kernel1f', 'stream'), 0.3)}")
-    for name in ("delta-V", "residuals"):
-        built = grads.get((name, "sum_over_rows, batch-first"))
-        plain = grads.get((name, "exchange, batch-first"))
-        print(f"  gradient / forward <= 3, {name + ':':10} "
-              + (f"built by sum_over_rows {verdict(built[2], 3, at_most=True)}; " if built else "")
-              + (f"written over jax.vmap(exchange) {verdict(plain[2], 3, at_most=True)}" if plain else ""))
-    def compiles(layout):  # first calls of the two losses' gradients
-        return ", ".join(f"{grads[(name, layout)][3]:.2f}" for name in ("delta-V", "residuals") if (name, layout) in grads)
-
-    print(f"  first calls (compile + run):   exchange_batch {firsts[0]:.2f} s, jit(vmap(exchange)) {firsts[1]:.2f} s; "
-          f"gradients by sum_over_rows {compiles('sum_over_rows, batch-first')} s, "
-          f"over jax.vmap(exchange) {compiles('exchange, batch-first')} s")
-    for line in memory:
-        found = re.search(r"([0-9.e+]+) points, keep=(\w+): ([0-9.]+) s .*peak RSS ([0-9]+) MiB", line)
-        if found:
-            points, keep, seconds, mib = found.groups()
-            print(f"  {points} points in < 2 GiB:      keep={keep}: peak RSS {mib} MiB in {seconds} s "
-                  f"({'met' if int(mib) < 2048 else 'NOT met'})")
-        else:
-            print(f"  10^8 points in < 2 GiB:        not measured ({line})")
-    if sharded is not None:
-        found = re.search(r"largest difference ([0-9.e+-]+|nan), NaN in the same places: (\w+)", sharded)
-        print("  sharded == one device:         " + (f"largest difference {found[1]}, NaN alike {found[2]}"
-                                                     if found else f"not measured ({sharded})"))
-
-
-def run_script(name, *argv, **env):
-    """The last line a benchmark script beside this one prints, run in a process of its own (its
-    peak memory is then its own, and XLA_FLAGS apply to it alone)."""
-    import subprocess
-
-    done = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / name), *argv],
-                          env=dict(os.environ, **env), capture_output=True, text=True)
-    if done.returncode != 0:
-        return f"failed (exit {done.returncode}): {done.stderr.strip().splitlines()[-1:]}"
-    return done.stdout.strip().splitlines()[-1]
+    print("\nsummary (medians of the rounds above):")
+    for key, label in (("vmap64", "jit(vmap(exchange)) float64"), ("batch64", "exchange_batch float64"),
+                       ("vmap32", "jit(vmap(exchange)) float32"), ("batch32", "exchange_batch float32")):
+        against = "stream32" if key.endswith("32") else "stream"
+        print(f"  {label:28} {rate[key]:.3g} exchanges/s, {q(key, 'numpy'):.1f}x NumPy float64, "
+              f"{q(key, against):.2f} of streaming into new arrays, {q(key, against + '_in_place'):.2f} in place "
+              f"({'float32' if key.endswith('32') else 'float64'})")
+    for name in LOSSES:
+        print(f"  gradient/forward, {name:9}  sum_over_rows {grads[(name, 'sum_over_rows')]:.2f}, "
+              f"vmap(exchange) {grads[(name, 'vmap(exchange)')]:.2f}, whole-batch {grads[(name, 'whole-batch')]:.2f}")
+    print(f"  sweep {args.grid} x {args.grid}             {tsw:.2f} s")
 
 
 if __name__ == "__main__":

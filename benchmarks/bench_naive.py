@@ -1,22 +1,21 @@
-"""The naive baseline of issue #5, measured beside NumPy, streaming and the library. Not a test.
+"""The naive baseline: ``jax.jit(jax.vmap)`` of the exchange written with batched 3x3 LAPACK solves,
+measured beside NumPy, streaming and the library. Not a test.
 
     .venv/bin/python benchmarks/bench_naive.py [--rows 1048576] [--repeats 5]
 
-Issue #5 calibrates its targets on "a first naive jit(vmap) with batched 3x3 solves", which it says
-gets "about 2x NumPy and 0.14 of streaming". This script measures that baseline (benchmarks/naive_ks.py:
-jnp.linalg.inv and jnp.linalg.solve per row, batched by jax.jit(jax.vmap)) in rounds beside the same
-references as bench_kernel.py: the NumPy implementation (numpy_ks.py), the two streaming references over
-the bytes of the library's inputs and results (into new arrays, and in place), and the library's own
-``jax.jit(jax.vmap(ks_jax.exchange))``, batch-first. Then gradient / forward of bench_kernel.py's two
-batched losses through the baseline and, in the same rounds, through ``jax.vmap(ks_jax.exchange)``.
-It prints the figures, and last a one-line summary (bench_kernel.py runs this script in a process of its
-own and prints that line).
+The baseline (benchmarks/naive_ks.py: ``jnp.linalg.inv`` and ``jnp.linalg.solve`` per row, batched by
+``jax.jit(jax.vmap)``) is timed in rounds beside the same references as bench_kernel.py: the NumPy
+implementation (numpy_ks.py), the two streaming references over the bytes of the library's inputs and
+results (into new arrays, and in place), and the library's own ``jax.jit(jax.vmap(ks_jax.exchange))``,
+batch-first. Then gradient / forward of bench_kernel.py's two batched losses through the baseline and, in
+the same rounds, through ``jax.vmap(ks_jax.exchange)``. It prints the figures, and last a one-line
+summary (bench_kernel.py runs this script in a process of its own and prints that line).
 
 The baseline inverts both vehicles' inertias in one ``jnp.linalg.inv`` call (and takes both determinants
 in one ``jnp.linalg.det``): XLA runs independent calls at the same time, and a program holding two
-independent batched ``jnp.linalg.inv`` of 8192 or more 3x3 matrices did not return, with all its
-threads asleep, on the 2-core benchmark machine with JAX 0.10.2 (benchmarks/RESULTS.md). The library
-itself makes no LAPACK call (tests/test_batch.py checks it).
+independent batched ``jnp.linalg.inv`` of 8192 or more 3x3 matrices did not return, with all its threads
+asleep, on a 2-core machine with JAX 0.10.2. The library itself makes no LAPACK call (benchmarks/checks.py
+checks it).
 """
 
 from __future__ import annotations
@@ -38,7 +37,6 @@ import naive_ks  # noqa: E402
 import numpy_ks  # noqa: E402
 
 import ks_jax  # noqa: E402
-from ks_jax.exchange import input_status  # noqa: E402
 
 
 def naive_losses():
@@ -73,8 +71,7 @@ def main():
     n, reps = args.rows, args.repeats
     print(f"naive baseline, {n} rows, {reps} rounds, jax {jax.__version__}, {bk.cpu_model()}")
 
-    nps, last = bk.random_batch(n)
-    first = bk.batch_first(last)
+    nps, first = bk.random_batch(n)
     dicts = jax.block_until_ready(jax.tree_util.tree_map(jnp.asarray, nps))
     naive = jax.jit(jax.vmap(naive_ks.exchange))
     kernel = jax.jit(jax.vmap(ks_jax.exchange))
@@ -106,12 +103,10 @@ def main():
 
     # gradient / forward of the two losses through the baseline, and through ks_jax.exchange (as
     # bench_kernel.py takes it: jax.vmap(exchange), batch-first, every input) in the same rounds
-    floats = tuple(first[:5])
-    status = jax.jit(jax.vmap(input_status))(*first)
     gfns, firsts = {}, {}
     for name, loss in naive_losses().items():
-        lib_loss = bk.batched_loss({"delta-V": bk.delta_v, "residuals": bk.residuals}[name], 0, chunked=True)
-        for who, f, a in (("naive", loss, (dicts,)), ("ks_jax", lib_loss, (floats, status))):
+        lib_loss = bk.batched_loss(bk.LOSSES[name], "vmap(exchange)")
+        for who, f, a in (("naive", loss, (dicts,)), ("ks_jax", lambda args, lib_loss=lib_loss: lib_loss(*args), (tuple(first),))):
             fwd, grad = jax.jit(f), jax.jit(jax.value_and_grad(f))
             bk.first_call(lambda: jax.block_until_ready(fwd(*a)))
             first_grad = bk.first_call(lambda: jax.block_until_ready(grad(*a)))

@@ -1,6 +1,6 @@
 """Peak memory of a 10^8-point sweep (10000 x 10000 grid, one output). Not a test.
 
-    /usr/bin/time -v python benchmarks/bench_sweep_memory.py [--keep float32|none] [--n 10000]
+    .venv/bin/python benchmarks/bench_sweep_memory.py [--keep float32|none] [--n 10000]
 
 --keep float32: the output is stored as float32 (0.4 GB for 10^8 points) plus the int8 status;
 --keep none: nothing is stored; a per-chunk callback reduces the output (its maximum) as it goes.

@@ -3,10 +3,10 @@
     .venv/bin/python benchmarks/bench_write.py [--n 1000] [--repeats 3] [--dir /tmp]
 
 Solves an n x n grid of the seed case (default outputs), then writes it to each format in turn,
---repeats rounds, and prints every time and each file's size. A .csv is written twice: by pyarrow's
-CSV writer (what ``ResultWriter`` uses where pyarrow is installed) and by the csv module (without
-pyarrow), which is mostly Python's float formatting; the other two write the arrays as they are
-(.parquet needs pyarrow).
+--repeats rounds, and prints every time and each file's size. A .csv is written twice: by pyarrow's CSV
+writer (what ``ResultWriter`` uses where pyarrow is installed) and by the csv module (what it uses without
+pyarrow; here ``ks_jax.sweeps.files._arrow_csv`` is made to return None), which is mostly Python's float
+formatting; the other two write the arrays as they are (.parquet needs pyarrow).
 """
 
 import argparse
@@ -19,7 +19,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 import ks_jax  # noqa: E402
-import ks_jax.sweeps as sweeps_module  # noqa: E402
+import ks_jax.sweeps.files as files_module  # noqa: E402
 from ks_jax.sweeps import write_results  # noqa: E402
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
@@ -37,15 +37,15 @@ def main():
     for _ in range(args.repeats):
         for kind in (".csv (pyarrow)", ".csv (csv module)", ".npz", ".parquet"):
             out = Path(args.dir) / f"bench_write{kind.split()[0]}"
-            arrow_csv = sweeps_module._arrow_csv
+            arrow_csv = files_module._arrow_csv
             if kind == ".csv (csv module)":
-                sweeps_module._arrow_csv = lambda: None
+                files_module._arrow_csv = lambda: None
             try:
                 t = time.perf_counter()
                 write_results(result, out)
                 times.setdefault(kind, []).append(time.perf_counter() - t)
             finally:
-                sweeps_module._arrow_csv = arrow_csv
+                files_module._arrow_csv = arrow_csv
             sizes[kind] = out.stat().st_size
             out.unlink()
     print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, {result.points:.3g} points, "

@@ -11,7 +11,8 @@ Prints one line per check, PASS or FAIL with the numbers, and exits 1 if any fai
 - a batch of one or two rows compiles to about the program of one unbatched row (``jax.vmap`` adds a batch
   axis, not work): at most 1.5x its instructions;
 - the input rules are stored once per row (``model.checks.input_status``): the gradient of a batched loss
-  compiles to at most 3x the instructions of its forward (they were copied into hundreds of loops: 7x);
+  compiles to at most 3x the instructions of its forward (XLA copies them into every loop that reads an input
+  otherwise);
 - automatic contact in one program (``solve_inputs``: its input rules fenced off) compiles to at most 1.5x
   the instructions of its three stages compiled apart;
 - a chunked batch traces each stage of the exchange a bounded number of times (tracing is the first call's
@@ -32,7 +33,6 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import ks_jax  # noqa: E402
-from ks_jax.batch.stages import run  # noqa: E402
 from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
 from ks_jax.solve import solve_inputs, stages  # noqa: E402
 

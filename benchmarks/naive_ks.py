@@ -1,13 +1,13 @@
-"""The KS exchange (MODEL.md sections 3 and 4) as a first, naive JAX kernel, for the benchmark.
+"""The KS exchange (docs/model.md, "The impulse exchange" and "Results") as a first, naive JAX kernel,
+for the benchmark.
 
 One row at a time, written the way one would first write it in JAX: ``jnp.linalg.inv`` of the
 inertia, 3x3 matrix products, ``jnp.cross``, the stick impulse by ``jnp.linalg.solve``, norms and
 ``jnp.arctan2`` as they come; batched by ``jax.jit(jax.vmap(exchange))``, which turns the inverse and
 the solve into batched LU factorizations (one determinant, one inverse and one solve per batch, each
 waiting for the one before). It computes what ``numpy_ks.exchange`` computes (the same
-equations, the same per-row input checks, NaN in the results of an invalid row) and is the baseline
-that issue #5 calibrates its targets against ("a first naive jit(vmap) with batched 3x3 solves").
-Not a test reference (tests/reference.py is); a baseline.
+equations, the same per-row input checks, NaN in the results of an invalid row): the baseline that
+benchmarks/bench_naive.py measures. Not a test reference (tests/reference.py is); a baseline.
 
 Inputs: the per-row dicts of ``numpy_ks`` (fields of ks_jax.Vehicle/State/Contact, full (3, 3)
 inertias); under ``jax.vmap`` with the batch first, the batch-first dicts themselves.

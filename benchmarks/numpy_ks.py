@@ -1,4 +1,5 @@
-"""The KS exchange (MODEL.md sections 3 and 4) as plain vectorized NumPy, for the benchmark.
+"""The KS exchange (docs/model.md, "The impulse exchange" and "Results") as plain vectorized NumPy,
+for the benchmark.
 
 Batch first: every input has a leading axis of N rows; vectors (N, 3), matrices (N, 3, 3).
 Written the way one would write it in NumPy (np.cross, einsum, np.linalg.inv/solve over the
@@ -56,7 +57,7 @@ def status(v1, s1, v2, s2, c):
 
 def exchange(v1, s1, v2, s2, c):
     """Dicts of (N, ...) arrays (fields of ks_jax.Vehicle/State/Contact; full (3, 3) inertias)
-    -> dict of section-4 results (contact and per vehicle), NaN on invalid rows."""
+    -> dict of the results of docs/model.md (contact and per vehicle), NaN on invalid rows."""
     st = status(v1, s1, v2, s2, c)
     ok = st == 0
     with np.errstate(all="ignore"):

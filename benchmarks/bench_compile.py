@@ -1,0 +1,100 @@
+"""Compile time and run time of the programs ``quick_jit`` compiles, with ``ks_jax.compilation.QUICK_CPU``
+against XLA's defaults, on this machine's CPU. Not a test.
+
+    .venv/bin/python benchmarks/bench_compile.py [--rounds 5]
+
+The programs are the ones the command line compiles: ``ks_jax.solve`` of the seed case (given contact) and
+of ``auto_seed_000.json`` (automatic contact), and the solver of ``fit.reconstruct`` of ``fit_seed_001.json``
+(its cases x starts in one call). Every round traces, lowers and compiles each program both ways, the
+order alternating, and times the compile only; then one call of each compiled program is timed (median
+of 20).
+Prints every round and the medians of the ratios within rounds. Nothing is kept between processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import fit  # noqa: E402
+import fit.rows  # noqa: E402
+import ks_jax  # noqa: E402
+
+CASES = Path(ks_jax.__file__).parent / "cases"
+
+
+def captured_calls():
+    """{name: (quick_jit function, args)} of the three programs, recorded from one solve or fit each."""
+    calls = {}
+    solve_module = importlib.import_module("ks_jax.solve")  # the module, not the function it exports
+    original = solve_module._solve
+
+    def recording(name, fun):
+        def call(*args):
+            calls[name] = (fun, args)
+            return fun(*args)
+        return call
+
+    for name, case in (("solve", "seed_000_saturn_pontiac.json"), ("solve (automatic)", "auto_seed_000.json")):
+        solve_module._solve = recording(name, original)
+        ks_jax.solve(ks_jax.load_case(CASES / case))
+    solve_module._solve = original
+
+    pick = fit.rows.solver_for
+    fit.rows.solver_for = lambda block: recording("fit", fit.rows.fit_rows)
+    fit.reconstruct(ks_jax.load_cases(CASES / "fit_seed_001.json")[0])
+    fit.rows.solver_for = pick
+    return calls
+
+
+def compile_seconds(jitted, args):
+    """Seconds to compile the lowered program: lowered anew, as a lowered program keeps its executable."""
+    jax.clear_caches()
+    lowered = jitted.lower(*args)
+    return timed(lowered.compile)
+
+
+def timed(fun, *args):
+    start = time.perf_counter()
+    jax.block_until_ready(fun(*args))
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    a = parser.parse_args()
+    print(f"bench_compile.py --rounds {a.rounds}")
+    print(f"  date     {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC")
+    print(f"  machine  {platform.processor() or platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}")
+    for name, (fun, args) in captured_calls().items():
+        ways = {"quick": fun.quick.jitted, "defaults": fun.plain.jitted}
+        ratios, runs, compiles = [], [], {w: [] for w in ways}
+        for k in range(a.rounds):
+            order = list(ways) if k % 2 == 0 else list(ways)[::-1]
+            seconds = {way: compile_seconds(ways[way], args) for way in order}
+            for way in order:
+                compiles[way].append(seconds[way])
+            ratios.append(seconds["defaults"] / seconds["quick"])
+            print(f"  {name:18s} round {k}: compile quick {seconds['quick']:.2f} s, defaults {seconds['defaults']:.2f} s")
+        for way in ways:
+            jitted = ways[way]
+            jitted(*args)
+            runs.append(statistics.median(timed(jitted, *args) for _ in range(20)))
+        print(f"{name:18s} compile: quick {statistics.median(compiles['quick']):.2f} s, defaults "
+              f"{statistics.median(compiles['defaults']):.2f} s, defaults / quick {statistics.median(ratios):.2f}; "
+              f"one call: quick {runs[0] * 1e3:.2f} ms, defaults {runs[1] * 1e3:.2f} ms")
+
+
+if __name__ == "__main__":
+    main()
