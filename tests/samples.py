@@ -1,10 +1,25 @@
-"""Case dicts shared by the tests: one written in US units and its SI twin written by hand from the exact
-unit definitions, a CLI runner, and a reader of results files."""
+"""What several test modules share: the shipped cases, a case written in US units and its SI twin written
+by hand from the exact unit definitions, a CLI runner, a reader of results files, a batch of cases with bad
+rows placed at chunk boundaries, and a leaf-by-leaf comparison of batched results."""
 
+import copy
 import csv
+from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
+
+import ks_jax
+from ks_jax.cli import main
+
+CASES = Path(ks_jax.__file__).parent / "cases"  # the example cases shipped in the package
+SEED0 = CASES / "seed_000_saturn_pontiac.json"
+SEED1 = CASES / "seed_001_lucid_kia.toml"
+
+# results a sweep test reads back: a vector component, an angle, a flag, scalars of both vehicles
+SWEEP_OUTPUTS = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", "vehicles[0].delta_v[0]",
+                 "vehicles[1].pdof", "vehicles[0].speed_after", "contact.impulse[1]"]
 
 # A case written in US units; its SI twin below is written by hand from the exact unit definitions.
 US_CASE = {
@@ -43,8 +58,6 @@ def si_twin():
 
 def run_cli(capsys, *argv):
     """``ks-jax ARGV`` in this process: (exit status, stdout, stderr)."""
-    from ks_jax.cli import main
-
     code = main(list(argv))
     out = capsys.readouterr()
     return code, out.out, out.err
@@ -80,3 +93,24 @@ def assert_no_flag_on_invalid_rows(table, result):
     assert all(f is None for f in flags[invalid])
     assert [bool(f) for f in flags[~invalid]] == np.ravel(result["contact.sliding"])[~invalid].tolist()
     assert all(isinstance(f, (bool, np.bool_)) for f in flags[~invalid])
+
+
+def with_bad_rows(cases):
+    """``cases`` (at least 101 of them) with an invalid row ending the first 64-row chunk and a row with
+    restitution > 1 where an end-aligned last chunk computes rows again."""
+    bad = copy.deepcopy(cases[63])
+    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
+    wild = copy.deepcopy(cases[100])
+    wild["contact"]["restitution"] = 1.5
+    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
+
+
+def assert_same_leaves(batched, reference):
+    """Two result trees leaf by leaf: floats to rounding, codes and flags exactly."""
+    for a, b in zip(jax.tree_util.tree_leaves(batched), jax.tree_util.tree_leaves(reference)):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(a, b)

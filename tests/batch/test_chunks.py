@@ -14,22 +14,9 @@ import pytest
 
 import ks_jax
 from ks_jax.model import types as t
+from samples import assert_same_leaves, with_bad_rows
 
 CHUNKS = importlib.import_module("ks_jax.batch.chunks")
-
-
-def _leaves(result):
-    return jax.tree_util.tree_leaves(result)
-
-
-def _assert_same(batched, reference):
-    for a, b in zip(_leaves(batched), _leaves(reference)):
-        a, b = np.asarray(a), np.asarray(b)
-        assert a.shape == b.shape
-        if a.dtype.kind == "f":
-            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
-        else:
-            np.testing.assert_array_equal(a, b)
 
 
 @pytest.fixture
@@ -40,23 +27,15 @@ def small_chunks(monkeypatch):
     return 64
 
 
-def _with_bad_rows(cases):
-    bad = copy.deepcopy(cases[63])  # the last row of the first chunk
-    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
-    wild = copy.deepcopy(cases[100])  # a row the end-aligned last chunk computes again (restitution > 1)
-    wild["contact"]["restitution"] = 1.5
-    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
-
-
 def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
-    cases = _with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
+    cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
     fn = jax.jit(jax.vmap(ks_jax.exchange))
     assert "scan" in str(jax.make_jaxpr(fn)(*args))  # the loop over chunks, not the whole-batch program
     batched = fn(*args)
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
     stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
-    _assert_same(batched, stacked)
+    assert_same_leaves(batched, stacked)
     status = np.asarray(batched.contact.status)
     assert status[63] == t.INVALID_INERTIA_1 and status[100] == t.INVALID_RESTITUTION
     good = np.ones(len(cases), bool)
@@ -76,7 +55,7 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, ran
     fn = jax.jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
     batched = fn(s1, s2, c)
     for rows in (slice(0, 64), slice(66, 130)):  # one chunk: the whole-batch program
-        _assert_same(jax.tree_util.tree_map(lambda x: x[rows], batched),
+        assert_same_leaves(jax.tree_util.tree_map(lambda x: x[rows], batched),
                      fn(*jax.tree_util.tree_map(lambda x: x[rows], (s1, s2, c))))
 
 
@@ -84,7 +63,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     """Reverse and forward mode through a batch whose values run in chunks, with an unbatched input (one
     vehicle 2 in every row: its gradient is the sum over the rows) and rows with invalid inputs (zero
     gradient, nothing NaN): the per-row gradients, and central differences along vehicle 1's speed."""
-    cases = _with_bad_rows(random_cases["full"][:150])
+    cases = with_bad_rows(random_cases["full"][:150])
     v1, s1, v2, s2, c = kit.inputs(cases)
     shared = jax.tree_util.tree_map(lambda x: x[0], v2)
 
@@ -145,7 +124,7 @@ def test_a_batch_of_one_row_is_the_row(kit, random_cases):
         v1, s1, v2, s2, c = kit.inputs([case])
         shared = jax.tree_util.tree_map(lambda x: x[0], v2)
         row = jax.tree_util.tree_map(lambda x: x[0], (v1, s1, v2, s2, c))
-        _assert_same(batch(v1, s1, v2, s2, c), jax.tree_util.tree_map(lambda x: np.asarray(x)[None],
+        assert_same_leaves(batch(v1, s1, v2, s2, c), jax.tree_util.tree_map(lambda x: np.asarray(x)[None],
                                                                       kit.exchange(*row)))
         grads = grad_batch(shared, s1, c, v1, s2)
         reference = grad_row(shared, row[1], row[4], row[0], row[3])
@@ -187,6 +166,6 @@ def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
     cases = random_cases["full"][:100]
     args = kit.inputs(cases, np.float32)
     for result in (jax.jit(jax.vmap(ks_jax.exchange))(*args), ks_jax.exchange_batch(*args, chunk=64)):
-        floats = [x for x in _leaves(result) if np.asarray(x).dtype.kind == "f"]
+        floats = [x for x in jax.tree_util.tree_leaves(result) if np.asarray(x).dtype.kind == "f"]
         assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
         kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.rtol_float32, cases)

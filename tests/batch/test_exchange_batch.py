@@ -11,20 +11,7 @@ import pytest
 
 import ks_jax
 from ks_jax.model import types as t
-
-
-def _leaves(result):
-    return jax.tree_util.tree_leaves(result)
-
-
-def _assert_same(batched, reference):
-    for a, b in zip(_leaves(batched), _leaves(reference)):
-        a, b = np.asarray(a), np.asarray(b)
-        assert a.shape == b.shape
-        if a.dtype.kind == "f":
-            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
-        else:
-            np.testing.assert_array_equal(a, b)
+from samples import assert_same_leaves
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
@@ -41,10 +28,10 @@ def test_exchange_batch_equals_vmap(kit, random_cases, kind):
     # 150 rows in chunks of 64: 64, 64, then a last chunk aligned to the end (rows 86..149)
     for chunk in (64, 150, 1000):
         batched = ks_jax.exchange_batch(*args, chunk=chunk)
-        _assert_same(batched, reference)
-    assert all(isinstance(x, np.ndarray) for x in _leaves(batched))  # NumPy results, like sweep's
+        assert_same_leaves(batched, reference)
+    assert all(isinstance(x, np.ndarray) for x in jax.tree_util.tree_leaves(batched))  # NumPy results, like sweep's
     one = ks_jax.exchange_batch(*jax.tree_util.tree_map(lambda x: x[3:4], args))  # a batch of one row
-    _assert_same(one, jax.tree_util.tree_map(lambda x: x[3:4], reference))
+    assert_same_leaves(one, jax.tree_util.tree_map(lambda x: x[3:4], reference))
     status = np.asarray(batched.contact.status)
     assert status[7] == t.INVALID_MASS_2 and status[40] == t.INVALID_NONFINITE
     assert np.all(np.isnan(np.asarray(batched.vehicles[0].delta_v)[[7, 40]]))
@@ -60,7 +47,7 @@ def test_exchange_batch_equals_vmap(kit, random_cases, kind):
 def test_exchange_batch_smoothing_matches_vmap(kit, random_cases):
     args = kit.inputs(random_cases["principal"][:40])
     reference = kit.batch_exchange(args, 0.05)
-    _assert_same(ks_jax.exchange_batch(*args, smoothing=0.05, chunk=16), reference)
+    assert_same_leaves(ks_jax.exchange_batch(*args, smoothing=0.05, chunk=16), reference)
 
 
 def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_cases):
@@ -83,15 +70,15 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
     a, b = (kit.inputs(random_cases["principal"][k:k + 40]) for k in (0, 40))
     fresh = ks_jax.exchange_batch(*a, chunk=16)
     out = ks_jax.exchange_batch(*b, chunk=16)
-    before = [np.copy(x) for x in _leaves(out)]
+    before = [np.copy(x) for x in jax.tree_util.tree_leaves(out)]
     got = ks_jax.exchange_batch(*a, chunk=16, out=out)
-    assert all(x is y for x, y in zip(_leaves(got), _leaves(out)))
-    _assert_same(got, fresh)
-    assert any(not np.array_equal(x, y) for x, y in zip(before, _leaves(got)) if x.dtype.kind == "f")
+    assert all(x is y for x, y in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(out)))
+    assert_same_leaves(got, fresh)
+    assert any(not np.array_equal(x, y) for x, y in zip(before, jax.tree_util.tree_leaves(got)) if x.dtype.kind == "f")
     wrong = out._replace(vehicles=(out.vehicles[0]._replace(pdof=np.zeros(39)), out.vehicles[1]))
     with pytest.raises(ValueError, match=r"out\.vehicles\[0\]\.pdof = ndarray float64\[39\].*float64\[40\]"):
         ks_jax.exchange_batch(*a, out=wrong)
-    frozen = [np.copy(x) for x in _leaves(out)]
+    frozen = [np.copy(x) for x in jax.tree_util.tree_leaves(out)]
     frozen[0].flags.writeable = False
     with pytest.raises(ValueError, match="writeable"):
         ks_jax.exchange_batch(*a, out=jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(out), frozen))
@@ -108,7 +95,7 @@ def test_exchange_batch_of_no_rows(kit, random_cases):
     none = jax.tree_util.tree_map(lambda x: np.asarray(x)[:0], one)
     got, row = ks_jax.exchange_batch(*none), ks_jax.exchange_batch(*one)
     assert jax.tree_util.tree_structure(got) == jax.tree_util.tree_structure(row)
-    for a, b in zip(_leaves(got), _leaves(row)):
+    for a, b in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(row)):
         assert isinstance(a, np.ndarray) and a.shape == (0,) + b.shape[1:] and a.dtype == b.dtype
     assert ks_jax.exchange_batch(*none, out=got) is got
     wrong = got._replace(contact=got.contact._replace(impulse=np.zeros((1, 3))))

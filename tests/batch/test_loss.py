@@ -3,7 +3,6 @@ value, gradient, forward mode and second derivatives are those of the plain sum,
 
 from __future__ import annotations
 
-import copy
 
 import jax
 import jax.numpy as jnp
@@ -11,14 +10,7 @@ import numpy as np
 import pytest
 
 import ks_jax
-
-
-def _with_bad_rows(cases):
-    bad = copy.deepcopy(cases[63])  # the last row of the first chunk
-    bad["vehicles"][0]["inertia"] = -np.abs(np.asarray(bad["vehicles"][0]["inertia"]))
-    wild = copy.deepcopy(cases[100])  # a row the end-aligned last chunk computes again (restitution > 1)
-    wild["contact"]["restitution"] = 1.5
-    return cases[:63] + [bad] + cases[64:100] + [wild] + cases[101:]
+from samples import with_bad_rows
 
 
 def _evidence_row_loss(v1, s1, v2, s2, c, target):
@@ -33,7 +25,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     every row, rows with invalid inputs: the value is the plain sum, the gradients are the per-row
     gradients (summed over the rows for the shared inputs), zero and finite in the bad rows, and a
     central difference agrees."""
-    cases = _with_bad_rows(random_cases["full"][:150])
+    cases = with_bad_rows(random_cases["full"][:150])
     v1, s1, v2, s2, c = kit.inputs(cases)
     shared = jax.tree_util.tree_map(lambda x: x[0], v2)
     axes = (0, 0, None, 0, 0, None)

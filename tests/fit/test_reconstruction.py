@@ -23,14 +23,13 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import fit  # noqa: E402
-import ks_jax  # noqa: E402
 from fit.problem import to_x, to_z, wrap  # noqa: E402
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
+from samples import CASES  # noqa: E402
 
-CASES = Path(ks_jax.__file__).parent / "cases"
 SEED = CASES / "seed_001_lucid_kia.toml"
 FIT_SEED = CASES / "fit_seed_001.json"
 RECOVER = 1e-5

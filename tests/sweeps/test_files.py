@@ -5,7 +5,6 @@ never left behind."""
 from __future__ import annotations
 
 import csv
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,23 +15,7 @@ from ks_jax.case import CaseError
 from ks_jax.cli import main
 from ks_jax.cli.sweep import parse_over
 from ks_jax.sweeps import ResultWriter, sweep, write_results
-from samples import assert_no_flag_on_invalid_rows, read_table
-
-
-CASES = Path(ks_jax.__file__).parent / "cases"
-
-
-SEED0 = CASES / "seed_000_saturn_pontiac.json"
-
-
-SEED1 = CASES / "seed_001_lucid_kia.toml"
-
-
-RTOL = 1e-12  # sweep vs single solve: the same kernel, batched; only rounding may differ
-
-
-OUTPUTS = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", "vehicles[0].delta_v[0]",
-           "vehicles[1].pdof", "vehicles[0].speed_after", "contact.impulse[1]"]
+from samples import SEED0, SEED1, assert_no_flag_on_invalid_rows, read_table
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -19,22 +18,10 @@ import ks_jax
 from ks_jax import units as U
 from ks_jax.case import CaseError, as_arrays, get_output, set_input
 from ks_jax.sweeps import DEFAULT_OUTPUTS, sweep
-
-
-CASES = Path(ks_jax.__file__).parent / "cases"
-
-
-SEED0 = CASES / "seed_000_saturn_pontiac.json"
-
-
-SEED1 = CASES / "seed_001_lucid_kia.toml"
+from samples import CASES, SEED0, SEED1, SWEEP_OUTPUTS as OUTPUTS
 
 
 RTOL = 1e-12  # sweep vs single solve: the same kernel, batched; only rounding may differ
-
-
-OUTPUTS = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", "vehicles[0].delta_v[0]",
-           "vehicles[1].pdof", "vehicles[0].speed_after", "contact.impulse[1]"]
 
 
 @pytest.fixture(scope="module")
