@@ -45,7 +45,6 @@ from importlib import resources
 
 import jax
 jax.config.update("jax_enable_x64", True)
-import numpy as np
 import ks_jax
 from ks_jax import units as U
 from ks_jax.report import text_report
@@ -168,7 +167,6 @@ compiled, vectorised call and hands back only the results asked for. This notebo
 Sweep values are SI (m/s, m, rad); the plots convert to mph and ft.
 """),
         ("code", """
-import copy
 import time
 from importlib import resources
 
