@@ -1,6 +1,7 @@
 """What several test modules share: the shipped cases, a case written in US units and its SI twin written
 by hand from the exact unit definitions, a CLI runner, a reader of results files, a batch of cases with bad
-rows placed at chunk boundaries, and a leaf-by-leaf comparison of batched results."""
+rows placed at chunk boundaries, a leaf-by-leaf comparison of batched results, and the compiler of the
+programs a test compares against."""
 
 import copy
 import csv
@@ -12,6 +13,7 @@ import pytest
 
 import ks_jax
 from ks_jax.cli import main
+from ks_jax.compilation import compiler_options
 
 CASES = Path(ks_jax.__file__).parent / "cases"  # the example cases shipped in the package
 SEED0 = CASES / "seed_000_saturn_pontiac.json"
@@ -114,3 +116,10 @@ def assert_same_leaves(batched, reference):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
         else:
             np.testing.assert_array_equal(a, b)
+
+
+def reference_jit(fun):
+    """``jax.jit`` for a program that is a test's independent route to a result (a per-row gradient, a
+    plain sum, a central difference), not the program under test: compiled with the quick settings that
+    ``ks_jax.solve`` uses on a CPU (the same IEEE arithmetic, half the compile time)."""
+    return jax.jit(fun, compiler_options=compiler_options(True))
