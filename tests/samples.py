@@ -118,8 +118,8 @@ def assert_same_leaves(batched, reference):
             np.testing.assert_array_equal(a, b)
 
 
-def reference_jit(fun):
+def reference_jit(fun, **jit_kwargs):
     """``jax.jit`` for a program that is a test's independent route to a result (a per-row gradient, a
     plain sum, a central difference), not the program under test: compiled with the quick settings that
     ``ks_jax.solve`` uses on a CPU (the same IEEE arithmetic, half the compile time)."""
-    return jax.jit(fun, compiler_options=compiler_options(True))
+    return jax.jit(fun, compiler_options=compiler_options(True), **jit_kwargs)
