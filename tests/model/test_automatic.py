@@ -2,8 +2,9 @@
 
 Every case is worked by hand (or by a second formulation: ``ks_jax.exchange`` at the hand-made
 contact). One compiled program serves every test here: ``automatic_exchange`` and its JVP,
-vmapped over a batch padded to BATCH rows, with the user-override flags as per-row arrays.
-Single calls are checked against it without jit (``jax.disable_jit``).
+vmapped over a batch padded to BATCH rows, with the user-override flags as per-row arrays, compiled as
+``ks_jax.solve`` and the fit compile a case's automatic contact and its forward-mode derivatives
+(``ks_jax.compilation.quick_jit``). Single calls are checked against it without jit (``jax.disable_jit``).
 """
 
 import io
@@ -25,6 +26,7 @@ from ks_jax.model import automatic as G  # noqa: E402
 from ks_jax.model import first_contact  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import as_arrays, load_case, set_input, to_pytrees  # noqa: E402
+from ks_jax.compilation import quick_jit  # noqa: E402
 from ks_jax.model.types import NO_CONTACT, OK  # noqa: E402
 from samples import reference_jit  # noqa: E402
 
@@ -53,9 +55,9 @@ def _contact_jvp(args, tangents):
     return jax.jvp(f, args, tangents)
 
 
-AUTO = jax.jit(jax.vmap(_auto))
-AUTO_JVP = jax.jit(jax.vmap(_auto_jvp))
-CONTACT_JVP = jax.jit(jax.vmap(_contact_jvp))
+AUTO = quick_jit(jax.vmap(_auto))
+AUTO_JVP = quick_jit(jax.vmap(_auto_jvp))
+CONTACT_JVP = quick_jit(jax.vmap(_contact_jvp))
 EXCHANGE = reference_jit(ks_jax.exchange)  # the second formulation's exchange
 
 
@@ -799,7 +801,7 @@ def test_short_penetration_in_float32_is_the_triangle():
     vehicles' size, 2e-3 m^2 in float32, and these were put at the middle of the touching features: 2.5 cm
     off at 1 ms, |J| 1% off."""
     f32 = lambda tree: jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)  # noqa: E731
-    auto = jax.jit(lambda args: G.automatic_exchange(*args[:5], args[5], auto_point=True, auto_normal=True))
+    auto = quick_jit(lambda args: G.automatic_exchange(*args[:5], args[5], auto_point=True, auto_normal=True))
     for dt in (3e-4, 1e-3):
         v1, s1, v2, s2, c, pitch = CASES["oblique"]
         r = auto(f32((v1, s1, v2, s2, c._replace(penetration_time=dt), pitch)))
