@@ -14,9 +14,10 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from .stages import on_cpu, run
+from ..backend import CPU_CHUNK_ROWS, on_cpu
+from .stages import run
 
-CHUNK_ROWS = 1 << 14  # rows per chunk on a CPU
+CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
 
 
 def as_chunks(x, count, size):

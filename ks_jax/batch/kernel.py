@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..backend import chunk_rows, on_cpu
 from ..compilation import compiler_options
 from ..model import collision
 from ..model.checks import check_smoothing
@@ -44,53 +45,84 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
 
 
 @functools.lru_cache(maxsize=32)
-def _chunk_program(size, smoothing, quick):
-    """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart.
+def _chunk_program(size, smoothing, quick, cpu):
+    """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart on
+    the CPU's path (``cpu``, part of the key: a program traced for one path is not run on the other).
     ``quick``: compiled quickly (a batch of one chunk runs in milliseconds; compiling is most of its time)."""
     stages = exchange_stages(smoothing)
     return jax.jit(lambda args, start: run(stages, cut(args, start, size)), compiler_options=compiler_options(quick))
 
 
+@functools.lru_cache(maxsize=32)
+def _rows_program(smoothing, cpu):
+    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk)."""
+    stages = exchange_stages(smoothing)
+    return jax.jit(lambda args: run(stages, args))
+
+
+def row_bytes(tree) -> int:
+    """Bytes of one row of a batch-first pytree of arrays."""
+    return sum(int(np.prod(np.shape(x)[1:], dtype=np.int64)) * np.dtype(x.dtype).itemsize
+               for x in jax.tree_util.tree_leaves(tree))
+
+
 def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
-                   smoothing: float = 0.0, chunk: int = CHUNK_ROWS, out: ExchangeResult | None = None) -> ExchangeResult:
+                   smoothing: float = 0.0, chunk: int | None = None, out: ExchangeResult | None = None,
+                   to_host: bool = True) -> ExchangeResult:
     """The values of ``jax.vmap(exchange)`` over a leading batch axis of every leaf, as NumPy arrays.
 
     Every leaf has the batch size N first (a (3,) input becomes (N, 3)). Returns the ExchangeResult with
     a leading axis N, as NumPy arrays; rows with invalid inputs get their status code and NaN, as in
     ``exchange``; a batch of no rows, results of no rows. The rows are computed in chunks of ``chunk``
-    rows (one program per chunk size, the last chunk aligned to the end of the batch), each chunk
-    copied into the results while the next is computed, so that no batch-sized array is ever held by
-    XLA. A batch of at most ``CHUNK_ROWS`` rows is compiled quickly (``compilation.quick_jit``), a larger
-    one with XLA's defaults. For values only: to differentiate, vmap ``exchange``.
+    rows (default ``backend.chunk_rows``: 16384 on a CPU, from the free memory on an accelerator; one
+    program per chunk size, the last chunk aligned to the end of the batch), each chunk copied into the
+    results while the next is computed, so that no batch-sized array of intermediate values is ever held
+    by XLA. On an accelerator, rows given as NumPy arrays go to the device chunk by chunk, and each
+    chunk's results start their copy to the host as soon as they are computed. A batch of at most 16384
+    rows is compiled quickly on a CPU (``compilation.quick_jit``), a larger one with XLA's defaults. For
+    values only: to differentiate, vmap ``exchange``.
 
     out: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an earlier
     result of a batch of the same size), written in place and returned: a loop over batches then touches
-    no new memory.
+    no new memory. to_host: False, the results stay on the device, as JAX arrays (for work that goes on
+    there: a batch from device arrays then never crosses to the host).
     """
     check_smoothing(float(smoothing))
-    if int(chunk) < 1:
-        raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     args, target = (vehicle1, state1, vehicle2, state2, contact), out
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
         raise TypeError("exchange_batch computes values into NumPy arrays and cannot run under jax.jit, "
                         "jax.grad or jax.vmap; there, use jax.vmap(ks_jax.exchange)")
+    if target is not None and not to_host:
+        raise ValueError("exchange_batch: out= is written on the host; it cannot go with to_host=False")
     sizes = {int(np.shape(x)[0]) if np.ndim(x) else None for x in jax.tree_util.tree_leaves(args)}
     if len(sizes) != 1 or None in sizes:
         raise ValueError("exchange_batch: every input needs the same leading batch axis; got sizes "
                          f"{sorted(map(str, sizes))}")
     n = sizes.pop()
+    chunk = chunk_rows(2 * row_bytes(args)) if chunk is None else chunk
+    if int(chunk) < 1:
+        raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     given = [x for x in jax.tree_util.tree_leaves(args) if isinstance(x, np.ndarray)]
-    args = jax.tree_util.tree_map(jnp.asarray, args)
+    cpu = on_cpu()
+    on_host = not cpu and len(given) == len(jax.tree_util.tree_leaves(args))  # sent to the device by chunks
+    args = args if on_host else jax.tree_util.tree_map(jnp.asarray, args)
     if n == 0:  # nothing to solve (a filtered batch may be empty): empty results, shaped and typed
-        empty = jax.tree_util.tree_map(np.array, jax.vmap(functools.partial(collision.exchange,
-                                                                            smoothing=float(smoothing)))(*args))
+        empty = jax.vmap(functools.partial(collision.exchange, smoothing=float(smoothing)))(
+            *jax.tree_util.tree_map(jnp.asarray, args))
+        if not to_host:
+            return empty
+        empty = jax.tree_util.tree_map(np.array, empty)
         if target is None:
             return empty
         _checked_out(target, empty, 0, given)
         return target
     size = min(int(chunk), n)
-    program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS)
-    leaves, treedef, pending = None, None, None
+    if on_host:
+        rows = _rows_program(float(smoothing), cpu)
+        program = lambda a, start: rows(jax.tree_util.tree_map(lambda x: x[start:start + size], a))  # noqa: E731
+    else:
+        program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, cpu)
+    leaves, treedef, pending, kept = None, None, None, []
 
     def store(lo, start, result):  # rows lo.. of the batch from a chunk that starts at ``start``
         for o, x in zip(leaves, jax.tree_util.tree_leaves(result)):
@@ -99,6 +131,12 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     for lo in range(0, n, size):
         start = min(lo, n - size)  # the last chunk ends at n (rows it repeats are not copied again)
         result = program(args, start)
+        if not to_host:
+            kept.append(result if lo == start else jax.tree_util.tree_map(lambda x: x[lo - start:], result))
+            continue
+        if not cpu:  # start the copy to the host now: it runs while the next chunk is computed
+            for x in jax.tree_util.tree_leaves(result):
+                x.copy_to_host_async()
         if leaves is None:
             chunk_leaves, treedef = jax.tree_util.tree_flatten(result)
             if target is None:
@@ -108,6 +146,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         if pending is not None:  # copy the chunk before while this one is computed
             store(*pending)
         pending = (lo, start, result)
+    if not to_host:
+        return kept[0] if len(kept) == 1 else jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *kept)
     store(*pending)
     return jax.tree_util.tree_unflatten(treedef, leaves)
 

@@ -8,8 +8,9 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
+from ..backend import on_cpu
 from .chunks import CHUNK_ROWS, as_chunks
-from .stages import fenced_by, on_cpu
+from .stages import fenced_by
 
 
 def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):

@@ -14,11 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-
-def on_cpu() -> bool:
-    """Whether the speed layer's CPU path applies: JAX's default backend is a CPU. Both paths compute
-    the same values; this only chooses how XLA is asked to compute them."""
-    return jax.default_backend() == "cpu"
+from ..backend import on_cpu
 
 
 def run(stages, args, in_axes=0, fenced=True):

@@ -98,8 +98,8 @@ def input_status(vehicle1, state1, vehicle2, state2, contact, smoothing=0.0):
         code = jnp.where(ok, code, jnp.int32(bad))
     # stored once per row: every later step reads the code (``benign`` keys every input on it), and XLA's
     # fusion would otherwise copy the checks above into each of hundreds of loops, in a program many
-    # times the size to compile
-    return la.materialize(code)[0]
+    # times the size to compile (on a GPU too: each kernel would read every input again)
+    return la.materialize(code, everywhere=True)[0]
 
 
 def check_smoothing(smoothing):

@@ -22,6 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ..backend import on_cpu
+
 
 if hasattr(lax, "unstack"):
     def _unstack(x):
@@ -121,7 +123,7 @@ def adjugate3(m):
     return from_rows(adjugate_c(m))
 
 
-def materialize(*xs):
+def materialize(*xs, everywhere=False):
     """``xs`` (arrays of one shape and float dtype) unchanged, computed in a loop of their own
     and stored, batched under vmap on CPU.
 
@@ -132,8 +134,13 @@ def materialize(*xs):
     max-reduce over copies is rewritten into an elementwise op; a bitwise-or reduction of the
     bits with zeros is kept as a reduction, which is not copied into elementwise consumers.
     The values are exact (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
-    own derivative). On a GPU it costs one small kernel."""
+    own derivative). Off the CPU's path (``backend.on_cpu``) ``xs`` are returned as they are: a GPU's
+    fusions do not copy producers that way, and there the reduction was a kernel of its own that stored
+    and read back every value (over a third of the exchange's time). ``everywhere``: stored on every
+    device (a value that every later kernel reads, which a GPU's fusion would otherwise recompute in each)."""
     xs = jnp.broadcast_arrays(*xs)
+    if not (everywhere or on_cpu()):
+        return tuple(xs)
     dtype = xs[0].dtype
     int_type = {8: jnp.int64, 4: jnp.int32, 2: jnp.int16}[dtype.itemsize]
     bits = [lax.bitcast_convert_type(x, int_type) for x in xs]

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import ks_jax
+from ks_jax import backend
 from ks_jax.model import types as t
-from samples import assert_same_leaves
+from samples import assert_same_leaves, with_bad_rows
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
@@ -101,3 +102,45 @@ def test_exchange_batch_of_no_rows(kit, random_cases):
     wrong = got._replace(contact=got.contact._replace(impulse=np.zeros((1, 3))))
     with pytest.raises(ValueError, match=r"out\.contact\.impulse = ndarray float64\[1, 3\]"):
         ks_jax.exchange_batch(*none, out=wrong)
+
+
+@pytest.mark.parametrize("where", ["numpy", "device"])
+def test_exchange_batch_on_the_accelerator_path(kit, random_cases, where):
+    """The accelerator's path (``backend.path``, forced on whatever device runs the tests): rows given as
+    NumPy arrays go to the device chunk by chunk, results are copied to the host while the next chunk runs,
+    or stay on the device (``to_host=False``): the values are ``jax.vmap(exchange)``'s, row for row, with
+    bad rows among them; an ``out`` cannot go with ``to_host=False``."""
+    cases = with_bad_rows(random_cases["full"][:150])
+    args = kit.inputs(cases)
+    reference = kit.batch_exchange(args)
+    args = jax.tree_util.tree_map(np.array if where == "numpy" else jax.numpy.asarray, args)
+    with backend.path("accelerator"):
+        assert not backend.on_cpu()
+        for chunk in (64, 150, None):  # 64, 64, then a last chunk aligned to the end; one chunk; the policy's
+            got = ks_jax.exchange_batch(*args, chunk=chunk)
+            assert all(isinstance(x, np.ndarray) for x in jax.tree_util.tree_leaves(got))
+            assert_same_leaves(got, reference)
+            kept = ks_jax.exchange_batch(*args, chunk=chunk, to_host=False)
+            assert all(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(kept))
+            assert_same_leaves(kept, reference)
+        with pytest.raises(ValueError, match="out= .* to_host=False"):
+            ks_jax.exchange_batch(*args, out=got, to_host=False)
+    assert backend.on_cpu() == (jax.default_backend() == "cpu")
+
+
+def test_chunk_rows_from_free_memory(monkeypatch):
+    """The accelerator's chunk: the largest power of two whose working set (``WORKING_SET`` x the row's
+    bytes) is at most ``MEMORY_SHARE`` of the free memory, within [MIN_ROWS, MAX_ROWS]; the CPU's is fixed."""
+    free = {"bytes": 80 << 30}
+    monkeypatch.setattr(backend, "free_bytes", lambda device=None: free["bytes"])
+    with backend.path("cpu"):
+        assert backend.chunk_rows(1000) == backend.CPU_CHUNK_ROWS
+    with backend.path("accelerator"):
+        # 0.25 * 80 GiB / (4 * 1000 B) = 5.4e6 rows -> 2^22
+        assert backend.chunk_rows(1000) == 1 << 22
+        free["bytes"] = 1 << 30  # 0.25 GiB / 4 kB = 67108 -> 2^16
+        assert backend.chunk_rows(1000) == 1 << 16
+        free["bytes"] = 1 << 20  # far too little: the smallest chunk still
+        assert backend.chunk_rows(1000) == backend.MIN_ROWS
+        free["bytes"] = 1 << 50
+        assert backend.chunk_rows(8) == backend.MAX_ROWS

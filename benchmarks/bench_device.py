@@ -1,0 +1,235 @@
+"""The default device's figures, one script: kernel, streaming, exchange_batch, a sweep, gradient / forward, fits.
+Not a test.
+
+    .venv/bin/python benchmarks/bench_device.py [--rows N] [--sweep N] [--fits N] [--profile DIR]
+
+Prints the device, the date and the command, then, each the median of --repeats calls after a first
+(compiling) call:
+
+- the kernel: ``jax.jit(jax.vmap(ks_jax.exchange))`` over --rows random rows around the seed case (inputs
+  and results on the device), float64 and float32, batch-first and batch-last (``in_axes=-1``);
+- streaming: a jitted x * a + b over arrays as large as the kernel's inputs and results (each read and
+  written once): the device's rate for the same bytes; the kernel's bytes (inputs read, results written
+  once) over its time, as a fraction of that rate;
+- ``ks_jax.exchange_batch`` over the same rows: from NumPy arrays into NumPy arrays, from device arrays
+  into NumPy arrays, and from device arrays into device arrays (``to_host=False``);
+- ``ks_jax.sweep`` of --sweep points (a square grid of two inputs) with ``keep=False``, and with the
+  default outputs kept;
+- gradient / forward of a batched loss (both delta-V magnitudes, rows not OK masked) built with
+  ``ks_jax.sum_over_rows``;
+- ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases).
+
+Defaults: 2^22 rows, 10^8 sweep points and 1000 fits on an accelerator; 2^16, 10^6 and 100 on a CPU.
+--profile DIR: also writes the compiled programs of the kernel (float32 and float64) and, for the kernel,
+``exchange_batch`` and the fits, a table of the device's kernels by time (``jax.profiler``) to DIR.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import glob
+import inspect
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_fit  # noqa: E402
+from bench_kernel import delta_v, nbytes, random_batch, streaming_references  # noqa: E402
+
+import fit  # noqa: E402
+import ks_jax  # noqa: E402
+from ks_jax.model import collision  # noqa: E402
+
+CASE = Path(ks_jax.__file__).resolve().parent / "cases" / "seed_000_saturn_pontiac.json"
+
+
+def median_time(fn, repeats):
+    """Median wall time of ``fn()`` (which blocks) over ``repeats`` calls, after one call that compiles."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def blocking(fn, *args, **kw):
+    return lambda: jax.block_until_ready(fn(*args, **kw))
+
+
+def kernel_table(fn, what, out_dir, top=12):
+    """Run ``fn`` under ``jax.profiler`` and print the device's kernels by total time (name, launches, time):
+    where the device's time goes, and how much of the wall time it is busy."""
+    with tempfile.TemporaryDirectory() as d:
+        t = time.perf_counter()
+        with jax.profiler.trace(d):
+            fn()
+        wall = time.perf_counter() - t
+        files = glob.glob(f"{d}/**/*.xplane.pb", recursive=True)
+        if not files:
+            print(f"  {what}: no profile written")
+            return
+        data = jax.profiler.ProfileData.from_file(files[0])
+    kernels, busy = {}, 0.0
+    for plane in data.planes:
+        if not plane.name.startswith("/device:"):
+            continue
+        for line in plane.lines:
+            if "stream" not in line.name.lower():
+                continue
+            for e in line.events:
+                n, t_ns = kernels.get(e.name, (0, 0.0))
+                kernels[e.name] = (n + 1, t_ns + e.duration_ns)
+                busy += e.duration_ns
+    lines = [f"## {what}: wall {wall * 1e3:.1f} ms (profiled), device streams busy {busy / 1e6:.1f} ms, "
+             f"{sum(n for n, _ in kernels.values())} launches of {len(kernels)} kernels"]
+    for name, (n, t_ns) in sorted(kernels.items(), key=lambda kv: -kv[1][1])[:top]:
+        lines.append(f"  {t_ns / 1e6:9.3f} ms  {n:6d} x  {name[:110]}")
+    text = "\n".join(lines)
+    print(text, flush=True)
+    if out_dir:
+        with open(Path(out_dir) / "kernels.txt", "a") as f:
+            f.write(text + "\n\n")
+
+
+def as_dtype(tree, dtype):
+    return jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x, tree)
+
+
+def main(argv=None):
+    accel = jax.default_backend() != "cpu"
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rows", type=int, default=1 << 22 if accel else 1 << 16)
+    ap.add_argument("--sweep", type=int, default=10 ** 8 if accel else 10 ** 6, help="sweep points")
+    ap.add_argument("--fits", type=int, default=1000 if accel else 100, help="reconstructions (x 8 starts)")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--profile", metavar="DIR", help="write compiled programs and kernel tables to DIR")
+    ap.add_argument("--only", default="kernel,batch,sweep,grad,fit", help="sections to run, comma-separated")
+    args = ap.parse_args(argv)
+    only = set(args.only.split(","))
+    dev = jax.devices()[0]
+    stats = {}
+    try:
+        stats = dev.memory_stats() or {}
+    except Exception:  # noqa: BLE001 (a backend without memory statistics)
+        pass
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"device: {dev.device_kind} ({jax.default_backend()}, {jax.device_count()} device(s), "
+          f"{stats.get('bytes_limit', 0) / 2**30:.0f} GiB for XLA), host {platform.machine()} {os.cpu_count()} cores, "
+          f"jax {jax.__version__}")
+    print(f"command: python {' '.join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])}\ndate: {date}",
+          flush=True)
+    if args.profile:
+        Path(args.profile).mkdir(parents=True, exist_ok=True)
+    table = []
+    n = args.rows
+
+    def row(what, value, note=""):
+        table.append(f"| {what} | {value} | {note} |")
+        print(table[-1], flush=True)
+
+    nps, batch = random_batch(n)
+    kernel_rate = {}
+    if "kernel" in only or "batch" in only:
+        for dtype in (jnp.float64, jnp.float32):
+            name = np.dtype(dtype).name
+            inputs = as_dtype(batch, dtype)
+            fn = jax.jit(jax.vmap(ks_jax.exchange))
+            outputs = jax.block_until_ready(fn(*inputs))
+            stream, _, nb = streaming_references(inputs, outputs, dtype)
+            t_stream = median_time(stream, args.repeats)
+            t_kernel = median_time(blocking(fn, *inputs), args.repeats)
+            kernel_rate[name] = n / t_kernel
+            stream_rate = 2 * nb / t_stream
+            row(f"streaming, {name} ({nb / n:.0f} bytes per row, read and written)", f"{stream_rate / 1e9:.0f} GB/s")
+            row(f"jit(vmap(exchange)), {name}, batch-first", f"{n / t_kernel:.3g} /s",
+                f"{nb / t_kernel / 1e9:.0f} GB/s = {nb / t_kernel / stream_rate:.2f} of streaming")
+            last = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, -1), inputs)
+            fn_last = jax.jit(jax.vmap(collision.exchange, in_axes=-1, out_axes=-1))
+            t_last = median_time(blocking(fn_last, *last), args.repeats)
+            row(f"jit(vmap(exchange)), {name}, batch-last", f"{n / t_last:.3g} /s",
+                f"{nb / t_last / 1e9:.0f} GB/s = {nb / t_last / stream_rate:.2f} of streaming")
+            if args.profile:
+                Path(args.profile, f"kernel_{name}.hlo.txt").write_text(fn.lower(*inputs).compile().as_text())
+                kernel_table(blocking(fn, *inputs), f"kernel {name}, {n} rows", args.profile)
+            del inputs, outputs, last
+    if "batch" in only:
+        host = jax.tree_util.tree_map(np.asarray, batch)
+        base = kernel_rate.get("float64")
+        t = median_time(lambda: ks_jax.exchange_batch(*host), args.repeats)
+        row("exchange_batch, NumPy in, NumPy out", f"{n / t:.3g} /s", f"{n / t / base:.2f} of the kernel" if base else "")
+        t = median_time(lambda: ks_jax.exchange_batch(*batch), args.repeats)
+        row("exchange_batch, device in, NumPy out", f"{n / t:.3g} /s", f"{n / t / base:.2f} of the kernel" if base else "")
+        if "to_host" in inspect.signature(ks_jax.exchange_batch).parameters:
+            t = median_time(blocking(ks_jax.exchange_batch, *batch, to_host=False), args.repeats)
+            row("exchange_batch, device in, device out", f"{n / t:.3g} /s",
+                f"{n / t / base:.2f} of the kernel" if base else "")
+        if args.profile:
+            kernel_table(lambda: ks_jax.exchange_batch(*host), f"exchange_batch, {n} rows", args.profile)
+    del batch
+    if "sweep" in only:
+        case = ks_jax.load_case(CASE)
+        side = int(round(args.sweep ** 0.5))
+        over = {"vehicles[1].speed": np.linspace(5.0, 35.0, side), "contact.restitution": np.linspace(0.0, 0.5, side)}
+        ks_jax.sweep(case, over, keep=False, progress=False)
+        t = time.perf_counter()
+        r = ks_jax.sweep(case, over, keep=False, progress=False)
+        wall = time.perf_counter() - t
+        base = kernel_rate.get("float64")
+        row(f"sweep, {side}^2 points, keep=False", f"{side * side / wall:.3g} /s",
+            f"{wall:.2f} s" + (f"; {side * side / wall / base:.2f} of the kernel" if base else ""))
+        small = {k: v[: max(2, side // 10)] for k, v in over.items()}
+        ks_jax.sweep(case, small, progress=False)
+        t = time.perf_counter()
+        ks_jax.sweep(case, small, progress=False)
+        wall = time.perf_counter() - t
+        m = len(small["vehicles[1].speed"]) ** 2
+        row(f"sweep, {m} points, default outputs kept", f"{m / wall:.3g} /s", f"{wall:.2f} s; statuses {r.status_counts}")
+    if "grad" in only:
+        m = min(n, 1 << 20)
+        _, rows = random_batch(m, seed=1)
+
+        def one(*a):
+            r = ks_jax.exchange(*a)
+            return jnp.where(r.contact.status == 0, delta_v(r), 0.0)
+
+        loss = ks_jax.sum_over_rows(one)
+        fwd = jax.jit(loss)
+        vg = jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2, 3, 4)))
+        t_f = median_time(blocking(fwd, *rows), args.repeats)
+        t_g = median_time(blocking(vg, *rows), args.repeats)
+        row(f"gradient / forward, sum_over_rows, {m} rows", f"{t_g / t_f:.2f}", f"forward {m / t_f:.3g} rows/s")
+    if "fit" in only:
+        cases, truths, evidence, unknowns, chi2 = bench_fit.sliding_cases(args.fits, 0)
+        t = time.perf_counter()
+        fit.reconstruct_batch(cases, unknowns, evidence, starts=8, smoothing=bench_fit.SMOOTHING)
+        first = time.perf_counter() - t
+        t = time.perf_counter()
+        results = fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
+        second = time.perf_counter() - t
+        s = bench_fit.score(results, truths, chi2)
+        row(f"reconstruct_batch, {args.fits} x 8 starts", f"{second:.3f} s",
+            f"first call {first:.1f} s; global {100 * s['global']:.1f}%, coverage {100 * s['coverage']:.1f}%")
+        if args.profile:
+            kernel_table(lambda: fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=2,
+                                                       smoothing=bench_fit.SMOOTHING), f"fits {args.fits} x 8",
+                         args.profile)
+    print(f"\n{dev.device_kind}, {date}\n| what | figure | note |\n|---|---|---|")
+    print("\n".join(table))
+
+
+if __name__ == "__main__":
+    main()
