@@ -14,17 +14,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..backend import chunk_rows, on_cpu
 from ..batch import CHUNK_ROWS
+from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
 from ..case import input_ties, set_input, undefined_kind
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiler_options
-from ..model.types import STATUS_TEXT, status_text
+from ..model.types import INVALID_NONFINITE, STATUS_TEXT, status_text
 from ..progress import Progress
 from ..solve import stages
-from .columns import invalid_rows
 from .result import SweepResult
 
 
@@ -41,7 +42,8 @@ DEFAULT_OUTPUTS = (
 )
 
 
-DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk
+DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk on a CPU (elsewhere: ``backend.chunk_rows``)
+STATUS_CODES = tuple(sorted(STATUS_TEXT))  # the statuses counted on the device, in this order
 # a sweep of at most this many points compiles quickly (``compilation.quick_jit``): its one short chunk runs in
 # milliseconds, and compiling is most of its time; a larger one keeps XLA's defaults, where running counts
 QUICK_POINTS = DEFAULT_CHUNK
@@ -91,23 +93,26 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 @lru_cache(maxsize=32)
 def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing, out_dtype, devices,
-             quick=False):
+             quick=False, cpu=True):
     """The jitted program of one chunk of ``n_rows`` points, sharded over ``devices`` along the rows.
 
-    Called as ``(start, axes, sizes, total, base)``: it makes each row's swept values from its flat index
-    (grid: the index unravelled into one position per axis; zip: the k-th sample of every path), solves the
-    rows through the case's pipeline (``solve.stages``, run by ``batch.stages.run``: each stage rebuilds
-    the rows' inputs from ``base`` and the values, which costs less than storing them), and returns only
-    the requested outputs (NaN where undefined) and the status. ``static_sizes``: the axes' sizes compiled
+    Called as ``(start, stop, axes, sizes, total, base)``: it makes each row's swept values from its flat
+    index (grid: the index unravelled into one position per axis; zip: the k-th sample of every path),
+    solves the rows through the case's pipeline (``solve.stages``, run by ``batch.stages.run``: each stage
+    rebuilds the rows' inputs from ``base`` and the values, which costs less than storing them), and returns
+    the requested outputs (NaN where undefined), the status, and, over the rows before ``stop``, the count
+    of each status (``STATUS_CODES``, then any other) and of undefined values per output in
+    ``undefined``: a sweep that keeps nothing then copies none of its rows to the host. ``static_sizes``: the axes' sizes compiled
     in (a sweep of several chunks: dividing by a constant is cheaper), or None: read from ``sizes`` (a whole
     sweep in one chunk: a sweep of another size in the same ``_bucket`` runs the same program). ``quick``:
-    compiled quickly (``QUICK_POINTS``)."""
+    compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced on the
+    CPU's path only)."""
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
     rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
     pipeline = stages(auto_point, auto_normal, smoothing)
 
-    def chunk(start, axes, sizes, total, base):
+    def chunk(start, stop, axes, sizes, total, base):
         vals = _chunk_values(start, axes, mode, sizes if static_sizes is None else static_sizes, n_rows, total)
         vals = tuple(jax.lax.with_sharding_constraint(v, rows) for v in vals)
 
@@ -117,9 +122,18 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
                 return _selected(out, outputs, out_dtype) if last else out
             return one
 
-        return run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
+        out = run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
+        counted = start + jnp.arange(n_rows, dtype=start.dtype) < stop
+        status = out["status"].astype(jnp.int32)
+        known = [jnp.sum(counted & (status == c), dtype=jnp.int32) for c in STATUS_CODES]
+        solved = counted & (status < INVALID_NONFINITE)
+        counts = {"status": jnp.stack(known + [jnp.sum(counted, dtype=jnp.int32) - sum(known)]),
+                  "undefined": jnp.stack([jnp.sum(solved & jnp.isnan(out[p]), dtype=jnp.int32) for p in undefined]
+                                         or [jnp.int32(0)])}
+        return out, counts
 
-    return jax.jit(chunk, in_shardings=(replicated,) * 5, out_shardings=rows,
+    undefined = tuple(p for p in outputs if undefined_kind(p))
+    return jax.jit(chunk, in_shardings=(replicated,) * 6, out_shardings=(rows, replicated),
                    compiler_options=compiler_options(quick))
 
 
@@ -255,7 +269,11 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     n_points = hi - lo
 
     devices = tuple(jax.devices() if devices is None else devices)
-    per_device = DEFAULT_CHUNK if chunk_size is None else _whole_number(chunk_size, "chunk_size")
+    if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.chunk_rows``)
+        one_row = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], as_arrays(case.inputs))
+        per_device = chunk_rows(2 * row_bytes(one_row), devices[0])
+    else:
+        per_device = _whole_number(chunk_size, "chunk_size")
     if per_device <= 0:
         raise CaseError(f"chunk_size = {chunk_size}: must be positive")
     n_rows = per_device * len(devices)
@@ -281,7 +299,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     static_sizes = None if one_chunk else sizes
     program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes,
                                                    case.auto_point, case.auto_normal, float(smoothing), out_dtype,
-                                                   devices, quick)
+                                                   devices, quick, on_cpu())
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
@@ -299,35 +317,39 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
             store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved
                                 else out_dtype)
         store["status"] = np.empty(n_points, dtype=np.int8)
-    counts = np.zeros(256, dtype=np.int64)
+    counts = np.zeros(len(STATUS_CODES) + 1, dtype=np.int64)
     undefined = {p: 0 for p in outputs if undefined_kind(p)}
+    rows_wanted = keep or on_chunk is not None  # else only the counts leave the device
+    stop = jnp.asarray(hi, dtype=index_dtype)
 
     show = n_points > n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
     bar = Progress(n_points, "ks-jax sweep", "pt", show, PROGRESS_DELAY if progress is None else 0.0)
     t0 = time.perf_counter()
 
     def launch(start):
-        s = jnp.asarray(start, dtype=index_dtype)
-        return start, program(s, dev_axes, dev_sizes, total_arr, base)
+        out, tally = program(jnp.asarray(start, dtype=index_dtype), stop, dev_axes, dev_sizes, total_arr, base)
+        if rows_wanted and not on_cpu():  # start the copy to the host now: it runs while the next chunk computes
+            for x in out.values():
+                x.copy_to_host_async()
+        return start, out, tally
 
     def collect(item):
-        start, out = item
+        start, out, tally = item
         n = min(n_rows, hi - start)
-        chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
-        for p in outputs:
-            if p in moved:
-                chunk[p] = chunk[p].astype(np.float64) + moved[p]
-        counts[:] += np.bincount(chunk["status"].astype(np.int64) & 0xFF, minlength=256)
-        if undefined:
-            solved = ~invalid_rows(chunk["status"])
-            for p in undefined:
-                undefined[p] += int(np.count_nonzero(np.isnan(chunk[p]) & solved))
-        a, b = start - lo, start - lo + n
-        if keep:
-            for k, v in chunk.items():
-                store[k][a:b] = v
-        if on_chunk is not None:
-            on_chunk(start, start + n, chunk)
+        counts[:] += np.asarray(tally["status"])
+        for p, k in zip(undefined, np.asarray(tally["undefined"])):
+            undefined[p] += int(k)
+        if rows_wanted:
+            chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
+            for p in outputs:
+                if p in moved:
+                    chunk[p] = chunk[p].astype(np.float64) + moved[p]
+            a, b = start - lo, start - lo + n
+            if keep:
+                for k, v in chunk.items():
+                    store[k][a:b] = v
+            if on_chunk is not None:
+                on_chunk(start, start + n, chunk)
         bar.update(n)
 
     try:
@@ -346,7 +368,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     final_shape = shape if (index_range is None) else (n_points,)
     if keep:
         store = {k: v.reshape(final_shape) for k, v in store.items()}
-    status_counts = {STATUS_TEXT.get(c, status_text(c)): int(counts[c]) for c in np.flatnonzero(counts)}
+    status_counts = {status_text(c): int(k) for c, k in zip(STATUS_CODES, counts) if k}
+    if counts[-1]:
+        status_counts["invalid: unknown status"] = int(counts[-1])
     return SweepResult(store, axes, final_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs,
                        undefined=undefined)
 

@@ -172,7 +172,7 @@ def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, 
     compiled = engine._program
 
     def spy(*args):
-        seen.append(args[-1])
+        seen.append(args[11])  # quick
         return compiled(*args)
 
     monkeypatch.setattr(engine, "_program", spy)
@@ -538,3 +538,31 @@ def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
                 v, w = np.asarray(v), np.asarray(far[kind][p]) - shift.get(p, 0.0)
                 scale = 1.0 if p.endswith("crush") or "point" in p else np.abs(v).max()  # lengths: 1 m
                 np.testing.assert_allclose(w, v, rtol=0, atol=5e-5 * scale, err_msg=f"{label} {kind} {p}")
+
+
+def test_the_accelerator_path_counts_on_the_device(case):
+    """On the accelerator's path (``backend.path``, forced here), each chunk's statuses and undefined values
+    are counted on the device over the rows of the range alone; a sweep that keeps nothing copies no rows
+    to the host. Values, statuses and counts are the CPU path's, in chunks that end inside the range."""
+    over = {"vehicles[1].speed": np.linspace(0.0, 20.0, 9), "contact.restitution": np.linspace(0.0, 1.5, 7)}
+    outputs = ["contact.impulse_magnitude", "vehicles[0].pdof", "vehicles[1].course_after"]
+    cpu = sweep(case, over, outputs=outputs, chunk_size=1000)
+    flat = {k: v.ravel() for k, v in cpu.items()}
+
+    def counted(lo, hi):  # the counts a sweep of flat indices lo..hi should give, from the kept results
+        codes, k = np.unique(flat["status"][lo:hi], return_counts=True)
+        solved = flat["status"][lo:hi] < ks_jax.model.types.INVALID_NONFINITE
+        return ({ks_jax.model.types.status_text(c): int(n) for c, n in zip(codes, k)},
+                {p: int(np.sum(np.isnan(flat[p][lo:hi]) & solved)) for p in outputs[1:]})
+
+    with ks_jax.backend.path("accelerator"):
+        for chunk in (5, 1000):
+            r = sweep(case, over, outputs=outputs, chunk_size=chunk)
+            for p in outputs + ["status"]:
+                np.testing.assert_allclose(r[p], cpu[p], rtol=1e-12, atol=1e-12, err_msg=p)
+            assert (r.status_counts, r.undefined) == counted(0, 63)
+        part = sweep(case, over, outputs=outputs, chunk_size=4, index_range=(10, 33), keep=False)
+        assert len(part) == 0 and (part.status_counts, part.undefined) == counted(10, 33)
+    # the grid has each kind of row counted: solved, separating at speed 0 (its PDOF and course undefined), invalid
+    assert set(cpu.status_counts) == {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"}
+    assert cpu.undefined == {"vehicles[0].pdof": 5, "vehicles[1].course_after": 5}
