@@ -18,7 +18,7 @@ import numpy as np
 from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
-from ks_jax.model.types import OK, status_text
+from ks_jax.model.types import status_text
 
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
@@ -222,19 +222,6 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     )
 
 
-def _stick_threshold(problem, arrays, x, smoothing, dtype) -> float:
-    """The least friction at which the exchange at ``x`` would stick: |J_t| / J_n of the stick impulse,
-    from the exchange with that friction raised to STICKING_FRICTION (NaN where the stick impulse pulls)."""
-    x = np.array(x, np.float64)
-    x[problem.unknowns.index("contact.friction")] = STICKING_FRICTION
-    inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
-    _, (status, sliding, ratio) = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
-    return float(ratio) if int(status) == OK and not bool(sliding) else float("nan")
-
-
-STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
-
-
 _predict = quick_jit(predict, static_argnums=0)  # one row: quick to compile (``compilation.quick_jit``)
 
 
@@ -401,8 +388,6 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         best = best_start(out["cost"][i], out["converged"][i])
         row = {k: v[i, best] for k, v in out.items()}
         row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i])
-        if "contact.friction" in problem.unknowns and row["status"] == OK and bool(row["sliding"]):
-            row["stick_threshold"] = _stick_threshold(problem, a, row["x"], smoothing, dtype)
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,

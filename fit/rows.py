@@ -25,7 +25,8 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
     x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
     with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
-    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled.
+    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled, and
+    stick_threshold (``_stick_threshold``: the friction at which a sliding contact would stick).
     A start is "stalled", and not converged, where it ends without an exchange (status not "ok":
     separating, no contact) and no unknown moves any evidence there: its gradient is zero because
     nothing collides, not because it reached a fit."""
@@ -51,7 +52,23 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     stalled = (status != OK) & jnp.all(jac[:, :m] == 0, axis=(1, 2))
     return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged & ~stalled, "iterations": sol.iterations,
             "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
-            "stick_ratio": stick_ratio, "stalled": stalled}
+            "stick_ratio": stick_ratio, "stalled": stalled, "stick_threshold": _stick_threshold(problem, inputs, x,
+                                                                                               smoothing)}
+
+
+STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
+
+
+def _stick_threshold(problem, inputs, x, smoothing):
+    """(R,): where friction is an unknown, the least friction at which each row's exchange at ``x`` would
+    stick: |J_t| / J_n of the stick impulse, from the exchange with friction raised to ``STICKING_FRICTION``
+    (NaN where the stick impulse pulls, or friction is not an unknown). Every row in the same program as
+    the fit: one more exchange per row, against a call per case after it."""
+    if "contact.friction" not in problem.unknowns:
+        return jnp.full(x.shape[:1], jnp.nan, x.dtype)
+    stick = x.at[:, problem.unknowns.index("contact.friction")].set(STICKING_FRICTION)
+    _, (status, sliding, ratio) = jax.vmap(lambda xi, d: predict(problem, d, xi, smoothing))(stick, inputs)
+    return jnp.where((status == OK) & ~sliding, ratio, jnp.nan)
 
 
 def best_start(cost, converged):

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 
 import jax.numpy as jnp
@@ -22,8 +23,10 @@ def canonical_path(path: str) -> str:
     """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
     return path.strip().replace(" ", "")
 
+@functools.lru_cache(maxsize=4096)
 def parse_path(path: str):
-    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,))."""
+    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,)).
+    Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     m = _PATH.match(canonical_path(path))
     if not m:
         raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")
@@ -74,7 +77,11 @@ def get_input(inputs: CaseInputs, path: str):
     names a path that is not an input. ``set_input`` is its converse."""
     group, vi, name, idx = input_leaf(path)
     leaf = getattr(inputs.vehicles[vi] if group == "vehicles" else inputs.contact, name)
-    return jnp.asarray(leaf)[idx] if idx else leaf
+    if not idx:
+        return leaf
+    if isinstance(leaf, np.ndarray):  # a value on the host: read it there (no device operation per read)
+        return leaf[idx]
+    return jnp.asarray(leaf)[idx]
 
 def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable). A
