@@ -46,7 +46,7 @@ jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_fit  # noqa: E402
-from bench_kernel import delta_v, nbytes, random_batch, streaming_references  # noqa: E402
+from bench_kernel import delta_v, random_batch, streaming_references  # noqa: E402
 
 import fit  # noqa: E402
 import ks_jax  # noqa: E402
@@ -179,7 +179,7 @@ def main(argv=None):
                 f"{n / t / base:.2f} of the kernel" if base else "")
         if args.profile:
             kernel_table(lambda: ks_jax.exchange_batch(*host), f"exchange_batch, {n} rows", args.profile)
-    del batch
+    batch = host = None  # free the rows before the sweep
     if "sweep" in only:
         case = ks_jax.load_case(CASE)
         side = int(round(args.sweep ** 0.5))

@@ -42,19 +42,21 @@ def on_cpu() -> bool:
 @contextlib.contextmanager
 def path(kind: str):
     """Within the block, every batched path takes ``kind``'s way ("cpu" or "accelerator"), whatever the
-    device. JAX's and ks-jax's caches of traced programs are cleared on entry and exit, since a program
-    traced for one path would otherwise be reused on the other."""
+    device. Where that changes the path, JAX's caches of traced programs are cleared on entry and exit,
+    since a program traced for one path would otherwise be reused on the other."""
     global _forced
     if kind not in ("cpu", "accelerator"):
         raise ValueError(f"path = {kind!r}: must be 'cpu' or 'accelerator'")
-    before = _forced
+    before, was_cpu = _forced, on_cpu()
     _forced = kind
-    jax.clear_caches()
+    if on_cpu() != was_cpu:
+        jax.clear_caches()
     try:
         yield
     finally:
         _forced = before
-        jax.clear_caches()
+        if on_cpu() != was_cpu:
+            jax.clear_caches()
 
 
 def free_bytes(device=None) -> int:

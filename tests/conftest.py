@@ -12,7 +12,11 @@ import shutil
 import tempfile
 import types
 
-import jax
+# On a GPU, XLA takes 75% of the device's memory at a process's first use of it: the second test worker
+# (pytest-xdist) would then fail to start. Each worker allocates what it uses instead.
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+
+import jax  # noqa: E402
 
 # ks_jax.cli.main keeps compiled programs in ~/.cache/ks-jax unless told otherwise; the tests that call
 # it write nothing there (tests/test_compilation.py runs the command line with a cache of its own)

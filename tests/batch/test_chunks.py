@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import ks_jax
+from ks_jax import backend
 from ks_jax.model import types as t
 from samples import assert_same_leaves, reference_jit, with_bad_rows
 
@@ -22,9 +23,10 @@ CHUNKS = importlib.import_module("ks_jax.batch.chunks")
 @pytest.fixture
 def small_chunks(monkeypatch):
     """``jax.vmap(exchange)`` over more than CHUNK_ROWS rows runs in chunks on one CPU device;
-    64-row chunks exercise that path on small batches."""
+    64-row chunks exercise that path on small batches, taken on any device (``backend.path``)."""
     monkeypatch.setattr(CHUNKS, "CHUNK_ROWS", 64)
-    return 64
+    with backend.path("cpu"):
+        yield 64
 
 
 def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
