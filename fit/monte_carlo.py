@@ -57,9 +57,10 @@ def linearisation_notes(result) -> list:
 
 
 def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
-                 chunk, block):
+                 chunk, block, devices=None):
     """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2); the first
-    start of each refit is the estimate, the others are drawn as for the fit. Calls of ``block`` rows."""
+    start of each refit is the estimate, the others are drawn as for the fit. Calls of ``block`` rows, on
+    ``devices`` (``rows.run_rows``)."""
     n_mc = int(samples)
     noise = rng.standard_normal((n_mc, len(a["values"])))
     values = a["values"] + a["sigmas"] * noise
@@ -73,7 +74,7 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
         k = min(size, n_mc - s)
         same = [np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pm", "pw")]
         out = run_rows(problem, solver, max_iter, stack([a["inputs"]] * k), values[s:s + k], *same, z0[s:s + k],
-                   smoothing, dtype, starts, block)
+                   smoothing, dtype, starts, block, devices)
         best = [best_start(out["cost"][i], out["converged"][i]) for i in range(k)]
         xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
         conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))

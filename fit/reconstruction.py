@@ -314,7 +314,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
-                progress: bool = False, chunk: int = 250, dtype=None) -> FitResult:
+                progress: bool = False, chunk: int = 250, dtype=None, devices=None) -> FitResult:
     """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
@@ -329,24 +329,27 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
     "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
-    ``chunk`` samples). Raises CaseError for a bad path, unit, bound or sigma.
+    ``chunk`` samples). devices: where the starts and refits are solved (default: this process's devices,
+    ``jax.local_devices()``; over several, the rows are split among them: docs/devices.md). Raises CaseError
+    for a bad path, unit, bound or sigma.
     """
     return reconstruct_batch([case], None if unknowns is None else [unknowns],
                              None if evidence is None else [evidence], starts=starts, seed=seed,
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
-                             rtol=rtol, progress=progress, chunk=chunk, dtype=dtype)[0]
+                             rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices)[0]
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
-                      dtype=None) -> list[FitResult]:
+                      dtype=None, devices=None) -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
     the same length as ``cases``), or None to read each case file's own. All cases must name
     the same unknown paths and the same evidence paths, in the same order (bounds, priors,
-    values and sigmas may differ). Other arguments as ``reconstruct``.
+    values and sigmas may differ). Other arguments as ``reconstruct``; every start of every case is a row,
+    and over several ``devices`` the rows are split among them.
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
@@ -379,7 +382,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     # with refits, the fit runs in calls of the refits' row count (``ROWS_PER_CALL``): one compiled program
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
-               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block)
+               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
         if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
@@ -391,7 +394,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
-                                         smoothing, dtype, progress, chunk, block)
+                                         smoothing, dtype, progress, chunk, block, devices)
             r.notes += linearisation_notes(r)
         results.append(r)
     return results

@@ -4,6 +4,7 @@ vmapped call, or in calls of one row count where a fit and its Monte Carlo refit
 from __future__ import annotations
 
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -113,14 +114,18 @@ def rows_per_call(rows: int) -> int:
     return min(rows, ROWS_PER_CALL.get(jax.default_backend(), ROWS_PER_CALL_ELSEWHERE))
 
 
-def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None):
+def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None,
+             devices=None):
     """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw
     (B, n); z0 (B, S, n). The B x S rows go to the solver in calls of ``block`` rows (default: one call of
-    them all), the last padded: a row's fit does not depend on the others in its call. Returns NumPy arrays
-    shaped (B, S, ...)."""
+    them all), the last padded: a row's fit does not depend on the others in its call. devices: where the
+    rows are solved (default ``jax.local_devices()``, this process's devices): over several, each call's
+    rows are split among them (a 1-D mesh; ``block`` rounded up to a multiple of their number). Returns
+    NumPy arrays shaped (B, S, ...)."""
+    devices = tuple(jax.local_devices() if devices is None else devices)
     B = np.asarray(values).shape[0]
     rows = B * starts
-    block = block or rows
+    block = -(-(block or rows) // len(devices)) * len(devices)
     total = -(-rows // block) * block
 
     def padded(a, per_case=True):  # (B, ...) per case, or (B * S, ...) per row -> (total, ...)
@@ -130,11 +135,27 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
 
     args = [jax.tree_util.tree_map(padded, inputs)] + [padded(a) for a in (values, sigmas, lo, hi, pm, pw)]
     args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
-    smoothing = jnp.asarray(smoothing, dtype)
+    place = row_placement(devices)
+    smoothing = jax.device_put(jnp.asarray(smoothing, dtype), place.replicated)
     parts, fit_rows = [], solver_for(block)
     for start in range(0, total, block):
-        part = jax.tree_util.tree_map(lambda a: jnp.asarray(a[start:start + block], dtype), args)
+        part = jax.tree_util.tree_map(lambda a: jax.device_put(np.asarray(a[start:start + block], dtype), place.rows),
+                                      args)
         out = fit_rows(problem, solver, max_iter, *part, smoothing)
         parts.append({k: np.asarray(v) for k, v in out.items()})
     return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
             for k in parts[0]}
+
+
+class RowPlacement(NamedTuple):
+    rows: jax.sharding.Sharding  # arrays with the rows first: split along them
+    replicated: jax.sharding.Sharding  # the same on every device
+
+
+def row_placement(devices) -> RowPlacement:
+    """How a call's arrays are put on ``devices``: on the one device, or split along the rows over a 1-D
+    mesh of several (XLA then runs each device's rows there; the solver's loop ends when every row on every
+    device has converged)."""
+    mesh = jax.sharding.Mesh(np.array(devices), ("rows",))
+    return RowPlacement(jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("rows")),
+                        jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec()))

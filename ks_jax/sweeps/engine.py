@@ -199,7 +199,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
     progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
     (from the start) or False; tqdm if installed, else a line on stderr.
-    devices: the devices to shard every chunk over (default ``jax.devices()``).
+    devices: the devices to shard every chunk over (default ``jax.local_devices()``, this process's).
     output_dtype: dtype of the stored float results (default: the compute dtype). In float32, a scene
     more than 1 km from the origin is solved about its CGs' midpoint (``case.scale.scene_origin``), and its
     ``contact.point[0]``/``[1]`` outputs are float64.
@@ -268,7 +268,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         raise CaseError(f"index_range = {index_range}: must satisfy 0 <= lo <= hi <= {total}")
     n_points = hi - lo
 
-    devices = tuple(jax.devices() if devices is None else devices)
+    devices = tuple(jax.local_devices() if devices is None else devices)
     if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.chunk_rows``)
         one_row = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], as_arrays(case.inputs))
         per_device = chunk_rows(2 * row_bytes(one_row), devices[0])
