@@ -1,11 +1,12 @@
 """A sweep sharded over several devices against the same sweep on one of them. Not a test.
 
-    XLA_FLAGS=--xla_force_host_platform_device_count=2 .venv/bin/python benchmarks/bench_sweep_sharded.py [--n 1000]
+    JAX_NUM_CPU_DEVICES=2 .venv/bin/python benchmarks/bench_sweep_sharded.py [--n 1000]
 
 Runs an n x n grid (default outputs) with ``ks_jax.sweep`` over all of ``jax.devices()`` (every
 chunk split along its rows over a 1-D mesh) and over the first device alone, each twice (the
 first call compiles), and prints both times and the largest difference between the two results.
-On a CPU the forced host devices share the machine's cores, so the figure shows that the sharded
+On a CPU the host devices (JAX_NUM_CPU_DEVICES, or XLA_FLAGS=--xla_force_host_platform_device_count)
+share the machine's cores, so the figure shows that the sharded
 program runs and what splitting a chunk costs or gains there; on several GPUs the same call
 spreads the work over them. Without the flag there is one device and the two runs are the same.
 """

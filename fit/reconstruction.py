@@ -18,11 +18,11 @@ import numpy as np
 from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
-from ks_jax.model.types import status_text
+from ks_jax.model.types import OK, status_text
 
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
-from .rows import best_start, rows_per_call, run_rows, stack
+from .rows import best_start, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .uncertainty import analyse, default_rtol
@@ -383,14 +383,22 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
+    best = [best_start(out["cost"][i], out["converged"][i]) for i in range(len(cases))]
+    threshold = np.full(len(cases), np.nan)
+    # the friction at which a sliding best fit would stick, for all those cases in one call
+    sliding = [i for i, b in enumerate(best) if "contact.friction" in problem.unknowns and out["status"][i, b] == OK
+               and bool(out["sliding"][i, b])]
+    if sliding:
+        threshold[sliding] = stick_thresholds(problem, stack([arrays[i]["inputs"] for i in sliding]),
+                                              np.stack([out["x"][i, best[i]] for i in sliding]), smoothing, dtype)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
         if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
             results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, starts))
             continue
-        best = best_start(out["cost"][i], out["converged"][i])
-        row = {k: v[i, best] for k, v in out.items()}
-        row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i])
+        row = {k: v[i, best[i]] for k, v in out.items()}
+        row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i],
+                   stick_threshold=threshold[i])
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,

@@ -26,8 +26,7 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
     x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
     with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
-    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled, and
-    stick_threshold (``_stick_threshold``: the friction at which a sliding contact would stick).
+    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled.
     A start is "stalled", and not converged, where it ends without an exchange (status not "ok":
     separating, no contact) and no unknown moves any evidence there: its gradient is zero because
     nothing collides, not because it reached a fit."""
@@ -53,23 +52,32 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     stalled = (status != OK) & jnp.all(jac[:, :m] == 0, axis=(1, 2))
     return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged & ~stalled, "iterations": sol.iterations,
             "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
-            "stick_ratio": stick_ratio, "stalled": stalled, "stick_threshold": _stick_threshold(problem, inputs, x,
-                                                                                               smoothing)}
+            "stick_ratio": stick_ratio, "stalled": stalled}
 
 
 STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
 
 
-def _stick_threshold(problem, inputs, x, smoothing):
-    """(R,): where friction is an unknown, the least friction at which each row's exchange at ``x`` would
-    stick: |J_t| / J_n of the stick impulse, from the exchange with friction raised to ``STICKING_FRICTION``
-    (NaN where the stick impulse pulls, or friction is not an unknown). Every row in the same program as
-    the fit: one more exchange per row, against a call per case after it."""
-    if "contact.friction" not in problem.unknowns:
-        return jnp.full(x.shape[:1], jnp.nan, x.dtype)
+@partial(quick_jit, static_argnames=("problem",))
+def _stick_thresholds(problem: Problem, inputs, x, smoothing):
+    """(R,): the least friction at which each row's exchange at ``x`` would stick: |J_t| / J_n of the stick
+    impulse, from the exchange with friction raised to ``STICKING_FRICTION`` (NaN where it pulls)."""
     stick = x.at[:, problem.unknowns.index("contact.friction")].set(STICKING_FRICTION)
     _, (status, sliding, ratio) = jax.vmap(lambda xi, d: predict(problem, d, xi, smoothing))(stick, inputs)
     return jnp.where((status == OK) & ~sliding, ratio, jnp.nan)
+
+
+def stick_thresholds(problem: Problem, inputs, x, smoothing, dtype):
+    """``_stick_thresholds`` of the rows of ``inputs`` (stacked CaseInputs [B]) at ``x`` (B, n), in one call
+    (a call per case would wait on the device once per case): B padded to a power of two (at least 8), so
+    that batches of other sizes run the program already compiled. NumPy (B,)."""
+    B = len(x)
+    size = max(8, 1 << (B - 1).bit_length())
+    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], size - B, axis=0)])  # noqa: E731
+    rows = jax.tree_util.tree_map(lambda a: jnp.asarray(pad(np.asarray(a, np.float64)), dtype), inputs)
+    out = _stick_thresholds(problem, rows, jnp.asarray(pad(np.asarray(x, np.float64)), dtype),
+                            jnp.asarray(smoothing, dtype))
+    return np.asarray(out)[:B]
 
 
 def best_start(cost, converged):

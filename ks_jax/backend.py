@@ -1,5 +1,4 @@
-"""Which kind of device the rows are computed on, and how many rows one call takes (docs/performance.md,
-"Devices").
+"""Which kind of device the rows are computed on, and how many rows one call takes (docs/devices.md).
 
 A CPU and an accelerator (a GPU) want the same rows computed differently. A CPU runs a program's loops one
 after another over memory that is also the host's: it is fastest over chunks of rows that fit its cache,

@@ -20,7 +20,7 @@ CPU = dict(os.environ, JAX_PLATFORMS="cpu", KS_JAX_CACHE="off")
 
 
 def run(*argv, devices=1, **popen):
-    env = dict(CPU, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
+    env = dict(CPU, JAX_NUM_CPU_DEVICES=str(devices), XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
     return subprocess.Popen([sys.executable, str(EXAMPLE), *argv], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, **popen)
 

@@ -7,8 +7,7 @@ Every device of this host, in one process (on a machine with one device, that on
 Forced CPU devices, to try the sharded programs anywhere (``--compare`` also runs both on one device and prints
 the largest differences):
 
-    XLA_FLAGS=--xla_force_host_platform_device_count=4 JAX_PLATFORMS=cpu \\
-        python docs/examples/several_devices.py --compare
+    JAX_NUM_CPU_DEVICES=4 JAX_PLATFORMS=cpu python docs/examples/several_devices.py --compare
 
 Several hosts: one process per host, started alike with its own ``--process-id`` (here two on one machine).
 Each solves its share (a range of the sweep's points, every ``processes``-th reconstruction) on its own

@@ -54,10 +54,11 @@ def _chunk_program(size, smoothing, quick, cpu):
 
 
 @functools.lru_cache(maxsize=32)
-def _rows_program(smoothing, cpu):
-    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk)."""
+def _rows_program(smoothing, quick, cpu):
+    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk); ``quick`` as
+    in ``_chunk_program``."""
     stages = exchange_stages(smoothing)
-    return jax.jit(lambda args: run(stages, args))
+    return jax.jit(lambda args: run(stages, args), compiler_options=compiler_options(quick))
 
 
 def row_bytes(tree) -> int:
@@ -118,7 +119,7 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         return target
     size = min(int(chunk), n)
     if on_host:
-        rows = _rows_program(float(smoothing), cpu)
+        rows = _rows_program(float(smoothing), n <= CHUNK_ROWS, cpu)
         program = lambda a, start: rows(jax.tree_util.tree_map(lambda x: x[start:start + size], a))  # noqa: E731
     else:
         program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, cpu)

@@ -1,4 +1,4 @@
-"""``ks-jax``: the command line (docs/ in the project: model.md, fit.md, sweeps.md, performance.md).
+"""``ks-jax``: the command line (docs/ in the project: model.md, fit.md, sweeps.md, performance.md, devices.md).
 
 Every command lives in a module of its own (``solve``: solve and demo; ``fit``; ``sweep``). The command line
 computes in float64 and keeps compiled programs between runs (``ks_jax.compilation.keep_programs``;
@@ -24,7 +24,8 @@ from ..units import UnitError
 from . import fit, signals, solve, sweep
 
 EPILOG = ("The model, its frames, the case-file format and the result names: docs/model.md. Reconstruction: "
-          "docs/fit.md. Sweeps: docs/sweeps.md. Speed and memory: docs/performance.md. (In the project's "
+          "docs/fit.md. Sweeps: docs/sweeps.md. Speed and memory: docs/performance.md; GPUs and several devices: "
+          "docs/devices.md. (In the project's "
           "repository; `ks-jax demo` solves the examples shipped in ks_jax/cases.)")
 
 

@@ -104,23 +104,23 @@ def test_exchange_batch_of_no_rows(kit, random_cases):
         ks_jax.exchange_batch(*none, out=wrong)
 
 
-@pytest.mark.parametrize("where", ["numpy", "device"])
-def test_exchange_batch_on_the_accelerator_path(kit, random_cases, where):
+def test_exchange_batch_on_the_accelerator_path(kit, random_cases):
     """The accelerator's path (``backend.path``, forced on whatever device runs the tests): rows given as
-    NumPy arrays go to the device chunk by chunk, results are copied to the host while the next chunk runs,
-    or stay on the device (``to_host=False``): the values are ``jax.vmap(exchange)``'s, row for row, with
-    bad rows among them; an ``out`` cannot go with ``to_host=False``."""
+    NumPy arrays go to the device chunk by chunk (64, 64, then a last chunk aligned to the end), results are
+    copied to the host while the next chunk runs, or stay on the device (``to_host=False``); device rows in
+    the chunk of the policy. The values are ``jax.vmap(exchange)``'s, row for row, with bad rows among them;
+    an ``out`` cannot go with ``to_host=False``."""
     cases = with_bad_rows(random_cases["full"][:150])
     args = kit.inputs(cases)
     reference = kit.batch_exchange(args)
-    args = jax.tree_util.tree_map(np.array if where == "numpy" else jax.numpy.asarray, args)
+    host = jax.tree_util.tree_map(np.array, args)
     with backend.path("accelerator"):
         assert not backend.on_cpu()
-        for chunk in (64, 150, None):  # 64, 64, then a last chunk aligned to the end; one chunk; the policy's
-            got = ks_jax.exchange_batch(*args, chunk=chunk)
+        for rows, chunk in ((host, 64), (args, None)):
+            got = ks_jax.exchange_batch(*rows, chunk=chunk)
             assert all(isinstance(x, np.ndarray) for x in jax.tree_util.tree_leaves(got))
             assert_same_leaves(got, reference)
-            kept = ks_jax.exchange_batch(*args, chunk=chunk, to_host=False)
+            kept = ks_jax.exchange_batch(*rows, chunk=chunk, to_host=False)
             assert all(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(kept))
             assert_same_leaves(kept, reference)
         with pytest.raises(ValueError, match="out= .* to_host=False"):
