@@ -1,7 +1,7 @@
 """Several devices and several processes (docs/devices.md), through the runnable example
-docs/examples/several_devices.py on forced CPU devices: a sweep and a batch of reconstructions split over two
-devices equal the same on one; two processes joined by ``jax.distributed``, each solving its share on its own
-device, give together what one process gives."""
+docs/examples/several_devices.py on forced CPU devices: two processes joined by ``jax.distributed``, each solving
+its share of a sweep and of a batch of reconstructions on its own device, give together what one process gives
+over two devices. (``--compare``, one process against its first device alone, is for a user's machine.)"""
 
 from __future__ import annotations
 
@@ -33,22 +33,18 @@ def finished(proc, timeout=300):
 
 @pytest.fixture(scope="module")
 def two_devices():
-    """The example in one process over two forced CPU devices, compared with one device."""
-    return json.loads(finished(run("--compare", devices=2)).strip().splitlines()[-1])
+    """The example in one process over two forced CPU devices."""
+    return json.loads(finished(run(devices=2)).strip().splitlines()[-1])
 
 
-def test_a_sweep_and_reconstructions_over_two_devices_equal_one_device(two_devices):
+def test_two_processes_each_solve_their_share_as_two_devices_do(two_devices, tmp_path):
+    """Two processes of one device each (``jax.distributed`` on a free local port), each its share: together
+    the values of one process over two devices, where every chunk and every call of the solver is split
+    between them. Each row is computed alone, so neither split changes a value beyond rounding."""
     out = two_devices
     assert out["devices"] == ["cpu:0", "cpu:1"] and out["range"] == [0, 1000] and len(out["impulse"]) == 1000
-    assert len(out["speed_mph"]) == 8
-    # each row is computed alone: the split changes no value beyond rounding
-    assert out["largest_difference"]["impulse"] <= 1e-12 * max(out["impulse"])
-    assert out["largest_difference"]["speed_mph"] <= 1e-9
     # the evidence is the shipped case's moved by about a sigma (0.3 mph): estimates near its 20 mph
-    assert all(18.0 < v < 22.0 for v in out["speed_mph"].values())
-
-
-def test_two_processes_each_solve_their_share(two_devices, tmp_path):
+    assert len(out["speed_mph"]) == 8 and all(18.0 < v < 22.0 for v in out["speed_mph"].values())
     with socket.socket() as s:  # a free port for the coordinator
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -58,7 +54,7 @@ def test_two_processes_each_solve_their_share(two_devices, tmp_path):
         finished(p)
     parts = [json.loads((tmp_path / f"p{k}.json").read_text()) for k in (0, 1)]
     assert [p["range"] for p in parts] == [[0, 500], [500, 1000]]
-    assert parts[0]["devices"] != parts[1]["devices"]  # each process on its own device
+    assert [len(p["devices"]) for p in parts] == [1, 1] and parts[0]["devices"] != parts[1]["devices"]
     np.testing.assert_allclose(parts[0]["impulse"] + parts[1]["impulse"], two_devices["impulse"], rtol=1e-12)
     speeds = {**parts[0]["speed_mph"], **parts[1]["speed_mph"]}
     assert sorted(parts[0]["speed_mph"]) == ["0", "2", "4", "6"] and sorted(speeds) == sorted(two_devices["speed_mph"])
