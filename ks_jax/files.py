@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 from .case.errors import CaseError
@@ -17,3 +18,8 @@ def check_output_file(path, option: str):
     if not folder.is_dir():
         why = "is a file, not a folder" if folder.exists() else "does not exist"
         raise CaseError(f"{option} {path}: the folder '{folder}' {why}")
+    try:  # the folder's permissions, and a file system that refuses files whatever they say
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".ks-jax-check-"):
+            pass
+    except OSError as err:
+        raise CaseError(f"{option} {path}: cannot write in the folder '{folder}' ({err.strerror or err})") from None

@@ -157,8 +157,11 @@ def parse_quantity(value, kind: str) -> float:
     if isinstance(value, bool):
         raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
     if isinstance(value, (int, float)):
-        x = float(value) * BARE_NUMBER_SCALE.get(kind, 1.0)
-        return x
+        try:
+            return float(value) * BARE_NUMBER_SCALE.get(kind, 1.0)
+        except OverflowError:  # an integer beyond any float
+            raise UnitError(f"an integer of about {int(value.bit_length() * 0.30103) + 1} digits is larger than "
+                            "any finite number") from None
     if not isinstance(value, str):
         raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
     text = value.strip()

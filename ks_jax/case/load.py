@@ -27,18 +27,21 @@ def _where(case_name, path):
     return f"case '{case_name}': {path}"
 
 def _number(value, kind, path, case_name):
+    if isinstance(value, LongInteger):
+        raise CaseError(f"{_where(case_name, path)} = {value[:20]}... (an integer of "
+                        f"{len(value.lstrip('-'))} digits): larger than any finite number")
     try:
         x = U.parse_quantity(value, kind)
     except U.UnitError as err:
-        raise CaseError(f"{_where(case_name, path)} = {value!r}: {err}") from None
+        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: {err}") from None
     if not math.isfinite(x):
-        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a finite number")
+        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be a finite number")
     return x
 
 def _vector(value, kind, path, case_name, sizes):
     if not isinstance(value, (list, tuple)) or len(value) not in sizes:
         want = " or ".join(str(s) for s in sizes)
-        raise CaseError(f"{_where(case_name, path)} = {value!r}: must be a list of {want} quantities")
+        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be a list of {want} quantities")
     return [_number(v, kind, f"{path}[{i}]", case_name) for i, v in enumerate(value)]
 
 def _inertia(value, path, case_name):
@@ -206,21 +209,73 @@ def _check_reference(reference, case_name):
             raise CaseError(f"{_where(case_name, 'reference')}: {err}") from None
         parse_output_value(value, path, case_name, f"reference.{path}")
 
+# Limits of a case file (docs/model.md, "Limits"): far beyond any real case file, and within what the program
+# can read without running out of memory or stack
+MAX_FILE_BYTES = 64 << 20
+MAX_DEPTH = 32  # tables and lists inside one another
+MAX_CASES = 100_000
+MAX_INTEGER_DIGITS = 400  # a longer integer literal is kept as its text: no float holds it
+
+
+class LongInteger(str):
+    """An integer literal of a case file too long for any float (more than ``MAX_INTEGER_DIGITS`` digits),
+    kept as its text so that its case, not the file, is refused (``units.parse_quantity`` names it)."""
+
+
+def _json_integer(text):
+    return LongInteger(text) if len(text) > MAX_INTEGER_DIGITS else int(text)
+
+
 def _read(path: Path):
     try:
-        text = path.read_bytes().decode("utf-8-sig")  # -sig: a byte-order mark, as some editors write
+        with open(path, "rb") as f:  # read at most the limit (a device file such as /dev/zero never ends)
+            raw = f.read(MAX_FILE_BYTES + 1)
+    except OSError as err:
+        raise CaseError(f"{path}: cannot be read ({err.strerror or err})") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise CaseError(f"{path}: larger than {MAX_FILE_BYTES >> 20} MiB, the limit of a case file (docs/model.md, "
+                        "\"Limits\"); split it into several files")
+    try:
+        text = raw.decode("utf-8-sig")  # -sig: a byte-order mark, as some editors write
     except UnicodeDecodeError as err:
         raise CaseError(f"{path}: not a UTF-8 text file (byte {err.start}: {err.reason}); case files are JSON "
                         "or TOML text") from None
+    kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
     try:
-        if path.suffix.lower() == ".toml":
-            return tomllib.loads(text)
-        return json.loads(text)
+        data = tomllib.loads(text) if kind == "TOML" else json.loads(text, parse_int=_json_integer)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
-        kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
         other = "" if path.suffix.lower() in (".json", ".toml") else \
             f" (case files are JSON or TOML; a '{path.suffix}' file is read as JSON)"
         raise CaseError(f"{path}: cannot be read as {kind}{other}: {err}") from None
+    except RecursionError:
+        raise CaseError(f"{path}: lists or tables nested too deep to read (a case file nests at most {MAX_DEPTH} "
+                        "deep)") from None
+    except ValueError as err:  # TOML: an integer beyond Python's limit of digits
+        raise CaseError(f"{path}: cannot be read as {kind}: {_shown(str(err))}") from None
+    depth = _depth(data)
+    if depth > MAX_DEPTH:
+        raise CaseError(f"{path}: lists or tables nested more than {MAX_DEPTH} deep, the limit of a case file "
+                        "(docs/model.md, \"Limits\")")
+    return data
+
+
+def _depth(data) -> int:
+    """How deep lists and tables nest in ``data`` (a number: 0), counted without recursion."""
+    deepest, stack = 0, [(data, 1)]
+    while stack:
+        x, d = stack.pop()
+        if isinstance(x, (dict, list)):
+            deepest = max(deepest, d)
+            if d <= MAX_DEPTH:  # deeper is refused anyway: no need to walk it all
+                stack.extend((v, d + 1) for v in (x.values() if isinstance(x, dict) else x))
+    return deepest
+
+
+def _shown(value, most: int = 80) -> str:
+    """``repr(value)``, cut to ``most`` characters with the count of the rest (a value of thousands of
+    digits or a long list would bury the message)."""
+    text = repr(value)
+    return text if len(text) <= most else f"{text[:most - 20]}... ({len(text)} characters)"
 
 def cases_from_data(data, source=None) -> list[Case]:
     """All cases of a loaded file. A file with one case raises CaseError on a bad case; in a
@@ -228,6 +283,9 @@ def cases_from_data(data, source=None) -> list[Case]:
     if isinstance(data, dict) and "cases" in data:
         if not isinstance(data["cases"], list) or not data["cases"]:
             raise CaseError(f"{source or 'file'}: cases must be a non-empty list")
+        if len(data["cases"]) > MAX_CASES:
+            raise CaseError(f"{source or 'file'}: {len(data['cases'])} cases, more than the {MAX_CASES} of a case "
+                            "file (docs/model.md, \"Limits\"); split it, or sweep the inputs that vary")
         out = []
         for i, d in enumerate(data["cases"]):
             default = d.get("name", f"case {i + 1}") if isinstance(d, dict) else f"case {i + 1}"

@@ -95,6 +95,10 @@ def main(argv=None) -> int:
     except BrokenPipeError:  # the reader went away (ks-jax demo | head): not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as err:  # a file that could not be read or written after its checks (a full disk, say)
+        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
+        print(f"ks-jax: error: {where}{err.strerror or err}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

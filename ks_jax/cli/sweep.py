@@ -150,6 +150,9 @@ def draw_over(specs, mode, samples, seed):
         raise CaseError(f"--over {draws[0]}=...: random values need --samples N (N >= 1), got {samples}")
     if mode == "grid":
         raise CaseError(f"--over {draws[0]}=...: random values are samples, swept together (--mode zip), not a grid")
+    # every path's values are held in memory (8 bytes each) before the sweep starts
+    check_memory(8 * samples * len(specs), f"--samples {samples} for {len(specs)} path{'s' * (len(specs) != 1)}",
+                 "give fewer samples, or run several sweeps with other --seed values")
     rng = np.random.default_rng(seed)
     return {p: v.draw(samples, rng) if isinstance(v, Draws) else v for p, v in specs}, "zip"
 
