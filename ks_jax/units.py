@@ -10,6 +10,7 @@ Unit strings in case files ("21 mph", "3496.531 lbf", "2300 lbf*ft*s^2") are par
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 from functools import lru_cache
@@ -169,6 +170,8 @@ def parse_quantity(value, kind: str) -> float:
         return float(text) * BARE_NUMBER_SCALE.get(kind, 1.0)
     except ValueError:
         pass
+    if "°" in text:
+        raise UnitError(f"'{text}': write the degree sign as deg: '{text.replace('°', ' deg').replace('  ', ' ')}'")
     number, unit = _split(text)
     if not unit:
         return float(number) * BARE_NUMBER_SCALE.get(kind, 1.0)
@@ -178,7 +181,9 @@ def parse_quantity(value, kind: str) -> float:
     try:
         q = ureg.Quantity(float(number), unit)
     except (pint.errors.UndefinedUnitError, pint.errors.DefinitionSyntaxError) as err:
-        raise UnitError(f"'{text}': unknown unit ({err})") from None
+        close = difflib.get_close_matches(unit, COMMON_UNITS.get(kind, ()), n=1, cutoff=0.5)
+        hint = f": did you mean '{number} {close[0]}'?" if close else ""
+        raise UnitError(f"'{text}': unknown unit ({err}){hint}") from None
     except Exception as err:  # pint raises several kinds for malformed text
         raise UnitError(f"'{text}' is not a '<number> <unit>' quantity ({err})") from None
     if kind == "dimensionless":
@@ -186,6 +191,8 @@ def parse_quantity(value, kind: str) -> float:
             raise UnitError(f"'{text}': a {kind} number takes no unit (give a plain number)")
         return float(q.to("").magnitude)
     if kind == "angle" and q.dimensionless:
+        if dict(q.to_root_units().unit_items()) != {"radian": 1}:  # a solid angle (sr), a percent, ...
+            raise UnitError(f"'{text}': an angle needs a plane-angle unit (deg, rad, turn, arcmin); '{unit}' is not one")
         return float(q.to(SI_UNITS[kind]).magnitude)
     if kind == "angular_velocity" and q.dimensionality == ureg.Quantity(1, "1/s").dimensionality \
             and not _names_an_angle(ureg, q):
@@ -194,11 +201,50 @@ def parse_quantity(value, kind: str) -> float:
     try:
         return float(q.to(SI_UNITS[kind]).magnitude)
     except pint.errors.DimensionalityError:
+        close = difflib.get_close_matches(unit, COMMON_UNITS.get(kind, ()), n=1, cutoff=0.5)
         raise UnitError(
             f"'{text}' has the dimension {q.dimensionality}, not that of {'an' if kind[0] in 'aeiou' else 'a'} "
             f"{kind.replace('_', ' ')}"
-            f" ({SI_UNITS[kind] or 'dimensionless'})"
+            f" ({SI_UNITS[kind] or 'dimensionless'})" + (f": did you mean '{number} {close[0]}'?" if close else "")
         ) from None
+
+
+# Units a reconstructionist writes for each kind: a unit of another dimension is matched against these for a
+# suggestion ("21 mhp" reads as milli-horsepower: did you mean mph?)
+COMMON_UNITS = {
+    "length": ("m", "cm", "mm", "km", "ft", "in", "yd", "mi"),
+    "mass": ("kg", "g", "lb", "slug", "t"),
+    "force": ("N", "kN", "lbf", "kgf"),
+    "velocity": ("mph", "km/h", "kph", "m/s", "ft/s", "knot"),
+    "angle": ("deg", "rad", "turn", "arcmin"),
+    "angular_velocity": ("deg/s", "rad/s", "rpm"),
+    "inertia": ("kg*m^2", "lbf*ft*s^2", "slug*ft^2"),
+    "energy": ("J", "kJ", "ft*lbf"),
+    "impulse": ("N*s", "lbf*s"),
+    "time": ("s", "ms"),
+}
+MAX_TURNS = 1e6  # an orientation given in radians or turns beyond this many turns is refused
+
+
+def parse_orientation(value) -> float:
+    """An orientation angle (``parse_quantity`` of kind "angle"), as radians within one turn either side of 0.
+    In degrees (a bare number, or a degree unit) it is reduced modulo 360 exactly, before any rounding: 1e20
+    deg is 280 deg. In another unit a value beyond ``MAX_TURNS`` turns is refused: its conversion to degrees
+    has already rounded away the orientation (float64 holds 1e20 rad only to the nearest 16384 rad)."""
+    x = parse_quantity(value, "angle")
+    degrees = value if isinstance(value, (int, float)) else _degrees_given(value)
+    if degrees is not None:
+        return math.fmod(float(degrees), 360.0) * DEG
+    if not abs(x) <= MAX_TURNS * 2.0 * math.pi:
+        raise UnitError(f"'{value}': {abs(x) / (2 * math.pi):.3g} turns; an orientation this large has no meaning "
+                        "in floating point: give it within a turn, or in degrees")
+    return math.fmod(x, 2.0 * math.pi)
+
+
+def _degrees_given(text):
+    """The number of degrees of a "<number> deg" string (deg, degree, degrees, °), None for another unit."""
+    m = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(deg|degree|degrees)?\s*", str(text))
+    return float(m.group(1)) if m else None
 
 
 def to_mph(v):

@@ -31,7 +31,7 @@ def _number(value, kind, path, case_name):
         raise CaseError(f"{_where(case_name, path)} = {value[:20]}... (an integer of "
                         f"{len(value.lstrip('-'))} digits): larger than any finite number")
     try:
-        x = U.parse_quantity(value, kind)
+        x = U.parse_orientation(value) if kind == "angle" else U.parse_quantity(value, kind)
     except U.UnitError as err:
         raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: {err}") from None
     if not math.isfinite(x):
