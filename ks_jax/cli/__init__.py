@@ -90,7 +90,7 @@ def main(argv=None) -> int:
         print(f"ks-jax: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("ks-jax: interrupted (nothing half-written is left behind)", file=sys.stderr)
+        print("ks-jax: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (ks-jax demo | head): not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -1,5 +1,5 @@
-"""Ctrl-C and kill during a command: unwound as exceptions, so that files half-written are removed and an
-earlier output stays as it was."""
+"""Ctrl-C and kill during a command: unwound as exceptions, so that an earlier output stays as it was and a
+sweep keeps the points it finished in a file of their own."""
 
 from __future__ import annotations
 

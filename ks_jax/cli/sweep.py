@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import replace
 from typing import NamedTuple
@@ -188,6 +189,12 @@ def run(args) -> int:
                        output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False)
         raise_if_stopped()
         writer.close()
+    except (KeyboardInterrupt, SystemExit):  # Ctrl-C or a kill: the finished points are kept, and said so
+        kept, rows = writer.keep_incomplete()
+        where = f"written to {kept}" if kept else "written"
+        print(f"ks-jax sweep: stopped: {rows:,} of {writer.points:,} points {where}; {args.out} is left as it was",
+              file=sys.stderr)
+        raise
     except BaseException:
         writer.abort()
         raise

@@ -90,7 +90,7 @@ class ResultWriter:
         self.points = math.prod(self.shape)
         self._partial = self.out.with_name(f".{self.out.name}.partial")
         self._file = self._parquet = self._tmpdir = None
-        self._arrays, self._pending, self._written = {}, [], 0
+        self._arrays, self._pending, self._written, self._npy_layout = {}, [], 0, {}
         self._arrow_csv = _arrow_csv() if self.kind == ".csv" else None
         # the swept values as the columns show them: in a .csv of a grid written by the csv module,
         # each value's text (what it writes for the Python float), formatted once instead of once per row
@@ -174,7 +174,45 @@ class ResultWriter:
                 header = {"descr": np.lib.format.dtype_to_descr(v.dtype), "fortran_order": False, "shape": self.shape}
                 np.lib.format.write_array_header_2_0(f, header)
                 self._arrays[p] = (path, f)
+                self._npy_layout[p] = (v.dtype, f.tell())
             self._arrays[p][1].write(np.ascontiguousarray(v).tobytes())
+
+    def keep_incomplete(self):
+        """After an interruption: the points written so far, finished as a file of their own beside ``out``,
+        named ``<stem>.incomplete<suffix>`` (``out`` is left as it was). Returns (its path, the points it
+        holds), counted from the file itself; (None, 0) where no point was written. A .npz holds them flat,
+        the first points of the sweep in row-major order (``flat_index`` says which)."""
+        target = self.out.with_name(f"{self.out.stem}.incomplete{self.out.suffix}")
+        try:
+            if self.kind == ".csv":
+                if self._file is None:
+                    return None, 0
+                self._file.close()
+                self._file = None
+                with self._partial.open("rb") as f:
+                    rows = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 24), b"")) - 1
+            elif self.kind == ".parquet":
+                self._flush_parquet()
+                if self._parquet is None:
+                    return None, 0
+                self._parquet.close()
+                self._parquet = None
+                import pyarrow.parquet as pq
+
+                rows = pq.read_metadata(self._partial).num_rows
+            else:
+                if not self._arrays:
+                    return None, 0
+                for _, f in self._arrays.values():
+                    f.flush()
+                # an output written in full for a point counts it: the least over the outputs
+                rows = min((path.stat().st_size - start) // dtype.itemsize
+                           for (path, _), (dtype, start) in zip(self._arrays.values(), self._npy_layout.values()))
+                self._write_npz(rows)
+            self._partial.replace(target)
+            return target, int(rows)
+        finally:
+            self.abort()
 
     def close(self):
         """Finish the file (.npz: store the arrays). Raises if not every point was written."""
@@ -197,15 +235,24 @@ class ResultWriter:
             self.abort()
             self.seconds += time.perf_counter() - t
 
-    def _write_npz(self):
+    def _write_npz(self, incomplete=None):
+        """The .npz from the arrays written; ``incomplete``: only that many first points, flat."""
         for _, f in self._arrays.values():
             f.close()
         codes = np.array(sorted(STATUS_TEXT))
         small = {f"axis:{p}": np.asarray(v) for p, v in self.axes.items()}
         small.update(status_codes=codes, status_texts=np.array([STATUS_TEXT[c] for c in codes]))
+        if incomplete is not None:
+            small["flat_index"] = np.arange(self.first, self.first + incomplete)
         with zipfile.ZipFile(self._partial, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
             for p, (path, _) in self._arrays.items():
-                zf.write(path, f"{p}.npy")
+                if incomplete is None:
+                    zf.write(path, f"{p}.npy")
+                    continue
+                dtype, start = self._npy_layout[p]
+                buf = io.BytesIO()
+                np.save(buf, np.fromfile(path, dtype, count=incomplete, offset=start))
+                zf.writestr(f"{p}.npy", buf.getvalue())
             for name, v in small.items():
                 buf = io.BytesIO()
                 np.save(buf, v)

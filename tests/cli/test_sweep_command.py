@@ -196,9 +196,9 @@ def test_cli_bad_path_is_a_clear_error(tmp_path, capsys):
 
 @pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
 def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
-    """``ks-jax sweep`` stopped by a kill (a batch system's SIGTERM) or Ctrl-C while it writes: the
-    unfinished file is removed, the earlier --out is as it was, the exit status says so (128 + signal,
-    130 for Ctrl-C) and no traceback is printed."""
+    """``ks-jax sweep`` stopped by a kill (a batch system's SIGTERM) or Ctrl-C while it writes: the points
+    it finished are kept in out.incomplete.csv (whole rows, as many as it says), the earlier --out is as it
+    was, the exit status says so (128 + signal, 130 for Ctrl-C) and no traceback is printed."""
     import signal
     import time
 
@@ -218,7 +218,15 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
     assert proc.returncode == code, err[-2000:]
     assert "Traceback" not in err
     assert out.read_text() == "earlier results\n"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv", "out.incomplete.csv"]
+    said = re.search(r"stopped: ([\d,]+) of 3,000,000 points written to (\S+); \S+ is left as it was", err)
+    assert said and said.group(2) == str(tmp_path / "out.incomplete.csv"), err[-2000:]
+    rows = read_table(tmp_path / "out.incomplete.csv")
+    n = int(said.group(1).replace(",", ""))
+    assert 0 < n < 3_000_000 and len(rows["status"]) == n
+    # the first points of the grid, in order (row-major: restitution varies fastest), each row whole
+    np.testing.assert_allclose(rows["contact.restitution"][:1000], np.linspace(0, 0.5, 1000))
+    assert np.all(np.isfinite(rows["contact.impulse_magnitude"]))
 
 
 def test_a_signal_that_a_library_swallowed_still_stops_the_command(monkeypatch):
