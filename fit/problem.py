@@ -163,6 +163,10 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     if field in INPUT_LIMITS and not INPUT_LIMITS[field][2]:  # a missing bound: the input's own limit
         lo = INPUT_LIMITS[field][0] if lo == -math.inf else lo
         hi = INPUT_LIMITS[field][1] if hi == math.inf else hi
+    for side, b in (("lower", lo), ("upper", hi)):
+        if math.isfinite(b) and abs(b) > MAX_MAGNITUDE:
+            raise CaseError(f"case '{name}': unknowns: {u.path}: {side} bound {_q(b, u.path)}: beyond {MAX_MAGNITUDE:g} "
+                            "(SI), where the fit cannot compute; leave the bound out for none")
     if math.isnan(lo) or math.isnan(hi) or not lo < hi:
         raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: the lower "
                         "bound must be below the upper bound")
@@ -177,10 +181,11 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
                         f"[{_q(lo, u.path)}, {_q(hi, u.path)}]")
     if u.prior is not None:
         mean, sigma = u.prior
-        if not (math.isfinite(mean) and math.isfinite(sigma) and sigma > 0):
+        if not (abs(mean) <= MAX_MAGNITUDE and MIN_SIGMA <= sigma <= MAX_MAGNITUDE):
             raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {_q(mean, u.path)}, "
                             f"sigma {_q(sigma, u.path)}): "
-                            "needs a finite mean and a positive sigma")
+                            f"needs a mean within +/-{MAX_MAGNITUDE:g} and a sigma within [{MIN_SIGMA:g}, "
+                            f"{MAX_MAGNITUDE:g}] (SI)")
     return Unknown(u.path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
                    None if u.prior is None else (float(u.prior[0]), float(u.prior[1])))
 
@@ -207,13 +212,27 @@ def evidence_kind(case: Case, path: str):
     return True, (360.0 if field in CIRCULAR_OUTPUTS else 0.0)
 
 
+# The magnitudes a fit computes with (SI, or degrees where the results are in degrees): beyond them a residual
+# (value - prediction) / sigma or a bound transform overflows or loses every digit (docs/fit.md, "Limits")
+MAX_MAGNITUDE = 1e12
+MIN_SIGMA = 1e-9
+
+
 def check_evidence(case: Case, e: Evidence) -> Evidence:
     evidence_kind(case, e.path)  # raises on a bad path
     if not math.isfinite(e.value):
         raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)} must be finite")
+    if not abs(e.value) <= MAX_MAGNITUDE:
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)}: beyond {MAX_MAGNITUDE:g} "
+                        "(SI), no measurement of a crash is; the fit cannot compute with it")
     if not (math.isfinite(e.sigma) and e.sigma > 0):
         raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {_q(e.sigma, e.path)}: must be positive "
                         "(an exact measurement is an input, not evidence)")
+    if not MIN_SIGMA <= e.sigma <= MAX_MAGNITUDE:
+        shown = f"{e.sigma:.3g} (SI)" if e.sigma < MIN_SIGMA else _q(e.sigma, e.path)
+        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {shown}: must be within "
+                        f"[{MIN_SIGMA:g}, {MAX_MAGNITUDE:g}] (SI): a smaller one makes its residual overflow, a larger "
+                        "one says nothing (leave the evidence out)")
     return Evidence(e.path.replace(" ", ""), float(e.value), float(e.sigma))
 
 

@@ -76,9 +76,12 @@ def fmt(x_si: float, kind: str, digits: int = 4, si: bool = False) -> str:
 
 def _number(v: float, digits: int) -> str:
     """``digits`` significant digits; 0 for a value within rounding of 0 (a speed at its bound of 0 is
-    1e-16 m/s), whole numbers with thousands separators from 10^digits on (89,798 ft lbf, not 8.98e+04)."""
+    1e-16 m/s), whole numbers with thousands separators from 10^digits on (89,798 ft lbf, not 8.98e+04), and
+    powers of ten from 1e15 on (a value far beyond any crash, shown so that its size can be read)."""
     if abs(v) < 1e-9:
         return "0"
+    if abs(v) >= 1e15:
+        return f"{v:.{digits}g}"
     if abs(v) >= 10**digits:
         return f"{v:,.0f}"
     return f"{v:.{digits}g}"

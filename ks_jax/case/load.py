@@ -50,13 +50,28 @@ def _inertia(value, path, case_name):
         if not np.allclose(m, m.T, rtol=1e-9, atol=0):
             raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be symmetric")
         if np.any(np.linalg.eigvalsh(m) <= 0):
-            raise CaseError(f"{_where(case_name, path)} = {value!r}: an inertia tensor must be positive definite")
+            raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: an inertia tensor must be positive definite")
+        _at_least(float(np.min(np.linalg.eigvalsh(m))), MIN_INERTIA, value, path, case_name, "kg m^2 (its least "
+                  "principal moment)")
         return m
     moments = _vector(value, "inertia", path, case_name, (3,))
     for i, x in enumerate(moments):
         if x <= 0:
             raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: principal moments of inertia must be positive")
+        _at_least(x, MIN_INERTIA, value[i], f"{path}[{i}]", case_name, "kg m^2")
     return np.diag(moments)
+
+
+# The least mass and moment of inertia a vehicle may have: the exchange inverts them (and the inertia's
+# determinant, a product of three moments), which smaller values would overflow (docs/model.md, "Limits")
+MIN_MASS = 1e-3  # kg
+MIN_INERTIA = 1e-3  # kg m^2
+
+
+def _at_least(x, least, raw, path, case_name, unit):
+    if x < least:
+        raise CaseError(f"{_where(case_name, path)} = {_shown(raw)}: must be at least {least:g} {unit}; the exchange "
+                        "divides by it")
 
 def _check_keys(d, allowed, path, case_name):
     """A table must be a dict; an unknown field (a typo, or a key of another tool) is ignored with
@@ -86,9 +101,11 @@ def _vehicle_inputs(d, i, case_name):
     if "mass" in d:
         mass = num("mass")
         _positive(mass, d["mass"], f"{path}.mass", case_name, "mass must be positive")
+        _at_least(mass, MIN_MASS, d["mass"], f"{path}.mass", case_name, "kg")
     elif "weight" in d:
         mass = num("weight") / U.G0
         _positive(mass, d["weight"], f"{path}.weight", case_name, "weight must be positive")
+        _at_least(mass, MIN_MASS, d["weight"], f"{path}.weight", case_name, "kg of mass")
     else:
         raise CaseError(f"{_where(case_name, path + '.mass')}: missing field (give mass or weight)")
     inertia = _inertia(_require(d, "inertia", path, case_name), f"{path}.inertia", case_name)
@@ -178,7 +195,7 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     """Read one case (a dict as in a JSON/TOML file). Raises CaseError."""
     if not isinstance(d, dict):
         raise CaseError(f"case '{default_name}': a case must be an object/table, got {type(d).__name__}")
-    name = str(d.get("name", default_name))
+    name = visible(str(d.get("name", default_name)))
     _check_keys(d, CASE_FIELDS, "", name)
     vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
     if vehicles is None:
@@ -193,7 +210,7 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     if "reference" in d:
         _check_reference(d["reference"], name)
     inputs = CaseInputs(veh, contact)
-    names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
+    names = tuple(visible(str(v.get("name", f"vehicle {i + 1}"))) for i, v in enumerate(vehicles))
     return Case(name, inputs, auto_point, auto_normal, names, None, d, source)
 
 def _check_reference(reference, case_name):
@@ -220,6 +237,14 @@ MAX_INTEGER_DIGITS = 400  # a longer integer literal is kept as its text: no flo
 class LongInteger(str):
     """An integer literal of a case file too long for any float (more than ``MAX_INTEGER_DIGITS`` digits),
     kept as its text so that its case, not the file, is refused (``units.parse_quantity`` names it)."""
+
+
+def visible(text: str) -> str:
+    """``text`` with its control characters written as escapes (``\\x1b``, ``\\n``): a name from a file reaches
+    the terminal, where an escape sequence could retitle or clear it, and a line break would forge lines."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _json_integer(text):
@@ -292,7 +317,7 @@ def cases_from_data(data, source=None) -> list[Case]:
             try:
                 out.append(case_from_dict(d, f"case {i + 1}", source))
             except CaseError as err:
-                out.append(Case(str(default), None, error=str(err), raw=d if isinstance(d, dict) else {},
+                out.append(Case(visible(str(default)), None, error=str(err), raw=d if isinstance(d, dict) else {},
                                 source=source))
         return out
     return [case_from_dict(data, Path(source).stem if source else "case", source)]

@@ -33,7 +33,8 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    """``ks-jax fit``: exit status 0, or 1 where a case of several was not fitted."""
+    """``ks-jax fit``: exit status 0 where every case was fitted, converged, with an impulse exchanged at its
+    estimate; 1 where one was not (each said on stderr); 2 for a file or an argument that is refused."""
     cases = load_cases(args.file)
     if args.starts < 1:
         raise CaseError(f"--starts {args.starts}: need at least one start")
@@ -65,4 +66,12 @@ def run(args) -> int:
     failed.update((k, r.status) for k, r in enumerate(results) if r is not None and r.status.startswith("invalid"))
     for k, message in sorted(failed.items()):
         print(f"ks-jax: case '{cases[k].name}' not fitted: {message}", file=sys.stderr)
-    return 1 if failed else 0
+    # a fit that ended without converging, or where the vehicles exchange no impulse, is no answer either: a
+    # script reading the exit status must be able to tell
+    unfinished = {k: r for k, r in enumerate(results) if r is not None and k not in failed
+                  and not (r.converged and r.status == "ok")}
+    for k, r in sorted(unfinished.items()):
+        why = "did not converge" if not r.converged else f"ended where the exchange is '{r.status}'"
+        print(f"ks-jax: case '{cases[k].name}': the fit {why} (see its notes); its estimate is not an answer",
+              file=sys.stderr)
+    return 1 if failed or unfinished else 0

@@ -8,7 +8,7 @@ from . import linalg as la
 from .results import ROUNDING
 
 
-FRICTION_CAP = 1e100
+FRICTION_CAP = (1e10, 1e100)  # float32, float64
 
 
 def friction_cone(j_stick, n, friction, smoothing=0.0):
@@ -43,10 +43,11 @@ def friction_cone(j_stick, n, friction, smoothing=0.0):
     n_c = la.dot(n, j_stick)
     t_c = j_stick - n_c * n
     t_norm = la.safe_norm(t_c)
-    # a friction above FRICTION_CAP sticks wherever the stick impulse pushes (unless |T_c| > 1e100 N_c), as
-    # any friction that large does: capped, mu N_c cannot overflow and make M infinite (which would drop
-    # the friction altogether: d = n)
-    friction = jnp.minimum(friction, FRICTION_CAP)
+    # a friction above FRICTION_CAP sticks wherever the stick impulse pushes (unless |T_c| > cap N_c), as any
+    # friction that large does: capped, mu N_c cannot overflow and make M infinite (which would drop the
+    # friction altogether: d = n)
+    dtype = jnp.result_type(friction, n_c)
+    friction = jnp.minimum(friction, jnp.asarray(FRICTION_CAP[jnp.finfo(dtype).bits > 32], dtype))
     a = friction * jnp.maximum(n_c, 0.0)
     m = cone_scale(a, t_norm, smoothing)
     f = la.safe_div(friction, m)
