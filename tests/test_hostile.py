@@ -1,0 +1,221 @@
+"""What users and files can throw at ks-jax, and what it does: a clear message naming the case, the field, the
+value and the rule, the documented exit status, no traceback, the other cases kept, and no silent wrong answer.
+
+- an integer too long for a float (400 and 5000 digits) refuses its case, not the file;
+- lists nested 100000 deep, and 40 deep, are refused, as is a file that never ends (/dev/zero) or is too large;
+- a file of more cases than the limit is refused with the limit;
+- an output folder that cannot be written is refused before any work;
+- --samples beyond the machine's memory is refused up front;
+- a friction of 1e308 is a friction large enough to stick, as 100 is;
+- an orientation of 1e20 deg is 280 deg; 1e20 rad and a solid angle (30 sr) are refused;
+- "21 mhp", "30 kgs" and "90°" get a suggestion;
+- a case name with terminal escape sequences prints them escaped;
+- evidence, sigmas and bounds of 1e300 or 1e-300 are refused naming the evidence or the bound;
+- a denormal moment of inertia (1e-320) is refused where the file is read, with its value;
+- a fit whose bounds never give a collision exits 1;
+- a stopped sweep keeps its finished points, whole, in a file saying it is incomplete (.csv, .npz, .parquet).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import tomllib
+
+import numpy as np
+import pytest
+
+import fit
+import ks_jax
+from fit.synthetic import oblique_case
+from ks_jax import units as U
+from ks_jax.case import CaseError, case_from_dict, load_cases
+from ks_jax.case import load as load_module
+from ks_jax.sweeps.files import ResultWriter
+from samples import CASES, SEED0, SEED1, read_table, run_cli
+
+FIT_CASE = CASES / "fit_seed_001.json"
+
+
+def seed0():
+    return json.loads(SEED0.read_text())
+
+
+def written(tmp_path, name, data):
+    path = tmp_path / name
+    path.write_text(data if isinstance(data, str) else json.dumps(data))
+    return path
+
+
+def test_an_integer_too_long_for_a_float_refuses_its_case_only(tmp_path):
+    cases = []
+    for k in range(6):
+        d = seed0()
+        d["name"] = f"case {k}"
+        cases.append(d)
+    cases[2]["vehicles"][0]["weight"] = "@400@"
+    cases[4]["vehicles"][1]["weight"] = "@5000@"
+    text = json.dumps({"cases": cases}).replace('"@400@"', "1" * 400).replace('"@5000@"', "-" + "9" * 5000)
+    loaded = load_cases(written(tmp_path, "six.json", text))
+    assert [c.valid for c in loaded] == [True, True, False, True, False, True]
+    assert "vehicles[0].weight" in loaded[2].error and "about 400 digits" in loaded[2].error
+    assert "vehicles[1].weight = -9999" in loaded[4].error and "an integer of 5000 digits" in loaded[4].error
+    assert all(len(c.error) < 400 for c in loaded if not c.valid)  # the value is shown cut, not in full
+
+
+def test_lists_nested_too_deep_and_files_too_large_are_refused(tmp_path):
+    with pytest.raises(CaseError, match="nested too deep to read"):
+        load_cases(written(tmp_path, "deep.json", "[" * 100_000 + "]" * 100_000))
+    deep = '{"name": "x", "vehicles": ' + "[" * 40 + "]" * 40 + ', "contact": {}}'
+    with pytest.raises(CaseError, match="nested more than 32 deep"):
+        load_cases(written(tmp_path, "deep40.json", deep))
+    big = tmp_path / "big.json"
+    with big.open("wb") as f:  # a sparse file one byte over the limit
+        f.truncate(load_module.MAX_FILE_BYTES + 1)
+    with pytest.raises(CaseError, match="larger than 64 MiB, the limit of a case file"):
+        load_cases(big)
+    if os.path.exists("/dev/zero"):
+        with pytest.raises(CaseError, match="larger than 64 MiB"):
+            load_cases("/dev/zero")
+
+
+def test_a_file_of_more_cases_than_the_limit_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setattr(load_module, "MAX_CASES", 3)
+    with pytest.raises(CaseError, match="4 cases, more than the 3 of a case file"):
+        load_cases(written(tmp_path, "many.json", {"cases": [seed0()] * 4}))
+
+
+def test_an_output_folder_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(ks_jax.files.tempfile, "NamedTemporaryFile", refuse)  # as a read-only folder does
+    code, out, err = run_cli(capsys, "sweep", str(SEED1), "--over", "vehicles[1].speed=1:2:3", "--out",
+                             str(tmp_path / "x.csv"))
+    assert code == 2 and out == "" and "cannot write in the folder" in err and "Permission denied" in err
+    code, out, err = run_cli(capsys, "solve", str(SEED1), "--plot", str(tmp_path / "x.png"))
+    assert code == 2 and out == "" and "--plot" in err and "cannot write in the folder" in err
+
+
+def test_samples_beyond_the_machine_memory_are_refused_up_front(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "sweep", str(SEED1), "--over", "vehicles[1].speed=uniform:10:20",
+                           "--samples", str(10**12), "--out", str(tmp_path / "x.csv"))
+    assert code == 2 and "--samples 1000000000000" in err and "GiB, more than this machine's" in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_friction_beyond_any_real_value_sticks_as_a_large_one():
+    """1e308: mu N would overflow; it must give what any friction large enough to stick gives."""
+    d = oblique_case(np.random.default_rng(3))
+    results = []
+    for mu in (100.0, 1e308):
+        e = copy.deepcopy(d)
+        e["contact"]["friction"] = mu
+        results.append(ks_jax.solve([case_from_dict(e)])[0].result)
+    stick, huge = results
+    assert not bool(stick.contact.sliding) and not bool(huge.contact.sliding)
+    for a, b in ((stick.contact.impulse, huge.contact.impulse),
+                 (stick.vehicles[0].yaw_rate_after, huge.vehicles[0].yaw_rate_after)):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-12, atol=1e-12)
+
+
+def test_orientations_reduce_exactly_or_are_refused():
+    def yaw(value):
+        d = seed0()
+        d["vehicles"][0]["yaw"] = value
+        return float(case_from_dict(d).inputs.vehicles[0].yaw)
+
+    # 10^20 = 280 (mod 360), exactly: 10^20 is 0 mod 8 and 10 mod 45
+    assert yaw(1e20) == yaw("1e20 deg") == 280.0 * U.DEG
+    assert yaw(720) == 0.0 and yaw("-400 deg") == -40.0 * U.DEG and yaw(30) == 30 * U.DEG
+    assert math.isclose(yaw("2 rad"), 2.0, rel_tol=1e-15)
+    with pytest.raises(CaseError, match=r"vehicles\[0\]\.yaw = '1e20 rad'.*turns"):
+        yaw("1e20 rad")
+    with pytest.raises(CaseError, match="an angle needs a plane-angle unit.*'sr' is not one"):
+        yaw("30 sr")
+
+
+def test_units_that_look_wrong_get_a_suggestion():
+    with pytest.raises(U.UnitError, match="did you mean '21 mph'"):
+        U.parse_quantity("21 mhp", "velocity")
+    with pytest.raises(U.UnitError, match="did you mean '30 kg'"):
+        U.parse_quantity("30 kgs", "mass")
+    with pytest.raises(U.UnitError, match="write the degree sign as deg: '90 deg'"):
+        U.parse_quantity("90°", "angle")
+
+
+def test_a_name_with_terminal_escapes_prints_them_escaped(tmp_path, capsys):
+    d = tomllib.loads(SEED1.read_text())
+    d["name"] = "Kia\x1b]0;retitled\x07\x1b[2J K5\nforged line"
+    path = written(tmp_path, "escape.json", d)
+    case = ks_jax.load_case(path)
+    assert case.name.isprintable() and "\\x1b]0;retitled\\x07" in case.name and "\\n" in case.name
+    code, out, err = run_cli(capsys, "solve", str(path))
+    assert code == 0 and "\x1b" not in out + err and "\x07" not in out + err
+    assert "Case: Kia\\x1b]0;retitled" in out
+
+
+@pytest.mark.parametrize("where, value, message", [
+    ("value", 1e300, r"evidence: vehicles\[0\]\.delta_v_magnitude: value .*1e\+300 m/s\): beyond 1e\+12"),
+    ("sigma", 1e300, r"evidence: vehicles\[0\]\.delta_v_magnitude: sigma = .*1e\+300 m/s\): must be within"),
+    ("sigma", 1e-300, r"evidence: vehicles\[0\]\.delta_v_magnitude: sigma = 1e-300 \(SI\): must be within"),
+    ("bound", 1e300, r"unknowns: vehicles\[1\]\.speed: upper bound .*1e\+300 m/s\): beyond 1e\+12"),
+])
+def test_evidence_and_bounds_beyond_computing_are_refused_by_name(where, value, message):
+    case = ks_jax.load_case(FIT_CASE)
+    evidence = copy.deepcopy(case.raw["evidence"])
+    unknowns = copy.deepcopy(case.raw["unknowns"])
+    if where == "bound":
+        unknowns["vehicles[1].speed"]["bounds"] = [0, value]
+    else:
+        evidence[0][where] = value
+    with pytest.raises(CaseError, match=message):
+        fit.reconstruct(case, unknowns, evidence)
+
+
+def test_a_denormal_moment_of_inertia_is_refused_where_the_file_is_read():
+    d = seed0()
+    d["vehicles"][1]["inertia"] = [1e-320, 2000, 2000]
+    with pytest.raises(CaseError, match=r"vehicles\[1\]\.inertia\[0\] = 1e-320: must be at least 0\.001 kg m\^2"):
+        case_from_dict(d)
+    d["vehicles"][1]["inertia"] = [[1e-320, 0, 0], [0, 2000, 0], [0, 0, 2000]]
+    with pytest.raises(CaseError, match=r"vehicles\[1\]\.inertia = .*must be at least 0\.001"):
+        case_from_dict(d)
+
+
+def test_a_fit_whose_bounds_never_give_a_collision_exits_1(tmp_path, capsys):
+    d = json.loads(FIT_CASE.read_text())
+    d["unknowns"]["vehicles[1].speed"]["bounds"] = ["0 mph", "0.001 mph"]  # the Kia never reaches the Lucid
+    code, out, err = run_cli(capsys, "fit", str(written(tmp_path, "never.json", d)))
+    assert code == 1 and "Traceback" not in err
+    assert "the fit did not converge" in err or "ended where the exchange is" in err
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".parquet"])
+def test_a_stopped_sweep_keeps_its_finished_points_whole(tmp_path, suffix):
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    axes = {"vehicles[1].speed": np.linspace(1.0, 10.0, 10), "contact.restitution": np.linspace(0.0, 0.5, 6)}
+    out = tmp_path / f"out{suffix}"
+    writer = ResultWriter(out, axes, "grid", (10, 6))
+
+    def chunk(lo, hi):
+        return {"contact.impulse_magnitude": np.arange(lo, hi, dtype=float), "status": np.zeros(hi - lo, np.int8)}
+
+    writer.chunk(0, 24, chunk(0, 24))
+    writer.chunk(24, 48, chunk(24, 48))
+    kept, rows = writer.keep_incomplete()
+    assert kept == tmp_path / f"out.incomplete{suffix}" and rows == 48
+    assert sorted(p.name for p in tmp_path.iterdir()) == [kept.name]  # the unfinished file became it; no out
+    if suffix == ".npz":
+        with np.load(kept) as z:
+            np.testing.assert_array_equal(z["contact.impulse_magnitude"], np.arange(48.0))
+            np.testing.assert_array_equal(z["flat_index"], np.arange(48))
+    else:
+        table = read_table(kept)
+        np.testing.assert_array_equal(table["contact.impulse_magnitude"], np.arange(48.0))
+        np.testing.assert_allclose(table["contact.restitution"][:6], np.linspace(0.0, 0.5, 6))
+    nothing = ResultWriter(tmp_path / f"none{suffix}", axes, "grid", (10, 6))
+    assert nothing.keep_incomplete() == (None, 0)
