@@ -233,8 +233,10 @@ def parse_orientation(value) -> float:
     has already rounded away the orientation (float64 holds 1e20 rad only to the nearest 16384 rad)."""
     x = parse_quantity(value, "angle")
     degrees = value if isinstance(value, (int, float)) else _degrees_given(value)
-    if degrees is not None:
+    if degrees is not None and math.isfinite(degrees):
         return math.fmod(float(degrees), 360.0) * DEG
+    if not math.isfinite(x):
+        return x  # refused by the caller, which names the field
     if not abs(x) <= MAX_TURNS * 2.0 * math.pi:
         raise UnitError(f"'{value}': {abs(x) / (2 * math.pi):.3g} turns; an orientation this large has no meaning "
                         "in floating point: give it within a turn, or in degrees")

@@ -7,10 +7,12 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - an output folder that cannot be written is refused before any work;
 - --samples beyond the machine's memory is refused up front;
 - a friction of 1e308 is a friction large enough to stick, as 100 is;
-- an orientation of 1e20 deg is 280 deg; 1e20 rad and a solid angle (30 sr) are refused;
+- an orientation of 1e20 deg is 280 deg; 1e20 rad, 1e999 deg, a solid angle (30 sr) and a sweep over 1e21 deg
+  are refused;
 - "21 mhp", "30 kgs" and "90°" get a suggestion;
 - a case name with terminal escape sequences prints them escaped;
-- evidence, sigmas and bounds of 1e300 or 1e-300 are refused naming the evidence or the bound;
+- evidence, sigmas and bounds of 1e300 or 1e-300 are refused naming the evidence or the bound, and evidence
+  named by a number, a list or nothing, as not a path;
 - a denormal moment of inertia (1e-320) is refused where the file is read, with its value;
 - a fit whose bounds never give a collision exits 1;
 - a stopped sweep keeps its finished points, whole, in a file saying it is incomplete (.csv, .npz, .parquet).
@@ -135,6 +137,10 @@ def test_orientations_reduce_exactly_or_are_refused():
         yaw("1e20 rad")
     with pytest.raises(CaseError, match="an angle needs a plane-angle unit.*'sr' is not one"):
         yaw("30 sr")
+    with pytest.raises(CaseError, match=r"vehicles\[0\]\.yaw = '1e999': must be a finite number"):
+        yaw("1e999")
+    with pytest.raises(CaseError, match="2.78e\\+18 turns.*at most 1e\\+06 turns"):  # a sweep's angles alike
+        ks_jax.sweep(ks_jax.load_case(SEED0), {"vehicles[1].yaw": [0.0, math.radians(1e21)]})
 
 
 def test_units_that_look_wrong_get_a_suggestion():
@@ -173,6 +179,16 @@ def test_evidence_and_bounds_beyond_computing_are_refused_by_name(where, value, 
         evidence[0][where] = value
     with pytest.raises(CaseError, match=message):
         fit.reconstruct(case, unknowns, evidence)
+
+
+def test_evidence_named_by_something_other_than_a_path_is_refused():
+    case = ks_jax.load_case(FIT_CASE)
+    for quantity, message in ((0, "a path is a string"), (1.5, "a path is a string"), (None, "needs quantity"),
+                              (["vehicles[0].delta_v_magnitude"], "a path is a string"), ({"a": 1}, "a path is a string")):
+        evidence = copy.deepcopy(case.raw["evidence"])
+        evidence[0]["quantity"] = quantity
+        with pytest.raises(CaseError, match=message):
+            fit.reconstruct(case, case.raw["unknowns"], evidence)
 
 
 def test_a_denormal_moment_of_inertia_is_refused_where_the_file_is_read():

@@ -23,10 +23,16 @@ def canonical_path(path: str) -> str:
     """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
     return path.strip().replace(" ", "")
 
-@functools.lru_cache(maxsize=4096)
 def parse_path(path: str):
     """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,)).
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
+    if not isinstance(path, str):
+        raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
+    return _parse_path(path)
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse_path(path: str):
     m = _PATH.match(canonical_path(path))
     if not m:
         raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")

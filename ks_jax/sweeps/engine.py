@@ -19,8 +19,9 @@ from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
-from ..case import input_ties, set_input, undefined_kind
+from ..case import input_kind, input_ties, set_input, undefined_kind
 from ..case.errors import CaseError
+from ..units import MAX_TURNS
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiler_options
 from ..model.types import INVALID_NONFINITE, STATUS_TEXT, status_text
@@ -180,6 +181,11 @@ def _check_values(path, values):
         raise CaseError(f"sweep over '{path}': the values must be numbers (SI): {err}") from None
     if arr.ndim != 1 or arr.size == 0:
         raise CaseError(f"sweep over '{path}': give a non-empty 1-D list of values (SI), got shape {arr.shape}")
+    if input_kind(path) == "angle":
+        turns = np.abs(arr[np.isfinite(arr)]) / (2 * math.pi)
+        if turns.size and turns.max() > MAX_TURNS:
+            raise CaseError(f"sweep over '{path}': {turns.max():.3g} turns; an orientation this large has no meaning "
+                            f"in floating point (at most {MAX_TURNS:g} turns): give angles within a turn")
     return arr
 
 
