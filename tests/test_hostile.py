@@ -15,7 +15,8 @@ value and the rule, the documented exit status, no traceback, the other cases ke
   named by a number, a list or nothing, as not a path;
 - a denormal moment of inertia (1e-320) is refused where the file is read, with its value;
 - a fit whose bounds never give a collision exits 1;
-- a stopped sweep keeps its finished points, whole, in a file saying it is incomplete (.csv, .npz, .parquet).
+- a stopped sweep keeps its finished points, whole, in a file saying it is incomplete (.csv, .npz, .parquet);
+- every field of the shipped cases, given any of a list of hostile values, is read or refused by name.
 """
 
 from __future__ import annotations
@@ -26,10 +27,12 @@ import math
 import os
 import tomllib
 
+import jax
 import numpy as np
 import pytest
 
 import fit
+import fit.problem
 import ks_jax
 from fit.synthetic import oblique_case
 from ks_jax import units as U
@@ -235,3 +238,48 @@ def test_a_stopped_sweep_keeps_its_finished_points_whole(tmp_path, suffix):
         np.testing.assert_allclose(table["contact.restitution"][:6], np.linspace(0.0, 0.5, 6))
     nothing = ResultWriter(tmp_path / f"none{suffix}", axes, "grid", (10, 6))
     assert nothing.keep_incomplete() == (None, 0)
+
+
+HOSTILE_VALUES = [None, True, "", " ", "abc", "nan", "inf", "-inf", "1e999", "-0", 0, -1, 1e-320, 1e308, -1e308, [],
+                  [1], [1, 2, 3, 4], {}, {"a": 1}, "12 parsecs", "5 mph mph", "1/0 m", "3 m/s^-1", "\u202e12", "1_000",
+                  [[1, 2], [3]], ["1 m", None], "0x10", "\u0661\u0662", "1e5 kg*m^2/s", "10 deg/s/s", "30 sr"]
+
+
+def _leaves(d, prefix=()):
+    """The paths of a case dict's values (into vehicles by index), names and free text left out."""
+    if isinstance(d, dict):
+        for k, v in d.items():
+            if k not in ("name", "description", "reference"):
+                yield from _leaves(v, prefix + (k,))
+    elif isinstance(d, list) and d and isinstance(d[0], dict):
+        for i, v in enumerate(d):
+            yield from _leaves(v, prefix + (i,))
+    else:
+        yield prefix
+
+
+def test_every_field_of_a_case_with_any_hostile_value_is_read_or_refused():
+    """Each value of the shipped seed case and fit case replaced by each of ``HOSTILE_VALUES``: the case is read,
+    or refused with a CaseError naming the field; nothing else is raised, and what is read is finite."""
+    for source in (SEED0, FIT_CASE):
+        base = json.loads(source.read_text())
+        for path in _leaves(base):
+            for value in HOSTILE_VALUES:
+                d = copy.deepcopy(base)
+                holder = d
+                for key in path[:-1]:
+                    holder = holder[key]
+                holder[path[-1]] = value
+                try:
+                    case = case_from_dict(d)
+                except CaseError as err:
+                    assert path[-1] in str(err) or "unknowns" in path or "evidence" in path, (path, value, err)
+                    continue
+                leaves = [np.asarray(x, float) for x in jax.tree_util.tree_leaves(case.inputs)]
+                assert all(np.all(np.isfinite(x)) for x in leaves), (path, value)
+                if "unknowns" in d:
+                    try:
+                        fit.problem.parse_unknowns(case, d["unknowns"])
+                        fit.problem.parse_evidence(case, d["evidence"])
+                    except CaseError:
+                        pass
