@@ -18,6 +18,7 @@ import numpy as np
 from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
+from ks_jax.limits import check_memory
 from ks_jax.model.types import OK, status_text
 
 from .monte_carlo import linearisation_notes, refit_perturbed
@@ -373,6 +374,14 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         if p != problem:
             raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
                             f"in every case (differs from case '{cases[0].name}')")
+    # every start of every case is a row held at once (its inputs, Jacobian and state), as is every start of
+    # the Monte Carlo refits drawn at once: refused up front where that cannot fit in memory
+    m, n = len(problem.evidence), len(problem.unknowns)
+    row_bytes = 8 * (3 * (m + n) * (n + 1) + 8 * n) + 2048
+    check_memory(len(cases) * starts * row_bytes, f"{len(cases)} case(s) x {starts} starts",
+                 "give fewer starts (--starts) or fit fewer cases at once")
+    check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
+                 "give fewer refits")
     arrays = [_arrays(c, u, e, dtype) for c, (u, e, _) in zip(cases, prepared)]
     rng = np.random.default_rng(seed)
     x0 = np.stack([first_starts(u, a, starts, rng) for (u, _, _), a in zip(prepared, arrays)])

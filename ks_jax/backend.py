@@ -81,3 +81,4 @@ def chunk_rows(bytes_per_row: int, device=None) -> int:
     fits = int(MEMORY_SHARE * free_bytes(device)) // max(int(bytes_per_row) * WORKING_SET, 1)
     rows = 1 << max(fits, 1).bit_length() - 1
     return min(max(rows, MIN_ROWS), MAX_ROWS)
+

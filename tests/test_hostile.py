@@ -5,7 +5,7 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - lists nested 100000 deep, and 40 deep, are refused, as is a file that never ends (/dev/zero) or is too large;
 - a file of more cases than the limit is refused with the limit;
 - an output folder that cannot be written is refused before any work;
-- --samples beyond the machine's memory is refused up front;
+- --samples, --starts and --monte-carlo beyond the machine's memory are refused up front;
 - a friction of 1e308 is a friction large enough to stick, as 100 is;
 - an orientation of 1e20 deg is 280 deg; 1e20 rad, 1e999 deg, a solid angle (30 sr) and a sweep over 1e21 deg
   are refused;
@@ -109,6 +109,13 @@ def test_samples_beyond_the_machine_memory_are_refused_up_front(tmp_path, capsys
                            "--samples", str(10**12), "--out", str(tmp_path / "x.csv"))
     assert code == 2 and "--samples 1000000000000" in err and "GiB, more than this machine's" in err
     assert not list(tmp_path.iterdir())
+
+
+def test_starts_and_refits_beyond_the_machine_memory_are_refused_up_front(capsys):
+    code, _, err = run_cli(capsys, "fit", str(FIT_CASE), "--starts", str(10**8))
+    assert code == 2 and "1 case(s) x 100000000 starts needs" in err and "give fewer starts" in err
+    code, _, err = run_cli(capsys, "fit", str(FIT_CASE), "--monte-carlo", str(10**12))
+    assert code == 2 and "--monte-carlo 1000000000000 x 8 starts needs" in err and "Traceback" not in err
 
 
 def test_a_friction_beyond_any_real_value_sticks_as_a_large_one():

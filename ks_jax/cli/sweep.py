@@ -15,7 +15,8 @@ from ..case.errors import CaseError
 from ..plot import check_picture_path, save_sweep_view
 from ..sweeps import ResultWriter, SweepSample, sweep
 from ..sweeps.columns import typed_back
-from ..sweeps.engine import check_distinct, check_memory, result_shape
+from ..limits import check_memory
+from ..sweeps.engine import check_distinct, result_shape
 from ..sweeps.files import CSV_HINT_POINTS
 from ..units import UnitError, parse_quantity
 from .options import seed_option, smoothing_option

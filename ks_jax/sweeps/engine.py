@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import operator
-import os
 import time
 from collections.abc import Mapping
 from functools import lru_cache
@@ -24,6 +23,7 @@ from ..case.errors import CaseError
 from ..units import MAX_TURNS
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiler_options
+from ..limits import check_memory
 from ..model.types import INVALID_NONFINITE, STATUS_TEXT, status_text
 from ..progress import Progress
 from ..solve import stages
@@ -147,22 +147,6 @@ def _selected(result, outputs, out_dtype):
         out[p] = x if x.dtype == jnp.bool_ else x.astype(out_dtype)
     out["status"] = result.contact.status.astype(jnp.int8)
     return out
-
-
-def _memory_bytes():
-    """This machine's physical memory in bytes (None where the system does not say)."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return None
-
-
-def check_memory(nbytes, what, advice):
-    """CaseError where ``what`` needs more bytes than the machine has (before numpy's MemoryError)."""
-    memory = _memory_bytes()
-    if memory is not None and nbytes > memory:
-        raise CaseError(f"{what} needs {nbytes / 2**30:.3g} GiB, more than this machine's {memory / 2**30:.3g} GiB: "
-                        f"{advice}")
 
 
 def _whole_number(value, what):

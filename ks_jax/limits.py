@@ -1,0 +1,24 @@
+"""Work refused before it starts because it would not fit in this machine's memory (a sweep's values, its kept
+results, the rows of a fit): a message with the figure, rather than an allocation that fails part way."""
+
+from __future__ import annotations
+
+import os
+
+from .case.errors import CaseError
+
+
+def memory_bytes():
+    """This machine's physical memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes, what, advice):
+    """CaseError where ``what`` needs more bytes than the machine has."""
+    memory = memory_bytes()
+    if memory is not None and nbytes > memory:
+        raise CaseError(f"{what} needs {nbytes / 2**30:.3g} GiB, more than this machine's {memory / 2**30:.3g} GiB: "
+                        f"{advice}")
