@@ -142,10 +142,11 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     status = "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)"
     named = "; the input farthest out of scale: vehicles[1].speed = 1e+300 m/s"
     assert json.loads(out)["cases"][0] == {"name": "units check", "vehicles": [], "contact": {"status": status + named}}
-    # the input named is the one out of scale, not survey coordinates: a weight of 1e-300 lbf is
-    # 1e-300 * 0.45359237 kg, in a scene moved 300 km east and north
+    # the input named is the one out of scale, not survey coordinates: a speed of 1e200 mph is
+    # 1e200 * 0.44704 m/s, in a scene moved 300 km east and north (a mass of 1e-300 kg, the other way out of
+    # scale, is refused where the file is read: tests/test_hostile.py)
     far = copy.deepcopy(US_CASE)
-    far["vehicles"][0]["weight"] = "1e-300 lbf"
+    far["vehicles"][0]["speed"] = "1e200 mph"
     for v in far["vehicles"]:
         v["position"] = [f"{300000 + 0.3048 * float(x.split()[0])} m" for x in v["position"]]
     far["contact"]["point"] = [f"{300000 + 0.3048 * float(x.split()[0])} m" for x in far["contact"]["point"][:2]] + \
@@ -154,7 +155,7 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     code, out, _ = run_cli(capsys, "solve", str(path), "--json")
     far_res, good = json.loads(out)["cases"]
     assert code == 1 and good["contact"]["status"] == "ok"
-    assert far_res["contact"]["status"] == status + "; the input farthest out of scale: vehicles[0].mass = 4.5359e-301 kg"
+    assert far_res["contact"]["status"] == status + "; the input farthest out of scale: vehicles[0].speed = 4.4704e+199 m/s"
 
 
 def test_state_needs_a_height_for_a_2d_position():
