@@ -4,12 +4,12 @@ vmapped call, or in calls of one row count where a fit and its Monte Carlo refit
 from __future__ import annotations
 
 from functools import partial
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ks_jax.backend import row_placement
 from ks_jax.compilation import quick_jit
 from ks_jax.model.types import OK
 
@@ -154,16 +154,3 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
     return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
             for k in parts[0]}
 
-
-class RowPlacement(NamedTuple):
-    rows: jax.sharding.Sharding  # arrays with the rows first: split along them
-    replicated: jax.sharding.Sharding  # the same on every device
-
-
-def row_placement(devices) -> RowPlacement:
-    """How a call's arrays are put on ``devices``: on the one device, or split along the rows over a 1-D
-    mesh of several (XLA then runs each device's rows there; the solver's loop ends when every row on every
-    device has converged)."""
-    mesh = jax.sharding.Mesh(np.array(devices), ("rows",))
-    return RowPlacement(jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("rows")),
-                        jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec()))

@@ -14,8 +14,10 @@ the accelerator's logic is exercised and tested where no accelerator is: both pa
 from __future__ import annotations
 
 import contextlib
+from typing import NamedTuple
 
 import jax
+import numpy as np
 
 CPU_CHUNK_ROWS = 1 << 14  # rows per chunk on a CPU: a stage's inputs and outputs within its last-level cache
 # On an accelerator: the share of the device's free memory that one chunk's working set may take, the working
@@ -82,3 +84,15 @@ def chunk_rows(bytes_per_row: int, device=None) -> int:
     rows = 1 << max(fits, 1).bit_length() - 1
     return min(max(rows, MIN_ROWS), MAX_ROWS)
 
+
+class RowPlacement(NamedTuple):
+    rows: jax.sharding.Sharding  # arrays with the rows first: split along them
+    replicated: jax.sharding.Sharding  # the same on every device
+
+
+def row_placement(devices) -> RowPlacement:
+    """How a batch's arrays are put on ``devices`` (a sweep's chunks, a fit's rows): on the one device, or
+    split along the rows over a 1-D mesh of several, XLA running each device's rows there."""
+    mesh = jax.sharding.Mesh(np.array(devices), ("rows",))
+    return RowPlacement(jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("rows")),
+                        jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec()))

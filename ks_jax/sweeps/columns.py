@@ -75,8 +75,9 @@ def outputs_in_units(outputs, units):
 
 
 def invalid_rows(codes):
-    """Which status codes are "invalid: ..." (every code from ``INVALID_NONFINITE`` on)."""
-    return np.asarray(codes) >= INVALID_NONFINITE
+    """Which status codes are "invalid: ..." (every code from ``INVALID_NONFINITE`` on); NumPy or JAX arrays
+    (inside a program too)."""
+    return (codes if hasattr(codes, "dtype") else np.asarray(codes)) >= INVALID_NONFINITE
 
 
 def missing_flags(cols):

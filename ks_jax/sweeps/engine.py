@@ -13,20 +13,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..backend import chunk_rows, on_cpu
+from ..backend import chunk_rows, on_cpu, row_placement
 from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
 from ..case import input_kind, input_ties, set_input, undefined_kind
 from ..case.errors import CaseError
-from ..units import MAX_TURNS
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiler_options
 from ..limits import check_memory
-from ..model.types import INVALID_NONFINITE, STATUS_TEXT, status_text
+from ..model.types import STATUS_TEXT, status_text
 from ..progress import Progress
 from ..solve import stages
+from ..units import MAX_TURNS
+from .columns import invalid_rows
 from .result import SweepResult
 
 
@@ -103,14 +104,12 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
     rebuilds the rows' inputs from ``base`` and the values, which costs less than storing them), and returns
     the requested outputs (NaN where undefined), the status, and, over the rows before ``stop``, the count
     of each status (``STATUS_CODES``, then any other) and of undefined values per output in
-    ``undefined``: a sweep that keeps nothing then copies none of its rows to the host. ``static_sizes``: the axes' sizes compiled
-    in (a sweep of several chunks: dividing by a constant is cheaper), or None: read from ``sizes`` (a whole
+    ``undefined``: a sweep that keeps nothing then copies none of its rows to the host. ``static_sizes``: the
+    axes' sizes compiled in (a sweep of several chunks: dividing by a constant is cheaper), or None: read from ``sizes`` (a whole
     sweep in one chunk: a sweep of another size in the same ``_bucket`` runs the same program). ``quick``:
-    compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced on the
-    CPU's path only)."""
-    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-    rows = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
-    replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced
+    on the CPU's path only)."""
+    rows, replicated = row_placement(devices)
     pipeline = stages(auto_point, auto_normal, smoothing)
 
     def chunk(start, stop, axes, sizes, total, base):
@@ -127,7 +126,7 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
         counted = start + jnp.arange(n_rows, dtype=start.dtype) < stop
         status = out["status"].astype(jnp.int32)
         known = [jnp.sum(counted & (status == c), dtype=jnp.int32) for c in STATUS_CODES]
-        solved = counted & (status < INVALID_NONFINITE)
+        solved = counted & ~invalid_rows(status)
         counts = {"status": jnp.stack(known + [jnp.sum(counted, dtype=jnp.int32) - sum(known)]),
                   "undefined": jnp.stack([jnp.sum(solved & jnp.isnan(out[p]), dtype=jnp.int32) for p in undefined]
                                          or [jnp.int32(0)])}
