@@ -38,6 +38,7 @@ import tempfile
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 
 from . import units
 
@@ -69,6 +70,22 @@ def quick_jit(fun, **jit_kwargs):
 def compiler_options(quick: bool):
     """The per-program options of a program that is ``quick`` (``QUICK_CPU`` on a CPU) or not (None)."""
     return QUICK_CPU if quick and jax.default_backend() == "cpu" else None
+
+
+@functools.lru_cache(maxsize=32)
+def _executable(jitted, tree, avals):
+    return jitted.lower(*jax.tree_util.tree_unflatten(tree, avals)).compile()
+
+
+def compiled(jitted, *args):
+    """The executable of ``jitted`` (a ``jax.jit`` function) for arguments shaped as ``args``, compiled
+    here rather than inside its first call, so that a caller can say how long compiling took apart from
+    running (a sweep's rate counts running only). Kept per function and argument shapes: a later call with
+    the same shapes returns the same executable at once."""
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    avals = tuple(jax.ShapeDtypeStruct(jnp.shape(x), jnp.result_type(x),
+                                       weak_type=getattr(x, "weak_type", False)) for x in leaves)
+    return _executable(jitted, tree, avals)
 
 
 def keep_programs(folder=None, limit=CACHE_LIMIT):

@@ -84,6 +84,46 @@ US_DISPLAY = {
 }
 
 
+# The same in SI units (``--units si``): the quantities' SI units, except directions and rates, which are drawn in
+# degrees and deg/s in either system, as reconstructionists read them (and write them, as bare numbers).
+SI_DISPLAY = {
+    "length": (1.0, "m"),
+    "mass": (1.0, "kg"),
+    "force": (1.0, "N"),
+    "inertia": (1.0, "kg m^2"),
+    "velocity": (1.0, "m/s"),
+    "time": (1.0, "s"),
+    "angle": (DEG, "deg"),
+    "angular_velocity": (DEG_S, "deg/s"),
+    "dimensionless": (1.0, ""),
+    "impulse": (1.0, "N s"),
+    "energy": (1.0, "J"),
+    "degrees": (1.0, "deg"),
+}
+DISPLAY = {"si": SI_DISPLAY, "us": US_DISPLAY}
+
+
+def display_unit(kind, units="si", typed=None):
+    """(SI value of one display unit, its label) for a quantity of ``kind`` shown in the ``units`` system
+    ("si" or "us"), or in the unit ``typed`` where one was given ("km/h": the unit of a value the user
+    typed, ``typed_unit``; the label is the unit as typed)."""
+    if typed:
+        return parse_quantity(f"1 {typed}", kind), typed
+    if units not in DISPLAY:
+        raise UnitError(f"units = {units!r}: must be 'si' or 'us'")
+    return DISPLAY[units][kind]
+
+
+def typed_unit(text):
+    """The unit of a typed quantity ("10km/h" -> "km/h", "21 mph" -> "mph"), or None for a bare number or
+    anything that is not one number and its unit."""
+    if not isinstance(text, str):
+        return None
+    match = _QUANTITY.match(text.strip())
+    unit = " ".join(match.group(2).split()) if match else ""
+    return unit or None
+
+
 class UnitError(ValueError):
     """A quantity string that cannot be read, or has the wrong dimension."""
 

@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..case import input_kind, input_leaf, load_cases
+from ..case import canonical_path, input_kind, input_leaf, load_cases
 from ..case.errors import CaseError
 from ..plot import check_picture_path, save_sweep_view
 from ..sweeps import ResultWriter, SweepSample, sweep
@@ -18,6 +18,7 @@ from ..sweeps.columns import typed_back
 from ..limits import check_memory
 from ..sweeps.engine import check_distinct, result_shape
 from ..sweeps.files import CSV_HINT_POINTS
+from .. import units as U
 from ..units import UnitError, parse_quantity
 from .options import seed_option, smoothing_option
 from .signals import raise_if_stopped
@@ -48,8 +49,9 @@ def add_arguments(parser):
                         help="units of the file: si (default) or us (mph, ft, lbf s, ft lbf, deg, deg/s, lb; "
                              "each column's unit in its name, e.g. 'vehicles[1].speed [mph]')")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--plot", metavar="PNG", help="also draw the outputs over the swept inputs (US units): a map "
-                        "for two inputs, a line for one, histograms for --mode zip (matplotlib)")
+    parser.add_argument("--plot", metavar="PNG", help="also draw the outputs over the swept inputs, in the units of "
+                        "--units and, where --over gave values in a unit (10km/h:80km/h:8), in that unit: a map for "
+                        "two inputs, a line for one, histograms for --mode zip (matplotlib)")
 
 
 class Draws(NamedTuple):
@@ -126,6 +128,21 @@ def parse_over(text):
                 raise CaseError(f"--over {path}: {text!r} must be a finite number")
         return path, np.array([value for _, value in values])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")
+
+
+def typed_units(texts):
+    """{input path: the unit its --over values were typed in} ("vehicles[1].speed=10km/h:80km/h:8" ->
+    {"vehicles[1].speed": "km/h"}; the unit of START, LO, MEAN or the first value), for the picture; paths
+    given in bare numbers are left out."""
+    typed = {}
+    for text in texts:
+        path, _, spec = text.partition("=")
+        parts = spec.split(":")
+        first = parts[1] if parts[0].strip().lower() in ("uniform", "normal") and len(parts) > 1 else parts[0]
+        unit = U.typed_unit(first.split(",")[0])
+        if unit:
+            typed[canonical_path(path.strip())] = unit
+    return typed
 
 
 def _plain(text):
@@ -209,7 +226,7 @@ def run(args) -> int:
         print("  (a large .csv is written several times faster with pyarrow installed: "
               "pip install 'ks-jax[parquet]'; or write .npz / .parquet)")
     if sample is not None:
-        save_sweep_view(sample.result(result), args.plot)
+        save_sweep_view(sample.result(result), args.plot, units=args.units, typed=typed_units(args.over))
         print(f"  drawn to {args.plot}")
     return 0
 

@@ -1,5 +1,5 @@
 """Pictures of a sweep's results over its inputs: a line over one input, a map over two, histograms of
-samples (drawn from a thinned view of a large sweep)."""
+samples (drawn from a thinned view of a large sweep), in the units the user chose."""
 
 from __future__ import annotations
 
@@ -29,20 +29,66 @@ def _categories(output, values):
     return [0, 1], list(names)
 
 
-def sweep_view(result, output=None, ax=None, contours=True):
-    """Draw one output of a sweep (``ks_jax.sweep``'s ``SweepResult``) in US units on ``ax`` (a new
-    figure if None); returns the axes.
+def named(path, names=()):
+    """A path with the vehicle it is about: ``vehicles[1].speed (Kia K5)``; other paths as they are."""
+    group, index = parse_path(path)[:2]
+    return f"{path} ({names[index]})" if group == "vehicles" and index is not None and index < len(names) else path
+
+
+def display_units(result, units="si", typed=None):
+    """{path: (SI value of one display unit, label)} for every swept input and output of ``result``: each
+    in the unit ``typed`` gives for it (``{input path: unit}``, the units of the values the user typed,
+    e.g. ``--over vehicles[1].speed=10km/h:80km/h:8``), an output in the unit typed for an input of its kind
+    (speeds given in km/h: speeds after and delta-V in km/h too), anything else in the ``units`` system."""
+    typed = {p: u for p, u in (typed or {}).items() if u}
+    by_kind = {input_kind(p): u for p, u in typed.items()}
+    shown = {p: U.display_unit(input_kind(p), units, typed.get(p)) for p in result.axes}
+    for p in result.outputs:
+        if p != "status" and result.outputs[p].dtype != bool:
+            kind = output_kind(p)
+            shown[p] = U.display_unit(kind, units, by_kind.get(kind))
+    return shown
+
+
+def circular_view(degrees):
+    """Directions (deg; a masked array) as drawn: unwrapped about their circular mean, then, as a whole,
+    put where they read as plain numbers: in [0, 360) where they fit there, else in (-180, 180] (a PDOF
+    spread about 0 reads -0.4 ... 0.4, not 359.6 ... 0.4). Returns (values, wrapped): ``wrapped`` is True
+    where neither range holds them (spread over more than half the circle), and the labels must be read
+    mod 360."""
+    finite = degrees.compressed()
+    if not finite.size:
+        return degrees, False
+    rad = np.radians(finite)
+    centre = math.degrees(math.atan2(np.mean(np.sin(rad)), np.mean(np.cos(rad)))) % 360.0
+    shown = centre + (degrees - centre + 180.0) % 360.0 - 180.0
+    lo, hi = float(shown.min()), float(shown.max())
+    for shift in (0.0, -360.0, 360.0):
+        if 0.0 <= lo + shift and hi + shift < 360.0:
+            return shown + shift, False
+    for shift in (0.0, -360.0, 360.0):
+        if -180.0 < lo + shift and hi + shift <= 180.0:
+            return shown + shift, False
+    return shown, True
+
+
+def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=None):
+    """Draw one output of a sweep (``ks_jax.sweep``'s ``SweepResult``) on ``ax`` (a new figure if None);
+    returns the axes.
 
     - a grid over one input: the output against it (a line; gaps where a point has no result);
     - a grid over two inputs: a colour map over the first (x) and the second (y), with labelled contour
       lines (``contours``); points without a result are grey;
     - zip samples (e.g. Monte Carlo draws): a histogram with the median and the 5th and 95th percentiles.
-    ``contact.sliding`` is drawn as stick / slide and ``"status"`` by its status texts. A sweep with more
-    values per axis than ``sweeps.PLOT_LIMITS`` is drawn from every k-th value (``SweepResult.thinned``;
-    the title says so). output: an output path of the sweep (default: its first).
+    Units (``display_units``): the ``units`` system ("si": m/s, m, N s, J, kg; "us": mph, ft, lbf s, ft lbf,
+    lb; directions in degrees and rates in deg/s in both), except where ``typed`` ({input path: unit}, e.g.
+    {"vehicles[1].speed": "km/h"}) gives the unit the user typed. Paths about a vehicle carry its name
+    (``vehicles[1].speed (Kia K5)``). Directions (PDOF, course, azimuth) are drawn about their circular mean
+    (``circular_view``). ``contact.sliding`` is drawn as stick / slide and ``"status"`` by its status texts.
+    A sweep with more values per axis than ``sweeps.PLOT_LIMITS`` is drawn from every k-th value
+    (``SweepResult.thinned``; the title says so). output: an output path of the sweep (default: its first).
     """
     import matplotlib.pyplot as plt
-
 
     check_kept(result)
     paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
@@ -56,32 +102,33 @@ def sweep_view(result, output=None, ax=None, contours=True):
         result = result.thinned()
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 5))
+    shown_in = display_units(result, units, typed)
+    names = tuple(getattr(result, "names", ()))
     values, status = np.asarray(result[output]), np.asarray(result["status"])
     categorical = output == "status" or values.dtype == bool
     if categorical:
-        codes, names = _categories(output, values)
+        codes, names_of_codes = _categories(output, values)
         shown = np.ma.masked_array(np.searchsorted(codes, values.astype(int)).astype(float),
                                    # a flag means nothing without an exchange (separating, no contact, invalid)
                                    mask=(status != 0) if output != "status" else np.zeros(values.shape, bool))
         scale, unit = 1.0, ""
     else:
-        scale, unit = U.US_DISPLAY[output_kind(output)]
+        scale, unit = shown_in[output]
         shown = np.ma.masked_invalid(values / scale)
     circular = not categorical and parse_path(output)[2] in CIRCULAR_OUTPUTS
-    wrap = (lambda v: v % 360.0) if circular else (lambda v: v)  # noqa: E731
-    if circular and shown.count():  # a direction: drawn unwrapped about its circular mean, labelled mod 360
-        rad = np.radians(shown.compressed())
-        centre = math.degrees(math.atan2(np.mean(np.sin(rad)), np.mean(np.cos(rad))))
-        shown = centre + (shown - centre + 180.0) % 360.0 - 180.0
+    wrapped = False
+    if circular:
+        shown, wrapped = circular_view(shown)
+    label_of = (lambda v: f"{v % 360.0:.4g}") if wrapped else (lambda v: f"{v:.4g}")  # noqa: E731
     missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
-    axes = [(p, *U.US_DISPLAY[input_kind(p)], np.asarray(v)) for p, v in result.axes.items()]
+    axes = [(p, *shown_in[p], np.asarray(v)) for p, v in result.axes.items()]
     thinned = any(k > 1 for k in result.strides)
     note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
     if result.mode != "zip" and len(axes) == 2 and min(a[3].size for a in axes) == 1:
         # an input with one value is no axis (a map one cell wide draws nothing): a line over the other
         keep = 0 if axes[0][3].size > 1 or axes[1][3].size == 1 else 1
         path, xs, xunit, x = axes[1 - keep]
-        note.append(f"{path} = {float(x[0]) / xs:.6g}{_bracket(xunit)}")
+        note.append(f"{named(path, names)} = {float(x[0]) / xs:.6g}{_bracket(xunit)}")
         axes = [axes[keep]]
         shown = shown.reshape(-1)
     if missing:
@@ -89,37 +136,51 @@ def sweep_view(result, output=None, ax=None, contours=True):
         note.append(f"{missing} of {shown.size} points without a result ({how})")
     finite = shown.compressed()
     flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
-    if flat:  # one value everywhere (to rounding): say it, no contours of the rounding
-        note.append(" ".join(filter(None, (f"{wrap(float(np.median(finite))):.6g}", unit, "everywhere"))))
+    level = float(np.median(finite)) if flat else 0.0
+    # a value the same everywhere (to rounding) is said, and drawn on a scale of whole units about it, not of
+    # its rounding (which read 0.1 ... 0, 360, 359.9 for a PDOF of 0 deg)
+    span = (level - max(1.0, 0.01 * abs(level)), level + max(1.0, 0.01 * abs(level)))
+    if flat:
+        note.append(" ".join(filter(None, (f"{(level % 360.0) if circular else level:.6g}", unit, "everywhere"))))
+    if circular and not wrapped and finite.size and (finite.min() < 0 or finite.max() > 360):
+        note.append("directions about 0 deg drawn from -180 to 180 deg (-0.4 is 359.6)")
+    elif wrapped:
+        note.append("directions spread over more than half the circle: labels mod 360")
+    title = named(output, names) + _bracket(unit)
 
     if result.mode == "zip":
         data = shown.compressed()
         if categorical:
             counts = np.bincount(data.astype(int), minlength=len(codes))
             ax.bar(range(len(codes)), counts, color="tab:blue")
-            ax.set_xticks(range(len(codes)), names)
+            ax.set_xticks(range(len(codes)), names_of_codes)
         elif data.size:
-            ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7)
+            ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7,
+                    range=span if flat else None)
             for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
                 x = np.percentile(data, q)
-                text = angle_text(x, 2) if circular else f"{x:.4g}"
-                ax.axvline(x, color="k", ls=style, lw=1.2, label=f"{name} {text} {unit}".rstrip())
+                text = f"{name} {angle_text(x, 2) if circular else f'{x:.4g}'} {unit}".rstrip()
+                if circular and not wrapped and angle_text(x, 2) != f"{x:.2f}":
+                    text += f" (drawn at {x:.2f})"
+                ax.axvline(x, color="k", ls=style, lw=1.2, label=text)
             ax.legend(fontsize=8)
-        ax.set_xlabel(output + _bracket(unit))
+        ax.set_xlabel(title)
         if circular:
-            ax.xaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
+            ax.xaxis.set_major_formatter(lambda v, _: label_of(v))
         ax.set_ylabel(f"samples (of {shown.size})")
     elif len(axes) == 1:
         (path, xs, xunit, x), = axes
         ax.plot(x / xs, shown.astype(float).filled(np.nan), "-", marker="o" if x.size <= 60 else None,
                 color="tab:blue", ms=3, drawstyle="steps-mid" if categorical else "default")
-        ax.set_xlabel(path + _bracket(xunit))
+        ax.set_xlabel(named(path, names) + _bracket(xunit))
         if categorical:
-            ax.set_yticks(range(len(codes)), names)
+            ax.set_yticks(range(len(codes)), names_of_codes)
             ax.set_ylim(-0.5, len(codes) - 0.5)
-        ax.set_ylabel(output + _bracket(unit))
+        elif flat:
+            ax.set_ylim(*span)
+        ax.set_ylabel(title)
         if circular:
-            ax.yaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
+            ax.yaxis.set_major_formatter(lambda v, _: label_of(v))
         ax.grid(alpha=0.3)
     else:
         (px, xs, xunit, x), (py, ys, yunit, y) = axes
@@ -130,27 +191,29 @@ def sweep_view(result, output=None, ax=None, contours=True):
             cmap = ListedColormap([plt.get_cmap("tab10")(i % 10) for i in range(len(codes))]).with_extremes(bad="0.8")
             mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap, vmin=-0.5, vmax=len(codes) - 0.5)
             bar = ax.figure.colorbar(mesh, ax=ax, ticks=range(len(codes)))
-            bar.ax.set_yticklabels(names)
-            bar.set_label(output)
+            bar.ax.set_yticklabels(names_of_codes)
+            bar.set_label(named(output, names))
         else:
             cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
-            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap)
-            bar = ax.figure.colorbar(mesh, ax=ax, label=output + _bracket(unit))
+            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap, **(dict(vmin=span[0], vmax=span[1]) if flat else {}))
+            bar = ax.figure.colorbar(mesh, ax=ax, label=title)
             if circular:
-                bar.ax.yaxis.set_major_formatter(lambda v, _: f"{wrap(v):.4g}")
+                bar.ax.yaxis.set_major_formatter(lambda v, _: label_of(v))
             if contours and min(X.shape) >= 2 and finite.size and not flat:
                 lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6,
-                                   linestyles="solid" if circular else None)  # 358 deg is not negative
-                ax.clabel(lines, fontsize=7, fmt=lambda v: f"{wrap(v):,.0f}" if abs(wrap(v)) >= 100 else f"{wrap(v):.3g}")
-        ax.set_xlabel(px + _bracket(xunit))
-        ax.set_ylabel(py + _bracket(yunit))
-    ax.set_title("\n".join([output + _bracket(unit)] + ([", ".join(note)] if note else [])), fontsize=9)
+                                   linestyles="solid" if circular else None)  # -2 deg is no negative value
+                ax.clabel(lines, fontsize=7, fmt=lambda v: label_of(v) if circular else
+                          f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
+        ax.set_xlabel(named(px, names) + _bracket(xunit))
+        ax.set_ylabel(named(py, names) + _bracket(yunit))
+    ax.set_title("\n".join([title] + ([", ".join(note)] if note else [])), fontsize=9)
     return ax
 
 
-def save_sweep_view(result, path, outputs=None):
+def save_sweep_view(result, path, outputs=None, units="si", typed=None):
     """Write ``sweep_view`` of each of ``outputs`` (default: the sweep's outputs) side by side, three
-    per row, to ``path`` (PNG, PDF, SVG: by the file name). Returns the path."""
+    per row, to ``path`` (PNG, PDF, SVG: by the file name), in ``units`` and the ``typed`` units (as
+    ``sweep_view``). Returns the path."""
     from matplotlib.figure import Figure
 
     outputs = list(outputs or result.output_paths or [p for p in result.outputs if p != "status"] or ["status"])
@@ -161,7 +224,7 @@ def save_sweep_view(result, path, outputs=None):
     fig = Figure(figsize=(6.2 * cols, 4.6 * rows))
     axes = fig.subplots(rows, cols, squeeze=False)
     for ax, output in zip(axes.flat, outputs):
-        sweep_view(result, output, ax)
+        sweep_view(result, output, ax, units=units, typed=typed)
     for ax in list(axes.flat)[len(outputs):]:
         ax.set_visible(False)
     fig.tight_layout()

@@ -20,7 +20,10 @@ class SweepResult(Mapping):
 
     axes: path -> the values (SI) swept along each grid axis (zip: the samples).
     shape: the result shape. mode: "grid" or "zip". points: number of points solved.
-    status_counts: status text -> number of points. seconds: wall time of the sweep.
+    status_counts: status text -> number of points. seconds: wall time of solving the points;
+    compile_seconds: of compiling (or finding compiled) its program before, apart, so that the rate
+    (points / seconds) is the solving rate of a first sweep too.
+    names: the case's vehicle names, by index (for labels: ``vehicles[1].speed (Kia K5)``).
     undefined: output path -> the number of solved points (status not "invalid") where it is NaN
     because the model leaves it undefined there (``case.defined_output``: a PDOF or impulse direction
     without an impulse, the time of a contact that never happens, EES without crush); ``summary`` says why.
@@ -40,6 +43,8 @@ class SweepResult(Mapping):
     output_paths: tuple = field(default=())
     strides: tuple = ()
     undefined: dict = field(default_factory=dict)
+    compile_seconds: float = 0.0
+    names: tuple = ()
 
     def __getitem__(self, key):
         return self.outputs[key]
@@ -79,13 +84,15 @@ class SweepResult(Mapping):
         counts = ", ".join(f"{k}: {v}" for k, v in self.status_counts.items())
         rate = self.points / self.seconds if self.seconds > 0 else float("inf")
         text = (f"{self.points} points ({self.mode}, shape {self.shape}) in {self.seconds:.3g} s "
-                f"({rate:.3g} points/s); status: {counts}")
+                f"({rate:.3g} points/s), compiled first in {self.compile_seconds:.3g} s; status: {counts}")
         return text + "".join(f"\n  undefined (NaN) at {n} solved point{'s' * (n != 1)}: {p}, where "
                               f"{UNDEFINED_REASONS[undefined_kind(p)]}" for p, n in self.undefined.items() if n)
 
 
-PLOT_LIMITS = {1: 100_000, 2: 1000}
-PLOT_SAMPLES = 1_000_000
+# what a picture draws of a large sweep: more than this is finer than a figure's pixels (a line of 4000
+# points, a map of 250 x 250 cells) or a histogram's bins, and costs seconds and memory to draw
+PLOT_LIMITS = {1: 4000, 2: 250}
+PLOT_SAMPLES = 200_000
 
 
 def plot_strides(shape, mode, limit=None):

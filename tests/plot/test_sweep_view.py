@@ -1,8 +1,10 @@
 """Pictures of sweeps (ks_jax.plot.sweep_view, ks-jax sweep --plot): what is drawn is the sweep's
-results in US units, thinned the way the result says, with the points that have no result marked."""
+results in the units asked for (US units in most tests here), thinned the way the result says, with the
+points that have no result marked."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import jax
@@ -33,9 +35,9 @@ def case():
     return ks_jax.load_case(SEED1)
 
 
-def draw(result, output=None):
+def draw(result, output=None, units="us", typed=None):
     ax = Figure().subplots()
-    plot.sweep_view(result, output, ax)
+    plot.sweep_view(result, output, ax, units=units, typed=typed)
     return ax
 
 
@@ -57,8 +59,8 @@ def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     assert shown.mask[:, bad].all() and not shown.mask[:, ~bad].any()
     assert (r["status"][:, bad] == 17).all()
     assert f"{10 * bad.sum()} of 70 points without a result (grey)" in ax.get_title()
-    assert ax.get_xlabel() == "vehicles[1].speed [mph]" and ax.get_ylabel() == "contact.restitution"
-    assert ax.get_title().startswith(f"{DV1} [mph]")
+    assert ax.get_xlabel() == "vehicles[1].speed (Kia K5) [mph]" and ax.get_ylabel() == "contact.restitution"
+    assert ax.get_title().startswith(f"{DV1} (Lucid Air) [mph]")
     assert ax.get_xlim()[0] < 6 < 60 < ax.get_xlim()[1]
     # the energy in ft lbf: 1 ft lbf = 0.3048 m x 4.4482216152605 N
     shown = mesh_of(draw(r, "contact.energy_loss")).get_array()
@@ -101,7 +103,7 @@ def test_a_grid_axis_of_one_value_is_drawn_as_a_line(case):
         assert not [c for c in ax.collections if isinstance(c, QuadMesh)]
         np.testing.assert_allclose(line.get_xdata(), x, rtol=1e-12)
         np.testing.assert_allclose(line.get_ydata(), np.ravel(r[DV1]) / MPH, rtol=1e-12)
-        fixed = "contact.restitution = 0.1" if x.size == 1 else "vehicles[1].speed = 20 [mph]"
+        fixed = "contact.restitution = 0.1" if x.size == 1 else "vehicles[1].speed (Kia K5) = 20 [mph]"
         assert fixed in ax.get_title()
 
 
@@ -113,26 +115,28 @@ def test_sliding_is_drawn_as_stick_or_slide(case):
     np.testing.assert_array_equal(mesh_of(ax).get_array(), r["contact.sliding"].astype(float))
     labels = [t.get_text() for t in ax.figure.axes[-1].get_yticklabels()]
     assert labels == ["stick", "slide"]
-    assert ax.get_ylabel() == "vehicles[1].course [deg]"
+    assert ax.get_ylabel() == "vehicles[1].course (Kia K5) [deg]"
 
 
 def test_thinned_sweep_and_streamed_sample_agree(case):
-    """2500 x 3 points: every 3rd speed is drawn (at most 1000 per axis), the same whether the sweep was
+    """2500 x 3 points: every 10th speed is drawn (at most 250 per axis), the same whether the sweep was
     kept and thinned or streamed through a SweepSample in chunks that do not line up with the lattice."""
     over = {"vehicles[1].speed": np.linspace(5, 30, 2500), "contact.restitution": [0.0, 0.1, 0.2]}
     kept = sweep(case, over, outputs=[DV1])
     thin = kept.thinned()
-    assert thin.strides == (3, 1) and thin.shape == (834, 3)
-    np.testing.assert_array_equal(thin[DV1], kept[DV1][::3])
-    np.testing.assert_array_equal(thin.axes["vehicles[1].speed"], over["vehicles[1].speed"][::3])
+    assert thin.strides == (10, 1) and thin.shape == (250, 3)
+    np.testing.assert_array_equal(thin[DV1], kept[DV1][::10])
+    np.testing.assert_array_equal(thin.axes["vehicles[1].speed"], over["vehicles[1].speed"][::10])
 
     sample = SweepSample(over, "grid", (2500, 3))
     streamed = sweep(case, over, outputs=[DV1], keep=False, chunk_size=1000, on_chunk=sample.chunk)
     got = sample.result(streamed)
-    assert got.strides == (3, 1)
+    assert got.strides == (10, 1)
     for k in (DV1, "status"):
         np.testing.assert_array_equal(got[k], thin[k])
-    assert "shown: 1 in 3 x 1 points" in draw(got).get_title()
+    ax = draw(got)
+    assert "shown: 1 in 10 x 1 points" in ax.get_title()
+    assert mesh_of(ax).get_array().shape == (250, 3)  # what is drawn is the thinned view
 
 
 @pytest.mark.parametrize("mode, shape, limit, strides", [("grid", (50, 7), 10, (5, 1)), ("grid", (23, 31), 4, (6, 8)),
@@ -199,8 +203,9 @@ def test_separating_points_have_no_stick_or_slide(case):
 
 def test_directions_are_drawn_on_the_circle(case):
     """A PDOF spread about 0 deg (the Kia's, with the Lucid's heading drawn about 0): the histogram is one
-    hump unwrapped about the circular mean, not two bars at 0 and 360, and its percentiles are those of
-    the unwrapped samples, labelled in [0, 360)."""
+    hump unwrapped about the circular mean, not two bars at 0 and 360, on an axis that reads as plain
+    numbers about 0 (-0.4, not 359.6), and its percentiles are those of the unwrapped samples, reported in
+    [0, 360) and said where they are drawn."""
     yaw = np.radians(np.random.default_rng(5).normal(0.0, 3.0, 300))
     z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[1].pdof"], mode="zip")
     pdof = z["vehicles[1].pdof"]
@@ -211,6 +216,100 @@ def test_directions_are_drawn_on_the_circle(case):
     for name, q in (("median", 50), ("5th", 5), ("95th", 95)):
         x = np.percentile(unwrapped, q)
         assert lines[name].get_xdata()[0] == pytest.approx(x, abs=1e-9)
-        assert lines[name].get_label().endswith(f" {round(x % 360.0, 2) % 360.0:.2f} deg")
-    assert max(p.get_x() + p.get_width() for p in ax.patches) < 30  # no bar near 360
-    assert ax.xaxis.get_major_formatter()(-1.0, 0) == "359"
+        assert f" {round(x % 360.0, 2) % 360.0:.2f} deg" in lines[name].get_label()
+        assert (f"(drawn at {x:.2f})" in lines[name].get_label()) == (x < 0)
+    left = min(p.get_x() for p in ax.patches)
+    right = max(p.get_x() + p.get_width() for p in ax.patches)
+    assert unwrapped.min() - 1e-9 <= left < 0 < right <= unwrapped.max() + 1e-9  # one hump about 0, no bar near 360
+    assert ax.xaxis.get_major_formatter()(-1.0, 0) == "-1"  # the axis reads on through 0
+    assert "drawn from -180 to 180 deg" in ax.get_title()
+
+    # about 180 deg (the Lucid's PDOF): [0, 360) holds the hump, and the axis is as it would be anyway
+    z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[0].pdof"], mode="zip")
+    ax = draw(z)
+    assert 170 < min(p.get_x() for p in ax.patches) < 180 < max(p.get_x() + p.get_width() for p in ax.patches) < 190
+    assert "-180" not in ax.get_title()
+
+
+def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(case):
+    """The Kia is struck head-on wherever it is: PDOF 0 deg, to rounding on either side of 0 (359.99...,
+    0.00...). The colour bar and a line's axis run over whole degrees about 0 (not 0.1 ... 0, 360, 359.9),
+    and the title says the value."""
+    r = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 5), "contact.restitution": [0.0, 0.2, 0.4]},
+              outputs=["vehicles[1].pdof"])
+    pdof = r["vehicles[1].pdof"]
+    assert np.all(np.minimum(pdof, 360.0 - pdof) < 1e-9)
+    ax = draw(r)
+    mesh = mesh_of(ax)
+    assert (mesh.norm.vmin, mesh.norm.vmax) == (-1.0, 1.0)
+    assert np.all(np.abs(mesh.get_array()) < 1e-9)
+    bar = ax.figure.axes[-1]
+    ticks = [bar.yaxis.get_major_formatter()(v, 0) for v in bar.get_yticks()]
+    assert all(-1.0 <= float(t) <= 1.0 for t in ticks), ticks
+    assert "0 deg everywhere" in ax.get_title()
+    line = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 5)}, outputs=["vehicles[1].pdof"])
+    assert draw(line).get_ylim() == (-1.0, 1.0)
+
+
+def test_drawn_in_the_units_asked_for_and_those_typed(case):
+    """SI by default; an input typed in km/h is drawn in km/h, and outputs of its kind too (speeds after,
+    delta-V); others in the system asked for. The values are the sweep's divided by the unit's size,
+    written out here: 1 km/h = 1/3.6 m/s, 1 ft lbf = 0.3048 x 4.4482216152605 J."""
+    speed = np.array([20.0, 40.0, 60.0]) / 3.6
+    r = sweep(case, {"vehicles[1].speed": speed}, outputs=[DV1, "contact.energy_loss"])
+    si = draw(r, units="si")
+    assert si.get_xlabel() == "vehicles[1].speed (Kia K5) [m/s]" and si.get_ylabel() == f"{DV1} (Lucid Air) [m/s]"
+    np.testing.assert_allclose(si.get_lines()[0].get_ydata(), r[DV1], rtol=1e-12)
+    kmh = draw(r, units="si", typed={"vehicles[1].speed": "km/h"})
+    assert kmh.get_xlabel() == "vehicles[1].speed (Kia K5) [km/h]" and kmh.get_ylabel() == f"{DV1} (Lucid Air) [km/h]"
+    np.testing.assert_allclose(kmh.get_lines()[0].get_xdata(), [20.0, 40.0, 60.0], rtol=1e-12)
+    np.testing.assert_allclose(kmh.get_lines()[0].get_ydata(), r[DV1] * 3.6, rtol=1e-12)
+    for units, scale, unit in (("si", 1.0, "J"), ("us", 0.3048 * 4.4482216152605, "ft lbf")):
+        ax = draw(r, "contact.energy_loss", units=units, typed={"vehicles[1].speed": "km/h"})
+        assert ax.get_ylabel() == f"contact.energy_loss [{unit}]"
+        np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), r["contact.energy_loss"] / scale, rtol=1e-12)
+
+
+def test_cli_draws_in_the_units_typed_with_the_vehicles_names(tmp_path, capsys):
+    """``ks-jax sweep --over vehicles[1].speed=10km/h:80km/h:8 --plot``: the picture's text (an SVG with its
+    text kept as text) has the speeds in km/h with the Kia's name, and no mph anywhere; ``--units us``
+    draws the energy in ft lbf."""
+    import matplotlib
+
+    out = tmp_path / "k.csv"
+    with matplotlib.rc_context({"svg.fonttype": "none"}):
+        for units, energy in (("si", "contact.energy_loss [J]"), ("us", "contact.energy_loss [ft lbf]")):
+            svg = tmp_path / f"k_{units}.svg"
+            assert main(["sweep", str(SEED1), "--over", "vehicles[1].speed=10km/h:80km/h:8", "--units", units,
+                         "--output", "vehicles[1].speed_after", "--output", "contact.energy_loss",
+                         "--out", str(out), "--plot", str(svg), "--no-progress"]) == 0
+            text = svg.read_text()
+            assert "vehicles[1].speed (Kia K5) [km/h]" in text and "vehicles[1].speed_after (Kia K5) [km/h]" in text
+            assert energy in text and "mph" not in text
+    capsys.readouterr()
+
+
+def test_typed_units_are_read_from_the_values_given():
+    from ks_jax.cli.sweep import typed_units
+
+    assert typed_units(["vehicles[1].speed=10km/h:80km/h:8", "contact.restitution=0:0.5:3",
+                        "vehicles[0].yaw=normal:0.1rad:0.02rad", "vehicles[0].speed=5 mph,10 mph"]) == {
+        "vehicles[1].speed": "km/h", "vehicles[0].yaw": "rad", "vehicles[0].speed": "mph"}
+
+
+def test_a_sweeps_rate_counts_solving_and_its_compile_is_said_apart(case, monkeypatch):
+    """Compiling is timed apart from solving: with the compile made 0.4 s slower, the sweep's seconds (and so
+    its rate) do not change, its compile_seconds do, and the summary says both."""
+    from ks_jax.sweeps import engine
+
+    real = engine.compiled
+
+    def slow(*args):
+        time.sleep(0.4)
+        return real(*args)
+
+    monkeypatch.setattr(engine, "compiled", slow)
+    r = sweep(case, {"vehicles[1].speed": np.linspace(5, 9, 3)}, outputs=[DV1])
+    assert r.compile_seconds >= 0.4 > r.seconds
+    assert f"compiled first in {r.compile_seconds:.3g} s" in r.summary()
+    assert f"({r.points / r.seconds:.3g} points/s)" in r.summary()
