@@ -210,7 +210,15 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
                              "--out", str(out), "--no-progress"], stderr=subprocess.PIPE, text=True, env=env)
     partial = tmp_path / ".out.csv.partial"
     deadline = time.monotonic() + 120
-    while not partial.exists() and proc.poll() is None and time.monotonic() < deadline:
+    # a chunk written (16384 rows of about 200 bytes), not only the file opened: a kill between the opening and
+    # the first row leaves no point to keep
+    def written():
+        try:
+            return partial.stat().st_size
+        except FileNotFoundError:
+            return 0
+
+    while written() <= 1 << 20 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     assert partial.exists(), "the sweep never started writing"
     proc.send_signal(getattr(signal, sig))
