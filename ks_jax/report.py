@@ -4,6 +4,7 @@ values of a case file beside ks-jax's. (The JSON of ``ks-jax solve --json`` is `
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -40,8 +41,32 @@ def _quantity(label, x, si_unit, us_scale, us_unit):
     return _row(label, f"{_fmt(x)} {si_unit}", f"{_fmt(x / us_scale)} {us_unit}")
 
 
-def _row(label, si, us="", width=34):
-    return f"  {label:<{width}}{si:<26}{us}"
+LABEL_WIDTH, SI_WIDTH = 34, 26  # the least widths of the label and SI columns: an ordinary panel's
+GAP = 2  # the least number of spaces between two columns
+
+
+class _Row(NamedTuple):
+    """One row of the panel: a label, its SI text and its US text ("" where the row has none). The
+    columns are laid out once the whole panel is known (``_layout``), so that wide numbers widen them."""
+    label: str
+    si: str
+    us: str = ""
+
+
+def _row(label, si, us=""):
+    return _Row(label, si, us)
+
+
+def _layout(lines):
+    """The panel's text from its lines (text as it is, ``_Row``s in columns). Each column is as wide as
+    its widest entry plus ``GAP`` spaces, and at least as wide as an ordinary panel's, so that the US
+    column starts at one offset in every row and never touches the SI text, whatever the numbers. An SI
+    text with no US text beside it (a sentence) may run past its column and widens nothing."""
+    rows = [r for r in lines if isinstance(r, _Row)]
+    label_width = max([LABEL_WIDTH] + [len(r.label) + GAP for r in rows])
+    si_width = max([SI_WIDTH] + [len(r.si) + GAP for r in rows if r.us])
+    return "\n".join(f"  {r.label:<{label_width}}{r.si:<{si_width}}{r.us}".rstrip() if isinstance(r, _Row) else r
+                     for r in lines)
 
 
 def _timing_rows(sol):
@@ -79,7 +104,7 @@ def text_report(sol, reference: bool = True) -> str:
     ref = sol.case.raw.get("reference") if reference else None
     if ref:
         lines += ["", reference_table(sol, ref)]
-    return "\n".join(lines)
+    return _layout(lines)
 
 
 def _contact_rows(sol, c):
@@ -107,7 +132,7 @@ def _vehicle_rows(sol, v1, v2):
     for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
         lines += [
             "",
-            f"  object {k + 1}: {name}",
+            f"  vehicle {k + 1} = vehicles[{k}]: {name}",  # as the output paths (sweeps, fits, --json) name it
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
@@ -126,8 +151,9 @@ def _vehicle_rows(sol, v1, v2):
 
 def reference_table(sol, reference: dict) -> str:
     """Reported values (e.g. the manual's panel) beside ks-jax's, in the reported units; the difference
-    in percent, or in degrees for a direction (on the circle: 359 against 1 is 2 degrees apart)."""
-    lines = ["  reference                              reported            ks-jax              difference"]
+    in percent, or in degrees for a direction (on the circle: 359 against 1 is 2 degrees apart). Each
+    column is as wide as its widest entry plus ``GAP`` spaces, and at least 39, 20 and 20 characters."""
+    rows = [("reference", "reported", "ks-jax", "difference")]
     for path, value in reference.items():
         want_si = parse_output_value(value, path, sol.case.name, f"reference.{path}")
         got_si = float(np.asarray(defined_output(sol.result, path)))
@@ -141,5 +167,6 @@ def reference_table(sol, reference: dict) -> str:
             diff = f"{(got_si - want_si + 180.0) % 360.0 - 180.0:+.4f} deg"
         else:
             diff = f"{(got - want) / want * 100:+.4f} %" if want else f"{got - want:+.4f}"
-        lines.append(f"  {path:<38} {_fmt(want, 3) + ' ' + unit:<19} {_fmt(got, 3) + ' ' + unit:<19} {diff}")
-    return "\n".join(lines)
+        rows.append((path, f"{_fmt(want, 3)} {unit}".rstrip(), f"{_fmt(got, 3)} {unit}".rstrip(), diff))
+    widths = [max([least] + [len(r[k]) + GAP for r in rows]) for k, least in enumerate((39, 20, 20))]
+    return "\n".join(("  " + "".join(f"{text:<{w}}" for text, w in zip(r, widths)) + r[3]).rstrip() for r in rows)

@@ -9,10 +9,14 @@ What the top view draws (global frame, metres; a second axis in feet):
 - outlines at first contact t_i (dashed; automatic contact only) and at the exchange (solid),
   the front face thicker; the overlap polygon at the exchange (grey);
 - the impulse centroid P, the contact plane (red line through P, perpendicular to n), the normal
-  n (red arrow, from vehicle 2 into vehicle 1), the friction cone (blue wedge about n,
+  n (red arrow, from vehicle 2 into vehicle 1), the friction cone (cyan wedge about n,
   half-angle atan(mu));
-- the impulse on each vehicle (J on vehicle 1, -J on vehicle 2, drawn at P), and each vehicle's
-  CG velocity before (dotted) and after (solid). Arrow scales are given in the legend.
+- the impulse on each vehicle (J on vehicle 1, -J on vehicle 2, drawn at P: its horizontal part), and
+  each vehicle's CG velocity before (dotted) and after (solid);
+- whether the contact slides (the impulse on the cone's edge, |T| = mu N: that edge drawn dashed
+  beyond the wedge) or sticks (inside the cone), in the title and the legend.
+The legend states each arrow's scale as "1 m = X": an arrow's drawn length in metres is its
+quantity divided by X, X a round number (``round_scale``).
 """
 
 from __future__ import annotations
@@ -22,8 +26,25 @@ import math
 import numpy as np
 
 from .. import units as U
+from ..case import impulse_exchanged
 
 COLORS = ("tab:blue", "tab:orange")
+IMPULSE_LENGTH = 0.4  # the longest impulse arrow, in units of the larger vehicle's length or width
+VELOCITY_LENGTH = 0.5  # the longest velocity arrow, likewise
+ROUND_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # of a scale, times a power of ten
+
+
+def round_scale(x):
+    """The least of ``ROUND_STEPS`` times a power of ten that is at least ``x`` > 0: an arrow's scale
+    that reads exactly ("1 m = 2,500 N s"), and keeps the longest arrow between 2/3 of and its
+    intended length."""
+    power = 10.0 ** math.floor(math.log10(x))
+    return next((step * power for step in ROUND_STEPS if step * power >= x * (1 - 1e-12)), 10.0 * power)
+
+
+def scale_text(x):
+    """A scale from ``round_scale`` as written in the legend, with every digit it has."""
+    return f"{x:,.0f}" if x >= 10 else f"{x:.6g}"
 
 
 def _box(length, width, cg_to_front, xy, yaw):
@@ -79,6 +100,23 @@ def _arrow(ax, tip, tail, props, **kw):
     ax.update_datalim(np.array([tip, tail], float))
 
 
+def _friction_state(ax, c, p, n, mu, j, reach):
+    """Say whether the contact slides or sticks. Sliding: the impulse lies on the cone's edge (|T| = mu N),
+    and the edge on the side of its horizontal tangential part is drawn dashed out to ``reach`` and a
+    little past it (past the arrow's head where the arrow is longer than the wedge), so that the arrow
+    is seen to lie along it. Sticking: the impulse is inside the cone, |T| / N <= mu."""
+    if bool(c.sliding):
+        t = np.array([-n[1], n[0]])
+        side = 1.0 if float(np.dot(j, t)) >= 0 else -1.0
+        edge = (n + side * mu * t) / math.hypot(1.0, mu)
+        ax.plot(*np.stack([p, p + 1.15 * reach * edge]).T, "--", color="navy", lw=1.2, zorder=3.5,
+                label="sliding: |T| = mu N, impulse on the cone's edge (dashed)")
+    else:
+        normal, tangential = float(c.impulse_normal), float(c.impulse_tangential)
+        ratio = f"{tangential / normal:.3f}" if normal > 0 else "undefined"
+        ax.plot([], [], " ", label=f"sticking (inside the cone): |T| / N = {ratio} <= mu = {mu:g}")
+
+
 def top_view(solution, ax=None):
     """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
     Returns the axes."""
@@ -90,8 +128,12 @@ def top_view(solution, ax=None):
         _, ax = plt.subplots(figsize=(8, 7))
     case, res = solution.case, solution.result
     names = case.vehicle_names
-    ax.set_title(f"{case.name}\nstatus: {solution.status}", fontsize=9)
-    if case.inputs is None or res is None or solution.status.startswith("invalid"):
+    solved = not (case.inputs is None or res is None or solution.status.startswith("invalid"))
+    friction = ""
+    if solved and solution.status != "no_contact" and bool(impulse_exchanged(res)):
+        friction = ", sliding (|T| = mu N)" if bool(res.contact.sliding) else ", sticking (inside the cone)"
+    ax.set_title(f"{case.name}\nstatus: {solution.status}{friction}", fontsize=9)
+    if not solved:
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
         return ax
     inputs = case.inputs
@@ -125,24 +167,32 @@ def top_view(solution, ax=None):
         tang = np.array([-n[1], n[0]])
         half = 0.45 * extent
         ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
-        _arrow(ax, p + 0.4 * extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.8), zorder=5)
+        # thin and on top: an impulse arrow along n (an inline impact) shows on both sides of it
+        _arrow(ax, p + 0.4 * extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.2), zorder=5)
         ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
         mu = float(inputs.contact.friction)
         half_angle = math.degrees(math.atan(mu))
         az = math.degrees(math.atan2(n[1], n[0]))
-        ax.add_patch(Wedge(p, 0.3 * extent, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
-                           edgecolor="tab:blue", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
+        cone = 0.3 * extent
+        ax.add_patch(Wedge(p, cone, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
+                           edgecolor="darkcyan", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
         j = np.asarray(c.impulse, float)[:2]
         j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
         total = float(c.impulse_magnitude)
+        arrow = 0.0  # the impulse arrows' drawn length, m
         if j_mag > 0:
-            k = 0.35 * extent / j_mag  # m per N s
+            per_m = round_scale(j_mag / (IMPULSE_LENGTH * extent))  # N s per m of arrow
+            arrow = j_mag / per_m
             shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
             vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
             for i, sign in enumerate((1.0, -1.0)):
-                _arrow(ax, p + sign * k * j, p, dict(arrowstyle="-|>", color=COLORS[i], lw=2.5))
-                ax.plot([], [], color=COLORS[i], lw=2.5,
+                _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
+                ax.plot([], [], color=COLORS[i], lw=3.5,
                         label=f"impulse on {names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
+            ax.plot([], [], " ", label=f"impulse arrows: 1 m = {scale_text(per_m)} N s "
+                                       f"({per_m / U.LBF_S:,.6g} lbf s)")
+        if bool(impulse_exchanged(res)):
+            _friction_state(ax, c, p, n, mu, j, max(cone, arrow))
         ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
 
     speeds = []
@@ -151,7 +201,8 @@ def top_view(solution, ax=None):
         speeds.append(float(np.linalg.norm(np.asarray(res.vehicles[i].velocity_after, float)[:2])))
     vmax = max(speeds)
     if vmax > 0:
-        v_scale = 0.5 * extent / vmax  # m per m/s
+        v_per_m = round_scale(vmax / (VELOCITY_LENGTH * extent))  # m/s per m of arrow
+        v_scale = 1.0 / v_per_m  # m per m/s
         for i, v in enumerate(inputs.vehicles):
             before = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
             after = np.asarray(res.vehicles[i].velocity_after, float)[:2]
@@ -165,7 +216,7 @@ def top_view(solution, ax=None):
                 _arrow(ax, cgs[i] + shift + v_scale * vec, cgs[i] + shift,
                        dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
             ax.plot(*cgs[i], "o", color=COLORS[i], ms=4)
-        unit = f"1 m = {1 / v_scale:.2f} m/s = {1 / v_scale / U.MPH:.2f} mph"
+        unit = f"1 m = {scale_text(v_per_m)} m/s = {v_per_m / U.MPH:.2f} mph"
         ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
         ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
     if no_contact:

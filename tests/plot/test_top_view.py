@@ -1,7 +1,9 @@
 """The top view (ks_jax.plot): what is drawn is where the results and a hand calculation put it."""
 
 import io
+import json
 import math
+import re
 from contextlib import redirect_stdout
 from importlib import resources
 
@@ -14,6 +16,7 @@ import pytest  # noqa: E402
 
 pytest.importorskip("matplotlib")
 
+from matplotlib.colors import to_rgba  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Polygon, Wedge  # noqa: E402
 
@@ -125,3 +128,106 @@ def test_clip_polygon_against_the_engine():
     cr = x * np.roll(y, -1) - np.roll(x, -1) * y
     want = np.array([np.sum((x + np.roll(x, -1)) * cr), np.sum((y + np.roll(y, -1)) * cr)]) / (6 * np.sum(cr) / 2)
     np.testing.assert_allclose(np.asarray(centroid), want, rtol=1e-12)
+
+
+# An oblique impact with low friction, in one plane (the centroid at both CGs' height, a horizontal normal):
+# the contact slides and the impulse, horizontal, lies on the edge of the cone as drawn.
+SLIDING = {
+    "name": "oblique impact, low friction",
+    "vehicles": [
+        {"name": "Sedan", "mass": "1500 kg", "inertia": [500, 2400, 2600], "length": 4.7, "width": 1.8,
+         "height": 1.45, "cg_to_front": 2.3, "cg_height": 0.55, "position": [0, 0], "yaw": 0, "speed": "10 km/h"},
+        {"name": "SUV", "mass": "2000 kg", "inertia": [700, 3500, 3800], "length": 4.9, "width": 1.9,
+         "height": 1.7, "cg_to_front": 2.4, "cg_height": 0.55, "position": [-3.2, -3.3], "yaw": 45,
+         "speed": "50 km/h"},
+    ],
+    "contact": {"point": [-1.4, -0.9, 0.55], "normal": 110, "restitution": 0.1, "friction": 0.1},
+}
+
+
+def legend_texts(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def scale_in_legend(ax, pattern):
+    """The X of the legend's "1 m = X unit" after ``pattern`` (a regular expression)."""
+    (x,) = [float(m.group(1).replace(",", "")) for s in legend_texts(ax)
+            for m in [re.search(pattern + r"1 m = ([\d,.]+(?:e[-+]?\d+)?) ", s)] if m]
+    return x
+
+
+def cone_edges(ax):
+    """The dashed navy line along the cone's edge that marks a sliding contact."""
+    return [ln for ln in ax.lines if ln.get_linestyle() == "--" and ln.get_color() == "navy"]
+
+
+def impulse_arrows(ax, p):
+    """The two impulse arrows: the annotations drawn from the centroid ``p`` that are not the (red) normal."""
+    red = to_rgba("red")
+    return [a for a in ax.texts if a.arrow_patch is not None and np.allclose(a.xyann, p, rtol=0, atol=1e-12)
+            and tuple(a.arrow_patch.get_edgecolor()) != red]
+
+
+def check_arrow_scales(sol, ax):
+    """The impulse arrows are J's horizontal part (on vehicle 1) and its opposite (on vehicle 2) divided by
+    the legend's impulse scale, and the velocity arrows are as long as each speed (before, after) divided
+    by the legend's velocity scale."""
+    c = sol.result.contact
+    p = np.asarray(c.point)[:2]
+    per_m = scale_in_legend(ax, "impulse arrows: ")
+    (lbf,) = [re.search(r"N s \(([\d,.]+) lbf s\)", s).group(1) for s in legend_texts(ax) if "impulse arrows" in s]
+    assert float(lbf.replace(",", "")) == pytest.approx(per_m / U.LBF_S, rel=1e-5)
+    j = np.asarray(c.impulse)[:2]
+    drawn = sorted((np.subtract(a.xy, a.xyann) for a in impulse_arrows(ax, p)), key=lambda d: -np.dot(d, j))
+    assert len(drawn) == 2
+    for d, sign in zip(drawn, (1.0, -1.0)):
+        np.testing.assert_allclose(d, sign * j / per_m, rtol=1e-6, atol=1e-9 * np.linalg.norm(j) / per_m)
+        assert np.linalg.norm(d) == pytest.approx(np.linalg.norm(j) / per_m, rel=1e-6)
+    # velocities: every CG arrow's length is a speed over the stated scale
+    v_per_m = scale_in_legend(ax, r"CG velocity before \(")
+    assert v_per_m == scale_in_legend(ax, r"CG velocity after \(")
+    speeds = [float(v.speed) for v in sol.case.inputs.vehicles]
+    speeds += [float(np.linalg.norm(np.asarray(v.velocity_after)[:2])) for v in sol.result.vehicles]
+    lengths = [float(np.linalg.norm(np.subtract(a.xy, a.xyann))) for a in ax.texts
+               if a.arrow_patch is not None and not np.allclose(a.xyann, p, rtol=0, atol=1e-12)]
+    np.testing.assert_allclose(sorted(lengths), sorted(s / v_per_m for s in speeds if s > 0), rtol=1e-9)
+    return drawn
+
+
+def test_sliding_contact_is_marked_and_the_arrows_are_to_scale(tmp_path):
+    path = tmp_path / "sliding.json"
+    path.write_text(json.dumps(SLIDING))
+    sol = ks_jax.solve(ks_jax.load_case(path))
+    c = sol.result.contact
+    assert sol.status == "ok" and bool(c.sliding)
+    assert c.impulse_tangential == pytest.approx(0.1 * c.impulse_normal, rel=1e-9)  # |T| = mu N
+    ax = draw(sol)
+    assert "sliding (|T| = mu N)" in ax.get_title()
+    labels = legend_texts(ax)
+    assert "sliding: |T| = mu N, impulse on the cone's edge (dashed)" in labels
+    assert not any("sticking" in s for s in labels + [ax.get_title()])
+    on_1, _ = check_arrow_scales(sol, ax)
+    # the impulse on vehicle 1 lies on an edge of the wedge drawn, and along the dashed edge line
+    (wedge,) = [p for p in ax.patches if isinstance(p, Wedge)]
+    mid = 0.5 * (wedge.theta1 + wedge.theta2)
+    off = (math.degrees(math.atan2(on_1[1], on_1[0])) - mid + 180.0) % 360.0 - 180.0
+    assert abs(off) == pytest.approx(0.5 * (wedge.theta2 - wedge.theta1), abs=1e-9)
+    (edge,) = cone_edges(ax)
+    along = np.array([np.ptp(edge.get_xdata()), np.ptp(edge.get_ydata())]) * np.sign(on_1)
+    np.testing.assert_allclose(along / np.linalg.norm(along), on_1 / np.linalg.norm(on_1), atol=1e-9)
+    assert np.linalg.norm(along) > np.linalg.norm(on_1)  # it shows past the arrow's head
+
+
+def test_sticking_contact_is_marked_and_the_arrows_are_to_scale():
+    with resources.as_file(case_path("auto_tbone.json")) as path:
+        sol = ks_jax.solve(ks_jax.load_case(path))
+    c = sol.result.contact
+    assert not bool(c.sliding) and c.impulse_tangential > 0.1 * c.impulse_normal  # inside the cone, off its axis
+    ax = draw(sol)
+    assert "sticking (inside the cone)" in ax.get_title()
+    labels = legend_texts(ax)
+    ratio = f"{c.impulse_tangential / c.impulse_normal:.3f}"
+    assert f"sticking (inside the cone): |T| / N = {ratio} <= mu = 0.5" in labels
+    assert not any("sliding" in s for s in labels + [ax.get_title()])
+    assert not cone_edges(ax)
+    check_arrow_scales(sol, ax)

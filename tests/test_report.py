@@ -1,0 +1,122 @@
+"""The text panel of ``ks-jax solve`` (ks_jax.report): its columns stay apart and aligned whatever the
+numbers, its numbers are the solution's, and it names each vehicle as the output paths do."""
+
+import json
+import re
+import tomllib
+
+import pytest
+
+import ks_jax
+from ks_jax import units as U
+from ks_jax.case import get_output
+from ks_jax.report import text_report
+from samples import SEED1
+
+# A 40-tonne truck at 120 km/h into the left side of a car crossing at 50 km/h: an impulse, and its normal
+# and tangential parts, of five digits before the decimal point, in N s and in lbf s.
+HEAVY = {
+    "name": "40-tonne truck into the side of a car",
+    "vehicles": [
+        {"name": "Car", "mass": "1500 kg", "inertia": [500, 2400, 2600], "length": 4.7, "width": 1.8,
+         "height": 1.45, "cg_to_front": 2.1, "cg_height": 0.55, "position": [0, 0], "yaw": 90, "speed": "50 km/h"},
+        {"name": "Truck", "mass": "40000 kg", "inertia": [40000, 400000, 400000], "length": 16.5, "width": 2.55,
+         "height": 4.0, "cg_to_front": 6.0, "cg_height": 1.5, "position": [-6.7, 0.3], "yaw": 0,
+         "speed": "120 km/h"},
+    ],
+    "contact": {"point": [-0.8, 0.3, 0.8], "normal": 0, "restitution": 0.1, "friction": 0.5},
+}
+US_UNIT = re.compile(r"\b(lbf s|ft lbf|mph|ft|deg/s)\b")
+
+
+def solved(tmp_path, case, name="case.json"):
+    path = tmp_path / name
+    path.write_text(json.dumps(case))
+    return ks_jax.solve(ks_jax.load_case(path))
+
+
+def two_column_rows(panel):
+    """{label: [(SI text, US text, offset of the US text), ...]} of the panel's rows with a US unit in them.
+    A row splits at runs of two or more spaces into its label, its SI text and its US text (none of which
+    holds two spaces running); a row whose columns ran together splits into fewer parts and fails here.
+    The reference table, after the panel, has columns of its own."""
+    rows = {}
+    for line in panel.split("\n\n  reference ", 1)[0].splitlines():
+        if not US_UNIT.search(line) or not line.startswith("  "):
+            continue
+        parts = re.split(r" {2,}", line.strip())
+        assert len(parts) == 3, f"the columns run together: {line!r}"
+        label, si, us = parts
+        assert US_UNIT.search(us) and not US_UNIT.search(si), line
+        rows.setdefault(label, []).append((si, us, len(line) - len(us)))
+    return rows
+
+
+def number(text):
+    return float(text.replace(",", ""))
+
+
+def test_wide_numbers_keep_the_columns_apart_and_aligned(tmp_path):
+    sol = solved(tmp_path, HEAVY)
+    c = sol.result.contact
+    assert sol.status == "ok"
+    assert min(c.impulse_magnitude, c.impulse_normal, c.impulse_tangential) >= 1e4  # five digits in N s
+    assert min(c.impulse_normal, c.impulse_tangential) / U.LBF_S >= 1e3  # and four or five in lbf s
+    panel = text_report(sol)
+    rows = two_column_rows(panel)
+    offsets = {offset for entries in rows.values() for _, _, offset in entries}
+    assert len(offsets) == 1, offsets  # the US column starts at one offset in every row
+    (offset,) = offsets
+    gaps = [len(line[:offset]) - len(line[:offset].rstrip()) for line in panel.splitlines()
+            if US_UNIT.search(line) and line.startswith("  ")]
+    assert min(gaps) == 2  # two spaces after the widest SI text, more after the others
+    # the SI and US texts are whole: their numbers are the solution's
+    ((si, us, _),) = rows["impulse"]
+    assert si.endswith(" N s") and us.endswith(" lbf s")
+    assert number(si[:-4]) == pytest.approx(c.impulse_magnitude, abs=5e-4)
+    assert number(us[:-6]) == pytest.approx(c.impulse_magnitude / U.LBF_S, abs=5e-4)
+    ((si, us, _),) = rows["normal / tangential"]
+    assert [number(x) for x in si.removesuffix(" N s").split(" / ")] == pytest.approx(
+        [c.impulse_normal, c.impulse_tangential], abs=5e-4)
+    assert [number(x) for x in us.removesuffix(" lbf s").split(" / ")] == pytest.approx(
+        [c.impulse_normal / U.LBF_S, c.impulse_tangential / U.LBF_S], abs=5e-4)
+    ((si, us, _),) = rows["deformation energy (loss)"]
+    assert number(si.removesuffix(" J")) == pytest.approx(c.energy_loss, abs=5e-4)
+    assert number(us.removesuffix(" ft lbf")) == pytest.approx(c.energy_loss / U.FT_LBF, abs=5e-3)
+
+
+def test_an_ordinary_panel_keeps_its_columns():
+    """Numbers that fit take the panel's usual columns: SI text at offset 36, US text at 62."""
+    panel = text_report(ks_jax.solve(ks_jax.load_case(SEED1)))
+    assert "\n  impulse" + " " * 27 + "6,570.775 N s" + " " * 13 + "1,477.169 lbf s\n" in panel
+    assert {offset for entries in two_column_rows(panel).values() for _, _, offset in entries} == {62}
+    assert all(line == line.rstrip() for line in panel.splitlines())
+
+
+def test_vehicles_are_named_as_the_output_paths_name_them():
+    """Each vehicle's block is headed with its number, its path (as sweeps, fits and --json name it) and its
+    name, and the values under it are that path's."""
+    sol = ks_jax.solve(ks_jax.load_case(SEED1))
+    panel = text_report(sol)
+    assert "object" not in panel
+    for k, name in enumerate(("Lucid Air", "Kia K5")):
+        header = f"\n  vehicle {k + 1} = vehicles[{k}]: {name}\n"
+        assert header in panel
+        block = panel.split(header, 1)[1].split("\n\n", 1)[0]
+        delta_v = re.search(r"^  delta-V +([\d.,]+) m/s", block, re.M).group(1)
+        assert number(delta_v) == pytest.approx(float(get_output(sol.result, f"vehicles[{k}].delta_v_magnitude")),
+                                                abs=5e-4)
+
+
+def test_reference_table_columns_stay_apart(tmp_path):
+    """A reported value wider than its column pushes the next column out, for every row alike."""
+    case = tomllib.loads(SEED1.read_text())
+    case["reference"] = {"contact.impulse_magnitude": "6571.96 N*s", "contact.energy_loss": "1234567.5 ft*lbf"}
+    panel = text_report(solved(tmp_path, case))
+    table = panel.split("\n  reference", 1)[1].splitlines()
+    rows = [re.split(r" {2,}", line.strip()) for line in table[1:]]
+    assert [r[:2] for r in rows] == [["contact.impulse_magnitude", "6,571.960 N*s"],
+                                     ["contact.energy_loss", "1,234,567.500 ft*lbf"]]
+    assert all(len(r) == 4 for r in rows)
+    starts = {line.index(r[2]) for line, r in zip(table[1:], rows)}
+    assert len(starts) == 1  # the ks-jax column is aligned
