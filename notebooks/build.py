@@ -1,14 +1,31 @@
-"""Write the notebooks from the cell sources below (outputs stripped; the tests execute them).
+"""Build the notebooks from the cell sources below, execute each on a fresh kernel and write it with its outputs.
 
-    python notebooks/build.py
+    python notebooks/build.py                            # every notebook
+    python notebooks/build.py 02_parameter_sweeps.ipynb  # only those named
+    python notebooks/build.py --no-execute               # without outputs
+
+The notebooks are shipped executed, so that a reader browsing the repository sees the figures. A notebook
+whose run fails is not written: the command names the notebook, the cell and the error, and exits with 1.
 """
 
+import argparse
+import re
+import sys
+import time
 from pathlib import Path
 
+import nbclient
 import nbformat
+from nbclient.exceptions import CellExecutionError, CellTimeoutError, DeadKernelError
 
 HERE = Path(__file__).parent
 NOTEBOOKS = {}
+
+# The kernel's options: figures inline as PNG at 80 dpi (at matplotlib's 100 the colour maps of notebook 02
+# take 140-165 KB each; 80 keeps them legible at about three quarters of that), and only its errors on the
+# log (its start-up warning about unencrypted local TCP is noise in the command's progress).
+KERNEL_ARGUMENTS = ["--InlineBackend.rc={'figure.dpi': 80}", "--log-level=ERROR"]
+CELL_TIMEOUT = 600  # seconds
 
 
 def notebook(name):
@@ -196,7 +213,7 @@ restitution = np.linspace(0, 0.5, 51)
 r = sweep(lucid_case,
           over={"vehicles[1].speed": kia_speed, "contact.restitution": restitution},
           outputs=["vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude", "contact.energy_loss"])
-print(r.shape, r.status_counts, f"{r.seconds:.2f} s (compile included)")
+print(r.shape, r.status_counts, f"solved in {r.seconds:.2f} s after compiling in {r.compile_seconds:.2f} s")
 """),
         ("code", """
 X, Y = np.meshgrid(kia_speed / U.MPH, restitution, indexing="ij")   # result axes: (speed, restitution)
@@ -347,7 +364,8 @@ outputs (and a status byte per point) come back to the host. For sweeps much lar
 `on_chunk=` and `keep=False` (docs/sweeps.md).
 
 For a first look without writing the plotting by hand, `ks_jax.plot.sweep_view` draws any output of a sweep in
-US units: a map over two swept inputs (as here), a line over one, a histogram of `mode="zip"` samples.
+the units asked for (`units="si"` or `"us"`, here US), with the vehicles' names beside the paths: a map over two
+swept inputs (as here), a line over one, a histogram of `mode="zip"` samples.
 From the shell, `ks-jax sweep ... --plot grid.png` draws the same pictures beside the results file.
 """),
         ("code", """
@@ -355,7 +373,7 @@ from ks_jax import plot
 
 fig, axes = plt.subplots(1, 2, figsize=(13, 4.6))
 for ax, path in zip(axes, outs):
-    plot.sweep_view(rb, path, ax)
+    plot.sweep_view(rb, path, ax, units="us")
 fig.tight_layout()
 """),
     )
@@ -672,7 +690,7 @@ outputs = ["contact.time", "contact.point[0]", "contact.point[1]", "contact.norm
            "vehicles[0].crush", "vehicles[1].crush", "vehicles[0].ees", "vehicles[1].ees",
            "vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude"]
 r = sweep(tbone, over={"contact.penetration_time": dtp}, outputs=outputs)
-print(r.status_counts, f"{r.seconds:.1f} s (compile included)")
+print(r.status_counts, f"solved in {r.seconds:.2f} s after compiling in {r.compile_seconds:.2f} s")
 print(f"first contact t_i = {r['contact.time'][0]:.3f} s for every penetration time")
 separating = dtp[np.array([ks_jax.status_text(c) for c in r['status']]) == "separating"]
 if len(separating):
@@ -791,10 +809,76 @@ def build(name):
     return nb
 
 
-def main():
-    for name in NOTEBOOKS:
-        nbformat.write(build(name), HERE / name)
-        print("wrote", HERE / name)
+class NotebookError(Exception):
+    """A notebook's run failed: the message names the notebook, the cell (index into its cells) and the error."""
+
+
+ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the colours of IPython's tracebacks
+
+
+def execute(nb, name):
+    """Run ``nb`` (the notebook ``name``) top to bottom on a fresh ``python3`` kernel in notebooks/, in place,
+    and tidy it (``tidy``). A failing cell raises ``NotebookError`` with that cell's own traceback only."""
+    current = {}
+    client = nbclient.NotebookClient(
+        nb, timeout=CELL_TIMEOUT, kernel_name="python3", extra_arguments=KERNEL_ARGUMENTS,
+        record_timing=False, resources={"metadata": {"path": str(HERE)}},
+        on_cell_start=lambda cell, cell_index: current.update(index=cell_index))
+    try:
+        client.execute()
+    except CellExecutionError as e:
+        i = current["index"]
+        tb = next(("\n".join(o.traceback) for o in nb.cells[i].outputs if o.output_type == "error"), e.traceback)
+        raise NotebookError(f"{name}: cell {i} failed: {e.ename}: {e.evalue}\n{ANSI.sub('', tb)}") from None
+    except (CellTimeoutError, DeadKernelError) as e:
+        raise NotebookError(f"{name}: cell {current.get('index')} failed: {type(e).__name__}: "
+                            f"{str(e).splitlines()[0]}") from None
+    tidy(nb)
+    return nb
+
+
+def tidy(nb):
+    """Keep nothing in an executed notebook that changes from one run to the next but the outputs: execution
+    counts 1..n (as on a fresh kernel, whatever ran it) and no Python patch version (the kernel's)."""
+    count = 0
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            count += 1
+            cell.execution_count = count
+            for out in cell.outputs:
+                if out.output_type == "execute_result":
+                    out.execution_count = count
+    nb.metadata.get("language_info", {}).pop("version", None)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", metavar="NOTEBOOK",
+                        help=f"notebooks to build (file names; default all): {', '.join(NOTEBOOKS)}")
+    parser.add_argument("--no-execute", action="store_true", help="write the notebooks without outputs")
+    args = parser.parse_args(argv)
+    names = [Path(n).name for n in args.names] or list(NOTEBOOKS)
+    unknown = [n for n in names if n not in NOTEBOOKS]
+    if unknown:
+        parser.error(f"no notebook {', '.join(unknown)}; there are {', '.join(NOTEBOOKS)}")
+    failed = []
+    for name in names:
+        nb = build(name)
+        if not args.no_execute:
+            print(f"{name}: executing ...", file=sys.stderr, flush=True)
+            t0 = time.perf_counter()
+            try:
+                execute(nb, name)
+            except NotebookError as e:
+                print(e, file=sys.stderr)
+                print(f"{name}: not written", file=sys.stderr)
+                failed.append(name)
+                continue
+            print(f"{name}: executed in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        nbformat.write(nb, HERE / name)
+        print(f"wrote {HERE / name}", file=sys.stderr)
+    if failed:
+        sys.exit(f"failed: {', '.join(failed)}")
 
 
 if __name__ == "__main__":
