@@ -33,7 +33,8 @@ def run(tree, n, folder, plot):
         argv += ["--plot", str(Path(folder) / "r.png")]
     env = dict(os.environ, PYTHONPATH=str(tree))
     start = time.perf_counter()
-    child = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    # run in the tree: `python -m` puts the working directory first on the path, before PYTHONPATH
+    child = subprocess.Popen(argv, env=env, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(child.pid, 0)
     seconds = time.perf_counter() - start
     if status != 0:
