@@ -49,6 +49,7 @@ import pytest  # noqa: E402
 import ks_jax  # noqa: E402
 from ks_jax.model import types as kt  # noqa: E402
 import reference as ref  # noqa: E402
+from samples import reference_jit  # noqa: E402
 
 CONTACT_RESULTS = ks_jax.ContactResult._fields
 VEHICLE_RESULTS = ks_jax.VehicleResult._fields
@@ -168,7 +169,10 @@ def _grad(args, weights, smoothing):
 # static ``smoothing=0.0`` path bit for bit).
 EXCHANGE = jax.jit(_single)
 BATCH_JIT = jax.jit(_batch)
-GRAD_JIT = jax.jit(_grad)
+# the gradients, checked against central differences and second formulations, with the quick settings of
+# ``tests/samples.reference_jit``: XLA's settings change the rounding, not the derivative that is traced,
+# and the exchange's gradient program is the largest the tests compile
+GRAD_JIT = reference_jit(_grad)
 BATCH_ROWS = 160
 GRAD_ROWS = 128
 

@@ -119,7 +119,10 @@ def assert_same_leaves(batched, reference):
 
 
 def reference_jit(fun, **jit_kwargs):
-    """``jax.jit`` for a program that is a test's independent route to a result (a per-row gradient, a
-    plain sum, a central difference), not the program under test: compiled with the quick settings that
-    ``ks_jax.solve`` uses on a CPU (the same IEEE arithmetic, half the compile time)."""
+    """``jax.jit`` compiled with the quick settings that ``ks_jax.solve`` uses on a CPU (the same IEEE
+    arithmetic, half the compile time), for a program that is a test's independent route to a result (a
+    per-row gradient, a plain sum, a central difference), and for the test's own wrapper of a gradient or
+    Hessian through the library (``jax.jit(jax.grad(loss))``): what those tests check, the library's
+    derivatives (its batching rule, ``sum_over_rows``' chunks), is traced the same whatever XLA's settings.
+    The library's own programs (``exchange_batch``, ``sweep``, ``solve``, the fit) compile as users get them."""
     return jax.jit(fun, compiler_options=compiler_options(True), **jit_kwargs)

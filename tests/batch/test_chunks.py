@@ -79,7 +79,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
         return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, v1, s1, s2, c))
 
     assert "scan[" in str(jax.make_jaxpr(loss)(shared, s1, c))  # the forward's loop over chunks
-    grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
+    grads = reference_jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
     per_row = reference_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
         shared, v1, s1, s2, c)
     reference = (jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[0]), *per_row[1:])
@@ -92,7 +92,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     direction = np.zeros_like(np.asarray(s1.velocity))  # vehicle 1's speed in every row at once
     direction[:, 0] = 1.0
     zeros = jax.tree_util.tree_map(jnp.zeros_like, s1)
-    _, along = jax.jit(lambda s, t: jax.jvp(lambda x: loss(shared, x, c), (s,), (t,)))(
+    _, along = reference_jit(lambda s, t: jax.jvp(lambda x: loss(shared, x, c), (s,), (t,)))(
         s1, zeros._replace(velocity=jnp.asarray(direction)))  # forward mode (a fit uses jax.jacfwd)
     np.testing.assert_allclose(float(along), float(np.sum(np.asarray(per_row[1].velocity) * direction)), rtol=1e-10)
 
@@ -114,7 +114,7 @@ def test_a_batch_of_one_row_is_the_row(kit, random_cases):
         return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, s1, c, v1, s2))
 
     batch = jax.jit(jax.vmap(ks_jax.exchange))
-    grad_batch, grad_row = jax.jit(jax.grad(loss, argnums=(0, 1, 2))), reference_jit(jax.grad(row_loss, argnums=(0, 1, 2)))
+    grad_batch, grad_row = reference_jit(jax.grad(loss, argnums=(0, 1, 2))), reference_jit(jax.grad(row_loss, argnums=(0, 1, 2)))
     for case in (good, bad):
         v1, s1, v2, s2, c = kit.inputs([case])
         shared = jax.tree_util.tree_map(lambda x: x[0], v2)
@@ -145,7 +145,7 @@ def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chu
                                  + r.vehicles[1].speed_after, 0.0))
 
     p = jnp.array([1.0, 0.9])
-    hessian = np.asarray(jax.jit(jax.hessian(loss))(p))
+    hessian = np.asarray(reference_jit(jax.hessian(loss))(p))
     grad, h = reference_jit(jax.grad(loss)), 1e-6
     for k in range(2):
         step = h * np.eye(2)[k]
