@@ -37,6 +37,7 @@ from ks_jax.case import (
     CaseError,
     PathError,
     automatic_part,
+    on_fixed_object,
     check_output_path,
     input_ties,
     get_input,
@@ -156,6 +157,8 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
     field = _field(u.path)
+    if on_fixed_object(case, u.path):
+        raise CaseError(f"case '{name}': unknowns: {on_fixed_object(case, u.path)}")
     if automatic_part(case, u.path):
         raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
                         f"give contact.{field} in the case to fit it")
@@ -193,6 +196,8 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
+    if on_fixed_object(case, path):
+        raise CaseError(f"case '{case.name}': evidence: {on_fixed_object(case, path)}")
     try:
         group, vi, field, idx = check_output_path(path)
     except PathError as out_err:

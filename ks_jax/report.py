@@ -10,6 +10,7 @@ import numpy as np
 
 from . import units as U
 from .case import CIRCULAR_OUTPUTS, at_rest_after, defined_output, impulse_exchanged, parse_output_value, parse_path
+from .case.fixed import describe
 from .model.first_contact import HORIZON
 
 
@@ -94,6 +95,7 @@ def text_report(sol, reference: bool = True) -> str:
     else:
         lines += _contact_rows(sol, c)
     lines += _vehicle_rows(sol, v1, v2)
+    lines += [f"\n  note: {note}." for note in sol.notes()]
     if sol.status == "no_contact":
         lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
                      "(the search horizon): no exchange.")
@@ -130,6 +132,10 @@ def _contact_rows(sol, c):
 def _vehicle_rows(sol, v1, v2):
     lines = []
     for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
+        if k == 1 and sol.case.fixed is not None:  # the object has no per-vehicle results
+            lines += ["", f"  fixed object: {name}", f"  {describe(sol.case.fixed)}",
+                      "  (infinite mass, at rest: vehicle 1 takes all of the energy loss, EES = sqrt(2 E / m))"]
+            continue
         lines += [
             "",
             f"  vehicle {k + 1} = vehicles[{k}]: {name}",  # as the output paths (sweeps, fits, --json) name it

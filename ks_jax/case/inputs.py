@@ -56,7 +56,9 @@ class CaseInputs(NamedTuple):
 
 @dataclass(frozen=True)
 class Case:
-    """One case: its name, its inputs (None if invalid), and which contact parts are automatic."""
+    """One case: its name, its inputs (None if invalid), and which contact parts are automatic. ``fixed``: the
+    ``case.fixed.FixedObject`` struck in place of a second vehicle (None for two vehicles); its inputs are then
+    those of vehicle 2, a box at rest of infinite mass."""
 
     name: str
     inputs: CaseInputs | None
@@ -66,6 +68,7 @@ class Case:
     error: str | None = None
     raw: dict = field(default_factory=dict, compare=False, repr=False)
     source: str | None = None
+    fixed: Any = None
 
     @property
     def valid(self) -> bool:

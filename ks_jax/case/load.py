@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import units as U
 from .errors import CaseError, CaseWarning
+from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
 from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs
 from .paths import check_output_path, output_kind
 from .schema import CASE_FIELDS, CONTACT_FIELDS, TEXT_FIELDS, VEHICLE_FIELDS
@@ -200,18 +201,58 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
     if vehicles is None:
         raise CaseError(f"case '{name}': vehicles: missing field")
-    if not isinstance(vehicles, list) or len(vehicles) != 2:
+    wanted = 1 if "fixed" in d else 2
+    if not isinstance(vehicles, list) or len(vehicles) != wanted:
         n = len(vehicles) if isinstance(vehicles, list) else vehicles
-        raise CaseError(f"case '{name}': vehicles = {n!r} vehicles: a case needs exactly two vehicles")
+        rule = ("a case with a fixed object needs exactly one vehicle (the object takes the second's place)"
+                if wanted == 1 else "a case needs exactly two vehicles, or one and a fixed object (\"fixed\")")
+        raise CaseError(f"case '{name}': vehicles = {n!r} vehicles: {rule}")
     if "contact" not in d:
         raise CaseError(f"case '{name}': contact: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
+    fixed = _fixed_object(d["fixed"], name) if "fixed" in d else None
+    if fixed is not None:
+        veh = (veh[0], object_inputs(fixed, veh[0]))
     contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
     if "reference" in d:
         _check_reference(d["reference"], name)
     inputs = CaseInputs(veh, contact)
     names = tuple(visible(str(v.get("name", f"vehicle {i + 1}"))) for i, v in enumerate(vehicles))
-    return Case(name, inputs, auto_point, auto_normal, names, None, d, source)
+    if fixed is not None:
+        names = (names[0], visible(str(d["fixed"].get("name", fixed.kind))))
+    return Case(name, inputs, auto_point, auto_normal, names, None, d, source, fixed)
+
+
+FIXED_FIELDS = {"wall": {"point": ("length", "vec2"), "normal": ("angle", None)},
+                "pole": {"position": ("length", "vec2"), "diameter": ("length", None)},
+                "barrier": {"position": ("length", "vec2"), "yaw": ("angle", None), "length": ("length", None),
+                            "width": ("length", None), "height": ("length", None)}}
+
+
+def _fixed_object(d, case_name) -> FixedObject:
+    """The ``fixed`` entry of a case (docs/model.md, "Fixed objects"), SI."""
+    path = "fixed"
+    if not isinstance(d, dict):
+        raise CaseError(f"{_where(case_name, path)} = {_shown(d)}: must be a table/object, e.g. "
+                        "{\"kind\": \"wall\", \"point\": [0, 0], \"normal\": 180}")
+    kind = _require(d, "kind", path, case_name)
+    if kind not in KINDS:
+        raise CaseError(f"{_where(case_name, path + '.kind')} = {_shown(kind)}: must be one of {', '.join(KINDS)}")
+    fields = FIXED_FIELDS[kind]
+    _check_keys(d, set(fields) | TEXT_FIELDS | {"kind"}, path, case_name)
+    values = {}
+    for k, (quantity, shape) in fields.items():
+        if k == "height" and k not in d:
+            values[k] = OBJECT_HEIGHT
+            continue
+        raw = _require(d, k, path, case_name)
+        where = f"{path}.{k}"
+        values[k] = np.array(_vector(raw, quantity, where, case_name, (2,))) if shape else _number(raw, quantity, where,
+                                                                                                    case_name)
+    for k in ("diameter", "length", "width", "height"):
+        if k in values:
+            _positive(values[k], d.get(k, values[k]), f"{path}.{k}", case_name, f"{k} must be positive")
+    return FixedObject(kind, **values)
 
 def _check_reference(reference, case_name):
     """``reference``: reported results to print beside ks-jax's (an output path -> its value, e.g. the

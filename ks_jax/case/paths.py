@@ -117,6 +117,17 @@ def automatic_part(case: "Case", path) -> str | None:
     _, _, name, _ = input_leaf(path)
     return name if (name == "point" and case.auto_point or name == "normal" and case.auto_normal) else None
 
+def on_fixed_object(case: "Case", path) -> str | None:
+    """Where ``case`` strikes a fixed object (docs/model.md, "Fixed objects") and ``path`` names vehicle 2,
+    which is the object there: the words saying why it has no input or result to vary, fit or read; else
+    None."""
+    group, vi = parse_path(path)[:2]
+    if case.fixed is None or group != "vehicles" or vi != 1:
+        return None
+    return (f"{path}: this case strikes a fixed {case.fixed.kind}, which takes the place of vehicles[1]: the object "
+            "has no inputs to vary and no per-vehicle results (vehicles[0] is the vehicle)")
+
+
 def input_ties(case: "Case", paths) -> tuple:
     """((k, path), ...): the inputs that follow ``paths[k]`` when the inputs at ``paths`` are varied (a
     sweep, a fit), as re-solving the case file with the new value would move them (docs/model.md, "Inputs"):

@@ -34,8 +34,8 @@ CONTACT_FIELDS = {
 
 TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
 
-CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "contact", "unknowns", "evidence", "options",
-               "reference"}
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "unknowns", "evidence",
+               "options", "reference"}
 
 INPUT_KINDS = {
     "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",

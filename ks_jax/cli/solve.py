@@ -46,6 +46,9 @@ def run_solve(args) -> int:
     solutions = solve(cases, smoothing=args.smoothing)
     if args.json:
         print(json.dumps({"cases": [s.to_dict() for s in solutions]}, indent=1))
+        for s in solutions:  # the panel prints them; beside JSON they are said on stderr too
+            for note in s.notes():
+                print(f"ks-jax: case '{s.case.name}': {note}", file=sys.stderr)
     else:
         print("\n\n".join(text_report(s) for s in solutions))
     if args.plot:

@@ -71,13 +71,22 @@ def _box_ok(v):
             & (v.cg_height >= 0) & (v.cg_height <= v.height))
 
 
+def is_fixed(vehicle):
+    """() bool: the body is a fixed object (a wall, pole or barrier: docs/model.md, "Fixed objects"), given as a
+    vehicle of infinite mass, whose 1/m and I^-1 are 0 in the exchange. Only vehicle 2 may be one."""
+    return vehicle.mass == jnp.inf
+
+
 def input_status(vehicle1, state1, vehicle2, state2, contact, smoothing=0.0):
     """() int32: ``OK``, or the code of the first rule the inputs break (``ks_jax.model.types``).
 
-    ``smoothing`` is checked only where it is an array (a traced tau, one per row); a Python number is
-    checked once, by the caller, and refused with a ValueError."""
-    leaves = jax.tree_util.tree_leaves((vehicle1, state1, vehicle2, state2, contact))
-    finite = _all([jnp.isfinite(c) for x in leaves for c in _components(x)])
+    Vehicle 2's mass may be +inf: a fixed object (``is_fixed``); its inertia is then not used, but must
+    still be valid (the identity will do). ``smoothing`` is checked only where it is an array (a traced
+    tau, one per row); a Python number is checked once, by the caller, and refused with a ValueError."""
+    leaves = jax.tree_util.tree_leaves((vehicle1, state1, vehicle2._replace(mass=jnp.zeros_like(vehicle2.mass)),
+                                        state2, contact))
+    finite = _all([jnp.isfinite(c) for x in leaves for c in _components(x)]) & ~jnp.isnan(vehicle2.mass) \
+        & (vehicle2.mass != -jnp.inf)
     checks = [
         (finite, INVALID_NONFINITE),
         (vehicle1.mass > 0, INVALID_MASS_1),

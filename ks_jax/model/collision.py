@@ -21,7 +21,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from . import linalg as la
-from .checks import benign, check_smoothing, input_status
+from .checks import benign, check_smoothing, input_status, is_fixed
 from .cone import friction_cone
 from .matrix import collision_matrix, inverse_inertia_world
 from .results import derive, mask_invalid
@@ -140,6 +140,7 @@ def impulse(vehicle1, state1, vehicle2, state2, contact, prepared: Prepared, smo
     # 2. the collision matrix: the relative velocity after an impulse J is u + K J
     a1, rot1 = inverse_inertia_world(vehicle1.inertia, trig1)
     a2, rot2 = inverse_inertia_world(vehicle2.inertia, trig2)
+    a2 = jnp.where(is_fixed(vehicle2), jnp.zeros_like(a2), a2)  # a fixed object: I^-1 = 0 (and 1/m = 1/inf = 0)
     K = collision_matrix(vehicle1.mass, a1, r1, vehicle2.mass, a2, r2)
     # 3. no exchange unless the bodies approach at the centroid
     un = la.dot(n, u)
@@ -169,8 +170,10 @@ def results(vehicle1, state1, vehicle2, state2, contact, prepared: Prepared, fou
                     (vehicle1, state1, rows(found.rot1), rows(found.a1), arr(found.r1)),
                     (vehicle2, state2, rows(found.rot2), rows(found.a2), arr(found.r2)))
     # the overflow check reads what every result reads anyway (J, u, the velocities and masses)
+    fixed = is_fixed(vehicle2)  # an infinite mass has no finite kinetic energy to overflow: left out
+    mass2 = jnp.where(fixed, jnp.zeros_like(vehicle2.mass), vehicle2.mass)
     scale = la.dot(j, j) + la.dot(u, u) + vehicle1.mass * la.dot(state1.velocity, state1.velocity) + \
-        vehicle2.mass * la.dot(state2.velocity, state2.velocity)
+        mass2 * la.dot(state2.velocity, state2.velocity)
     status = jnp.where(ok & ~jnp.isfinite(scale), jnp.int32(INVALID_OVERFLOW), result.contact.status)
     result = result._replace(contact=result.contact._replace(status=status))
     return mask_invalid(result, ok)

@@ -118,7 +118,12 @@ def derive(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResult
     energy = la.plain_zero(-0.5 * la.dot(j, u + u_after))  # J = 0 (separating): 0, not -0
     # the rounding of E: the dot product's terms are at most |J| (|u| + |u'|) / 2
     rounding = ROUNDING * jnp.finfo(energy.dtype).eps * 0.5 * j_mag * (la.safe_norm(u) + la.safe_norm(u_after))
-    ees1, ees2 = ees_pair(energy, v1.crush, v2.crush, body1[0].mass, body2[0].mass,
+    # against a fixed object vehicle 1 takes all of the energy (docs/model.md, "Fixed objects"): its crush
+    # share is 1 and the object's 0, whatever the object's box holds
+    fixed = body2[0].mass == jnp.inf
+    crush1 = jnp.where(fixed, jnp.ones_like(v1.crush), v1.crush)
+    crush2 = jnp.where(fixed, jnp.zeros_like(v2.crush), v2.crush)
+    ees1, ees2 = ees_pair(energy, crush1, crush2, body1[0].mass, jnp.where(fixed, 1.0, body2[0].mass),
                           body1[0].length + body2[0].length, jax.lax.stop_gradient(rounding))
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
     v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)

@@ -143,18 +143,22 @@ def top_view(solution, ax=None):
     no_contact = solution.status == "no_contact"
     t_x = 0.0 if (no_contact or not auto) else t_i + float(inputs.contact.penetration_time)
 
+    fixed = case.fixed
+    moving = 1 if fixed is not None else 2  # a fixed object is drawn as what it is, once (it does not move)
     if auto and not no_contact:
         first, _ = _vehicle_boxes(inputs, t_i)
-        for i in range(2):
+        for i in range(moving):
             _draw_box(ax, first[i], COLORS[i], "--", alpha=0.6,
                       label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
     boxes, cgs = _vehicle_boxes(inputs, t_x)
     when = ("at the case state (no contact)" if no_contact else f"at the exchange, t = {t_x:.4f} s" if auto
             else "at the case state (explicit contact)")
-    for i in range(2):
+    for i in range(moving):
         _draw_box(ax, boxes[i], COLORS[i], "-", label=f"{names[i]} {when}")
 
-    extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles)
+    extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:moving])
+    if fixed is not None:
+        _draw_fixed(ax, fixed, names[1], boxes[1], np.asarray(c.point, float)[:2], extent)
     v_scale = None
     if not no_contact:
         overlap = clip_polygon(boxes[0], boxes[1])
@@ -185,7 +189,7 @@ def top_view(solution, ax=None):
             arrow = j_mag / per_m
             shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
             vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
-            for i, sign in enumerate((1.0, -1.0)):
+            for i, sign in enumerate((1.0, -1.0)[:moving]):
                 _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
                 ax.plot([], [], color=COLORS[i], lw=3.5,
                         label=f"impulse on {names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
@@ -196,14 +200,14 @@ def top_view(solution, ax=None):
         ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
 
     speeds = []
-    for i, v in enumerate(inputs.vehicles):
+    for i, v in enumerate(inputs.vehicles[:moving]):
         speeds.append(float(v.speed))
         speeds.append(float(np.linalg.norm(np.asarray(res.vehicles[i].velocity_after, float)[:2])))
     vmax = max(speeds)
     if vmax > 0:
         v_per_m = round_scale(vmax / (VELOCITY_LENGTH * extent))  # m/s per m of arrow
         v_scale = 1.0 / v_per_m  # m per m/s
-        for i, v in enumerate(inputs.vehicles):
+        for i, v in enumerate(inputs.vehicles[:moving]):
             before = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
             after = np.asarray(res.vehicles[i].velocity_after, float)[:2]
             for vec, style, side in ((before, ":", 1.0), (after, "-", -1.0)):
@@ -236,6 +240,30 @@ def top_view(solution, ax=None):
     ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, 0.0), bbox_transform=below, ncol=2,
               frameon=False)
     return ax
+
+
+def _draw_fixed(ax, obj, name, box, near, extent):
+    """A fixed object (``case.fixed.FixedObject``): a wall as its face, hatched on the wall's side, for
+    1.2 vehicle lengths each way of ``near`` (the centroid's side of the face); a pole as its circle; a
+    barrier as its box; grey, filled."""
+    from matplotlib.patches import Circle, Polygon
+
+    style = dict(facecolor="0.75", edgecolor="0.25", hatch="///", lw=1.4, alpha=0.9, zorder=1)
+    if obj.kind == "wall":
+        n = np.array([math.cos(obj.normal), math.sin(obj.normal)])
+        along = np.array([-n[1], n[0]])
+        foot = obj.point + along * float(along @ (near - obj.point))  # the face's point nearest the centroid
+        half, depth = 1.2 * extent, 0.15 * extent
+        face = [foot - half * along, foot + half * along]
+        ax.add_patch(Polygon([*face, face[1] - depth * n, face[0] - depth * n], closed=True,
+                             label=f"{name} (fixed wall; its face)", **style))
+        ax.plot(*np.stack(face).T, "-", color="0.1", lw=2.5)
+    elif obj.kind == "pole":
+        ax.add_patch(Circle(obj.position, 0.5 * obj.diameter, label=f"{name} (fixed pole, {obj.diameter:.3f} m)",
+                            **style))
+    else:
+        ax.add_patch(Polygon(box, closed=True, label=f"{name} (fixed barrier)", **style))
+    ax.update_datalim(np.asarray(box if obj.kind == "barrier" else [near - extent, near + extent], float))
 
 
 def save_top_view(solutions, path):

@@ -18,7 +18,7 @@ from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
-from ..case import input_kind, input_ties, set_input, undefined_kind
+from ..case import input_kind, input_ties, on_fixed_object, set_input, undefined_kind
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiled, compiler_options
@@ -216,17 +216,23 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     paths = tuple(over)
     for p in paths:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
+        if on_fixed_object(case, p):
+            raise CaseError(f"sweep over {on_fixed_object(case, p)}")
         if name:
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
                             f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
                             "to vary it")
     axes = {p: _check_values(p, over[p]) for p in paths}
-    outputs = tuple(DEFAULT_OUTPUTS if outputs is None else [outputs] if isinstance(outputs, str) else outputs)
+    if outputs is None:  # against a fixed object, vehicles[1] is the object: no results of its own
+        outputs = [p for p in DEFAULT_OUTPUTS if not on_fixed_object(case, p)]
+    outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
             raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
         if p != "status":
             check_output_path(p)
+            if on_fixed_object(case, p):
+                raise CaseError(f"output {on_fixed_object(case, p)}")
     outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
     for p in outputs:
         if p in axes:
