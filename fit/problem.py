@@ -104,6 +104,7 @@ class Problem:
     evidence: tuple
     auto_point: bool = False
     auto_normal: bool = False
+    pole: bool = False  # vehicle 2 is a pole (``Case.pole``)
 
     @property
     def n(self) -> int:
@@ -346,7 +347,8 @@ def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) 
         raise CaseError(case.error)
     ties = input_ties(case, [u.path for u in unknowns])
     ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
-    return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal))
+    return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal),
+                   bool(case.pole))
 
 
 # ---------------------------------------------------------------------------------------
@@ -393,7 +395,7 @@ def predict(problem: Problem, inputs, x, smoothing):
     """(predicted evidence (m,), (status (), sliding (), |J_t| / J_n ())) for unknowns x (n,), SI / the
     result's units. |J_t| / J_n of a contact that sticks is the least friction that keeps it sticking."""
     inputs = apply_unknowns(problem, inputs, x)
-    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing)
+    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole)
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
     c = res.contact

@@ -30,11 +30,12 @@ from .model.types import ContactResult, ExchangeResult, VehicleResult, status_te
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
-                 smoothing=0.0) -> ExchangeResult:
+                 smoothing=0.0, pole: bool = False) -> ExchangeResult:
     """One case's results from its inputs (pure, unbatched; jit, vmap and grad at the edge).
 
     ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
-    otherwise the exchange is at the case state. A negative ``speed`` (reachable by ``set_input``, a sweep
+    otherwise the exchange is at the case state. ``pole`` (static): vehicle 2 is a pole, which automatic
+    contact meets as a disc (``Case.pole``). A negative ``speed`` (reachable by ``set_input``, a sweep
     or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN results (``speed_status``),
     unless another input breaks a rule first.
 
@@ -42,11 +43,11 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     (``batch.stages.run``): every later loop reads the rules, and XLA would derive them again inside each
     loop that reads a stand-in input, in a program over twice the size to compile. The others are fused
     freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``."""
-    return run(stages(auto_point, auto_normal, smoothing), (inputs,), in_axes=None,
+    return run(stages(auto_point, auto_normal, smoothing, pole), (inputs,), in_axes=None,
                fenced=1 if auto_point or auto_normal else False)
 
 
-def stages(auto_point: bool, auto_normal: bool, smoothing=0.0):
+def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False):
     """The case's pipeline, three functions of a row's ``CaseInputs`` and the outputs of the stages before
     (``ks_jax.batch.stages.run``): the exchange's own stages (``model.collision.stages``) at a given
     contact; for automatic contact, the input rules, the contact (``model.automatic.automatic_stage``)
@@ -57,7 +58,7 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0):
 
         def contact(inputs, status):
             return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, status,
-                                   auto_point=auto_point, auto_normal=auto_normal)
+                                   auto_point=auto_point, auto_normal=auto_normal, pole=pole)
 
         def exchange(inputs, status, auto):
             return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
@@ -98,17 +99,17 @@ def with_speed_status(inputs: CaseInputs, result: ExchangeResult) -> ExchangeRes
     return result._replace(contact=result.contact._replace(status=status))
 
 
-def _solve_rows(inputs, auto_point, auto_normal, smoothing):
+def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False):
     """``solve_inputs`` of every row of ``inputs``. One row is solved unbatched: XLA compiles a batch of
     one row to a program several times the size of one unbatched row's."""
-    pipeline = stages(auto_point, auto_normal, smoothing)
+    pipeline = stages(auto_point, auto_normal, smoothing, pole)
     if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
         row = run(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), in_axes=None)
         return jax.tree_util.tree_map(lambda x: x[None], row)
     return run(pipeline, (inputs,))
 
 
-_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3))  # a file's few cases: compiling is most of the time
+_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4))  # a file's few cases: compiling is most of the time
 
 
 @dataclass
@@ -220,17 +221,19 @@ def solve(cases, smoothing: float = 0.0):
     groups: dict[tuple, list[int]] = {}
     for i, c in enumerate(cases):
         if c.valid:
-            groups.setdefault((c.auto_point, c.auto_normal), []).append(i)
+            # a pole is met as a disc by automatic contact only: at a given contact it is any other case
+            groups.setdefault((c.auto_point, c.auto_normal, c.pole and (c.auto_point or c.auto_normal)),
+                              []).append(i)
         else:
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
-    for (auto_point, auto_normal), idx in groups.items():
+    for (auto_point, auto_normal, pole), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
         origin = scene_origin(stacked)  # float32 far from the origin: solved about the CGs' midpoint
         if origin is not None:
             stacked = move_scene(stacked, origin, auto_point)
         warn_far_from_origin(stacked, what="a case", about="the origin" if origin is None else "its CGs' midpoint",
                              auto_point=auto_point)
-        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing))
+        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole)
         res = jax.tree_util.tree_map(np.asarray, res)
         if origin is not None:
             point = res.contact.point.astype(np.float64)

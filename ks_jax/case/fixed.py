@@ -6,10 +6,9 @@ I^-1 are 0), whose footprint automatic contact reads as it reads a second vehicl
 - wall: a half-plane, given as a box whose face towards the road is the wall's face: through ``point``, the
   box behind it, ``WALL_REACH`` long each way along the face and as deep, so that no vehicle can reach its
   ends within the first-contact search (HORIZON seconds at ``WALL_SPEED``) from where the case puts it.
-- pole: a box of the pole's diameter, square, turned to face the vehicle's path (its face perpendicular to
-  the vehicle's course). A flat face striking it meets it where the round pole would be met, and the plane
-  and normal of that contact are the face's, as for a round pole; a corner striking it meets the square's
-  corner first, a little (at most 0.21 diameters) before the round pole's face.
+- pole: the square about its disc, which automatic contact meets as the disc itself (``Case.pole``,
+  ``model.pole``): first touch of the footprint with the circle, the overlap of footprint and disc, a radial
+  normal.
 """
 
 from __future__ import annotations
@@ -51,9 +50,9 @@ def object_inputs(obj: FixedObject, vehicle: VehicleInputs) -> VehicleInputs:
     if obj.kind == "barrier":
         xy, yaw, length, width, height = obj.position, obj.yaw, obj.length, obj.width, obj.height
         cg_to_front = 0.5 * length
-    elif obj.kind == "pole":
+    elif obj.kind == "pole":  # the square about the disc (automatic contact meets the disc: ``model.pole``)
         xy, length, width, height = obj.position, obj.diameter, obj.diameter, OBJECT_HEIGHT
-        yaw, cg_to_front = float(vehicle.course), 0.5 * obj.diameter
+        yaw, cg_to_front = 0.0, 0.5 * obj.diameter
     else:  # wall: the box's rear face (body -x) is the wall's face, so the box is turned to face into the wall
         reach = float(np.hypot(*(np.asarray(vehicle.position[:2]) - obj.point))) + WALL_SPEED * HORIZON + WALL_MARGIN
         xy, yaw, length, width, height = obj.point, obj.normal + math.pi, 2.0 * reach, 2.0 * reach, OBJECT_HEIGHT

@@ -74,6 +74,11 @@ class Case:
     def valid(self) -> bool:
         return self.error is None
 
+    @property
+    def pole(self) -> bool:
+        """The case strikes a pole: automatic contact meets vehicle 2 as a disc (``model.pole``), not a box."""
+        return self.fixed is not None and self.fixed.kind == "pole"
+
 def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
     """Every leaf as a jnp array (of ``dtype``, default: JAX's default float)."""
     dtype = dtype or jnp.result_type(float)

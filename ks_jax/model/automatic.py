@@ -26,8 +26,9 @@ import jax.numpy as jnp
 from . import linalg as la
 from .checks import benign, input_status
 from .collision import exchange
-from .first_contact import HORIZON, advance, first_contact, reach, separation
-from .overlap import Contact2D, contact_geometry, growing_overlap, tilt
+from .first_contact import HORIZON, advance, first_contact, footprint, reach, separation
+from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, tilt
+from .pole import disc_contact, disc_gap
 from .results import mask_invalid
 from .types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
 
@@ -51,7 +52,8 @@ class AutoContact(NamedTuple):
     touch_crush: jnp.ndarray
 
 
-def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch, *, auto_point, auto_normal):
+def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch, *, auto_point, auto_normal,
+                      pole=False):
     """Free motion to t_i + penetration_time and the contact there (docs/model.md, "Automatic contact").
 
     ``contact.point`` (3,) m (global, at the exchange instant) is used where ``auto_point`` is
@@ -62,12 +64,18 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     # coordinates of 1e4 m and more, where the same scene gave another centroid and normal
     origin = (0.5 * (state1.position + state2.position)).at[2].set(0.0)
     near1, near2 = (s._replace(position=s.position - origin) for s in (state1, state2))
-    t_i, found = first_contact(vehicle1, near1, vehicle2, near2)
+    gap = disc_gap if pole else separation
+    t_i, found = first_contact(vehicle1, near1, vehicle2, near2, disc_gap if pole else None)
     t_x = jnp.where(found, t_i + contact.penetration_time, 0.0)
     a1, a2 = advance(state1, t_x), advance(state2, t_x)
-    geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin))
-    growth = growing_overlap(contact.penetration_time, (vehicle1, near1, vehicle2, near2, t_i, t_x,
-                                                         la.safe_norm(origin), normal_pitch))
+    if pole:  # a disc: no growing-overlap correction of the touch's derivative in penetration_time
+        geo = _pole_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin),
+                             advance(near1, t_i), advance(near2, t_i))
+        growth = jnp.zeros(4, t_x.dtype)
+    else:
+        geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin))
+        growth = growing_overlap(contact.penetration_time, (vehicle1, near1, vehicle2, near2, t_i, t_x,
+                                                             la.safe_norm(origin), normal_pitch))
     shift = jnp.where(geo.solid, 0.0, jnp.concatenate([growth[:2], jnp.zeros(1, growth.dtype)]))
     geo = geo._replace(point=geo.point + shift + origin, polygon=geo.polygon + origin[:2],
                        crossings=geo.crossings + origin[:2])
@@ -82,15 +90,32 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     x_axis = jnp.zeros(3, u.dtype).at[0].set(1.0)
     n_sep = jnp.where(u_len > 0, u / jnp.where(u_len > 0, u_len, 1.0), x_axis)
     contact = contact._replace(point=jnp.where(found, point, mid), normal=jnp.where(found, normal, n_sep))
-    gap = separation(vehicle1, near1, vehicle2, near2, t_x)  # <= 0 at t_i itself, to rounding
+    gap = gap(vehicle1, near1, vehicle2, near2, t_x)  # <= 0 at t_i itself, to rounding
     gap_tol = 1e3 * jnp.finfo(gap.dtype).eps * (reach(vehicle1) + reach(vehicle2) + la.safe_norm(origin))
     parted = found & (contact.penetration_time > 0) & (gap > gap_tol)
     at_touch = found & ~geo.solid & (contact.penetration_time == 0) & auto_point & auto_normal
     return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo, parted, at_touch, growth[2:])
 
 
+def _pole_geometry(vehicle1, state1, vehicle2, state2, coordinates, touch1, touch2) -> Contact2D:
+    """``overlap.contact_geometry`` where vehicle 2 is a pole (``pole.disc_contact``), with the same length
+    tolerance; no outline crossings. ``touch1``, ``touch2``: the states at the first touch."""
+    corners1 = footprint(vehicle1, state1.position[:2], state1.yaw)
+    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
+    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    xy, n, poly, count, area, solid = disc_contact(vehicle1, state1, state2.position[:2], 0.5 * vehicle2.width,
+                                                   corners1, len_tol, touch1, touch2.position[:2])
+    z = _vertical_middle(vehicle1, state1, vehicle2, state2)
+    zero = jnp.zeros((), xy.dtype)
+    no = jnp.zeros((), bool)  # no outline crossings: the plane is the tangent at the centroid
+    flags = {k: no for k in Contact2D._fields if k in ("crossing_ok", "facing")}
+    return Contact2D(point=jnp.stack([xy[0], xy[1], z]), normal=jnp.stack([n[0], n[1], zero]), polygon=poly,
+                     count=count, area=area, crossings=jnp.zeros((2, 2), xy.dtype), solid=solid, **flags)
+
+
 def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
-                       normal_pitch, *, auto_point: bool, auto_normal: bool, smoothing=0.0) -> ExchangeResult:
+                       normal_pitch, *, auto_point: bool, auto_normal: bool, smoothing=0.0,
+                       pole: bool = False) -> ExchangeResult:
     """The KS exchange at the automatic contact (docs/model.md).
 
     Vehicles (mass kg, inertia kg m^2, box m) and states (position m, velocity m/s, yaw rad,
@@ -108,18 +133,18 @@ def automatic_exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, stat
     """
     args = (vehicle1, state1, vehicle2, state2, contact)
     status = input_status(*args)
-    auto = automatic_stage(*args, normal_pitch, status, auto_point=auto_point, auto_normal=auto_normal)
+    auto = automatic_stage(*args, normal_pitch, status, auto_point=auto_point, auto_normal=auto_normal, pole=pole)
     return exchange_at_contact(*args, status, auto, smoothing)
 
 
 def automatic_stage(vehicle1, state1, vehicle2, state2, contact, normal_pitch, status, *, auto_point,
-                    auto_normal) -> AutoContact:
+                    auto_normal, pole=False) -> AutoContact:
     """``automatic_contact`` of a row whose ``input_status`` is ``status`` (() int32), run on harmless
     stand-in inputs where that is not OK. Its ``geometry`` is None (the exchange does not need it)."""
     ok = status == OK
     stand_ins = benign((vehicle1, state1, vehicle2, state2, contact), ok)
     normal_pitch = jnp.where(ok & jnp.isfinite(normal_pitch), normal_pitch, 0.0)
-    auto = automatic_contact(*stand_ins, normal_pitch, auto_point=auto_point, auto_normal=auto_normal)
+    auto = automatic_contact(*stand_ins, normal_pitch, auto_point=auto_point, auto_normal=auto_normal, pole=pole)
     return auto._replace(geometry=None)
 
 

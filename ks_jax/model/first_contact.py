@@ -154,7 +154,7 @@ def reach_window(vehicle1, state1, vehicle2, state2):
     return t_a, jnp.maximum(t_a, t_b), within
 
 
-def _scan_contact(vehicle1, state1, vehicle2, state2, skip):
+def _scan_contact(vehicle1, state1, vehicle2, state2, skip, gap=None):
     """Conservative advancement over the part of [0, HORIZON] inside the reach window, then
     ``_refine``: (t_i, found). Rows where ``skip`` is True are not searched (found False).
 
@@ -170,7 +170,8 @@ def _scan_contact(vehicle1, state1, vehicle2, state2, skip):
     dv = state1.velocity[:2] - state2.velocity[:2]
     bound = 1.001 * (la.safe_norm(dv) + jnp.abs(state1.angular_velocity[2]) * reach(vehicle1)
                      + jnp.abs(state2.angular_velocity[2]) * reach(vehicle2))
-    sep = lambda t: separation(vehicle1, state1, vehicle2, state2, t)  # noqa: E731
+    gap = separation if gap is None else gap  # a pole's: ``pole.disc_gap``
+    sep = lambda t: gap(vehicle1, state1, vehicle2, state2, t)  # noqa: E731
 
     def cond(carry):
         return ~carry[-1]
@@ -226,19 +227,24 @@ def _refine(sep, lo, hi, s_lo, s_hi, tol, active):
     return jax.lax.while_loop(cond, body, init)[2]
 
 
-def first_contact(vehicle1, state1, vehicle2, state2):
+def first_contact(vehicle1, state1, vehicle2, state2, gap=None):
     """First time t_i >= 0 (s) at which the footprints touch under free motion, and whether
-    they were found to: ((), bool ()). Differentiable through the touching condition."""
+    they were found to: ((), bool ()). Differentiable through the touching condition. ``gap``: the
+    separation function of vehicle 2's footprint where it is not a box (a pole's ``pole.disc_gap``), which
+    is searched as the footprints of turning vehicles are."""
     params = jax.lax.stop_gradient((vehicle1, state1, vehicle2, state2))
     translating = (params[1].angular_velocity[2] == 0) & (params[3].angular_velocity[2] == 0)
+    if gap is not None:
+        translating = jnp.zeros_like(translating)  # the closed form is the boxes'
     t_lin, found_lin = _translation_contact(*params)
-    t_rot, found_rot = _scan_contact(*params, translating)
+    t_rot, found_rot = _scan_contact(*params, translating, gap)
     t0 = jnp.where(translating, t_lin, t_rot)
     found = jnp.where(translating, found_lin, found_rot)
     t0 = jnp.where(found, t0, 0.0)
 
     # implicit differentiation: t = t0 - (s(t0, theta) - s(t0, theta0)) / s_t(t0, theta0)
-    s_theta, s_t = jax.jvp(lambda t: separation(vehicle1, state1, vehicle2, state2, t), (t0,), (jnp.ones_like(t0),))
+    gap = separation if gap is None else gap
+    s_theta, s_t = jax.jvp(lambda t: gap(vehicle1, state1, vehicle2, state2, t), (t0,), (jnp.ones_like(t0),))
     correction = la.safe_div(s_theta - jax.lax.stop_gradient(s_theta), jax.lax.stop_gradient(s_t))
     t = t0 - jnp.where(found & (t0 > 0), correction, 0.0)
     return t, found

@@ -161,7 +161,11 @@ def top_view(solution, ax=None):
         _draw_fixed(ax, fixed, names[1], boxes[1], np.asarray(c.point, float)[:2], extent)
     v_scale = None
     if not no_contact:
-        overlap = clip_polygon(boxes[0], boxes[1])
+        other = boxes[1]
+        if fixed is not None and fixed.kind == "pole":  # the disc, not the square about it
+            angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+            other = fixed.position + 0.5 * fixed.diameter * np.stack([np.cos(angle), np.sin(angle)], -1)
+        overlap = clip_polygon(boxes[0], other)
         if len(overlap) >= 3:
             ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5,
                                  label="overlap of the footprints"))

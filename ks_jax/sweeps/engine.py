@@ -95,7 +95,7 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 @lru_cache(maxsize=32)
 def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing, out_dtype, devices,
-             quick=False, cpu=True):
+             quick=False, cpu=True, pole=False):
     """The jitted program of one chunk of ``n_rows`` points, sharded over ``devices`` along the rows.
 
     Called as ``(start, stop, axes, sizes, total, base)``: it makes each row's swept values from its flat
@@ -110,7 +110,7 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
     compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced
     on the CPU's path only)."""
     rows, replicated = row_placement(devices)
-    pipeline = stages(auto_point, auto_normal, smoothing)
+    pipeline = stages(auto_point, auto_normal, smoothing, pole)
 
     def chunk(start, stop, axes, sizes, total, base):
         vals = _chunk_values(start, axes, mode, sizes if static_sizes is None else static_sizes, n_rows, total)
@@ -292,9 +292,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     # a larger one (or a range of one) keeps its exact axes (a zip of 10^8 samples is not padded) and sizes
     one_chunk = total <= n_rows
     static_sizes = None if one_chunk else sizes
-    program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes,
-                                                   case.auto_point, case.auto_normal, float(smoothing), out_dtype,
-                                                   devices, quick, on_cpu())
+    program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes, case.auto_point,
+                       case.auto_normal, float(smoothing), out_dtype, devices, quick, on_cpu(), case.pole)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")

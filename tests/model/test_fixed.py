@@ -218,3 +218,57 @@ def test_a_contact_that_cannot_exchange_an_impulse_says_why():
     assert "from the fixed wall into Sedan" in wall.notes()[1]
     assert rev.to_dict()["notes"] == rev.notes()
     assert "note: the normal may point the wrong way" in text_report(rev)
+
+
+def _pole(centre, diameter=0.3, dt=0.0, speed=V):
+    return {"name": "pole", "vehicles": [dict(CAR, speed=speed)],
+            "fixed": {"kind": "pole", "position": list(centre), "diameter": diameter},
+            "contact": {"restitution": 0.1, "friction": 0.6, "penetration_time": dt}}
+
+
+def test_a_pole_is_met_as_a_circle():
+    """Automatic contact with a pole of radius 0.15 m, by hand. A corner: the pole's centre 0.1 m outside the
+    sedan's left side (y = 0.9 m) is first touched by the front-left corner, where the corner's line y = 0.9
+    meets the circle, x = x_c - sqrt(0.15^2 - 0.1^2), with the normal radial there (azimuth 180 + atan(0.1 /
+    0.1118) = 221.8 deg). A centred pole, 0.1 m in: the overlap is a circular segment, whose centroid lies
+    4 r sin^3(a/2) / (3 (a - sin a)) from the centre (a: the segment's angle, cos(a/2) = (r - 0.1) / r), and
+    the normal is along the sedan's axis. A pole wholly inside the footprint (0.5 m in), and one 0.5 m off the
+    axis, 0.4 m from the left side when 0.56 m in: the centroid is its centre and the normal the front face's,
+    through which it came, turned inwards."""
+    r, xc = 0.15, 4.0
+    corner, segment, inside, aside = solve_all([_pole((xc, 1.0)), _pole((xc, 0.0), dt=0.1 / V),
+                                                _pole((xc, 0.0), dt=0.5 / V), _pole((xc, 0.5), dt=0.56 / V)])
+    x_touch = xc - math.sqrt(r * r - 0.1 ** 2)
+    c = corner.result.contact
+    assert float(c.time) == pytest.approx((x_touch - 2.0) / V, abs=1e-9)
+    np.testing.assert_allclose(c.point[:2], [x_touch, 0.9], atol=1e-9)
+    azimuth = math.degrees(math.atan2(float(c.normal[1]), float(c.normal[0]))) % 360
+    assert azimuth == pytest.approx(180 + math.degrees(math.atan2(0.1, xc - x_touch)), abs=1e-6)
+    assert azimuth == pytest.approx(221.81, abs=0.01)
+
+    half = math.acos((r - 0.1) / r)  # a / 2
+    a = 2 * half
+    d = 4 * r * math.sin(half) ** 3 / (3 * (a - math.sin(a)))
+    c = segment.result.contact
+    assert float(c.time) == pytest.approx((xc - r - 2.0) / V, abs=1e-9)
+    assert float(c.point[0]) == pytest.approx(xc - d, abs=2e-3 * r)  # the 32-sided polygon of the disc
+    assert float(c.point[1]) == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(c.normal, [-1.0, 0.0, 0.0], atol=1e-12)
+    for sol, y in ((inside, 0.0), (aside, 0.5)):
+        c = sol.result.contact
+        np.testing.assert_allclose(c.point[:2], [xc, y], atol=1e-9)
+        np.testing.assert_allclose(c.normal, [-1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_a_fit_recovers_the_speed_into_a_pole_from_its_delta_v():
+    """Noise-free delta-V of an off-centre pole impact (automatic contact with the circle, 0.04 s of
+    penetration, the centroid off the sedan's axis so that it spins): the fit, which differentiates through
+    the first touch and the overlap, returns the speed it was made with."""
+    case = case_from_dict(_pole((4.0, 0.5), dt=0.04, speed=14.0))
+    (sol,) = ks_jax.solve([case])
+    assert sol.status == "ok" and abs(float(sol.result.vehicles[0].yaw_rate_after)) > 0.1
+    dv = float(sol.result.vehicles[0].delta_v_magnitude)
+    result = fit.reconstruct(case, {"vehicles[0].speed": {"bounds": [5.0, 30.0]}},
+                             [{"quantity": "vehicles[0].delta_v_magnitude", "value": dv, "sigma": 0.3}])
+    assert result.converged
+    assert result.estimate["vehicles[0].speed"] == pytest.approx(14.0, rel=1e-6)
