@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from . import linalg as la
 from .checks import benign, input_status
 from .collision import exchange
-from .first_contact import HORIZON, advance, first_contact, footprint, reach, separation
+from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, separation
 from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, tilt
 from .pole import disc_contact, disc_gap
 from .results import mask_invalid
@@ -73,7 +73,13 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
                              advance(near1, t_i), advance(near2, t_i))
         growth = jnp.zeros(4, t_x.dtype)
     else:
-        geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin))
+        # the face that touched first: where the faces facing each other decide the normal, theirs
+        t1, t2 = advance(near1, t_i), advance(near2, t_i)
+        touched = jnp.argmin(penetrations(footprint(vehicle1, t1.position[:2], t1.yaw),
+                                          footprint(vehicle2, t2.position[:2], t2.yaw),
+                                          edge_normals(t1.yaw, t2.yaw))) % 4
+        geo = contact_geometry(vehicle1, advance(near1, t_x), vehicle2, advance(near2, t_x), la.safe_norm(origin),
+                               touched)
         growth = growing_overlap(contact.penetration_time, (vehicle1, near1, vehicle2, near2, t_i, t_x,
                                                              la.safe_norm(origin), normal_pitch))
     shift = jnp.where(geo.solid, 0.0, jnp.concatenate([growth[:2], jnp.zeros(1, growth.dtype)]))

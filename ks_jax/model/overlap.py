@@ -17,18 +17,29 @@ Pure and unbatched, built from fixed-size arrays (an overlap polygon is (8, 2) w
   the growing overlap's derivative too. These are the one-sided derivatives from
   penetration_time > 0; the derivatives in every other input are those of the touching
   configuration, which stays touching.
-- Normal: perpendicular to the line through the two points where the outlines cross,
-  horizontal, pointing from vehicle 2 into vehicle 1: to the side of that line where footprint
-  1's centre lies relative to footprint 2's (n . (c_1 - c_2) > 0; the axis of least penetration
-  decides only if that product is exactly 0), then tilted up by ``normal_pitch``:
-  n = (cos p n_x, cos p n_y, sin p). The axis of least penetration would not do for the sign:
-  once a penetration is deeper than the overlap is wide, that axis turns across the line, and its
+- Normal: horizontal, pointing from vehicle 2 into vehicle 1, perpendicular to the contact plane,
+  which is found from the two points where the outlines cross (``_plane_axis``):
+  - both crossings on one edge of one footprint (a corner, or a whole face, entering a side or a
+    face of the other: a T-bone, a corner into a side, a narrow front into a wide rear): the
+    plane is that edge, and n its edge normal (the line through the crossings is that edge);
+  - otherwise each crossing joins an edge of one footprint to a different edge of the other, and
+    each footprint has a corner inside the other (an offset frontal, a rear-end with partial
+    overlap, two corners meeting): the overlap is bounded by a face of each vehicle that face each
+    other, and the line through the crossings is the overlap's diagonal, which no face lies
+    along. n is the axis the faces first touched along (``contact_geometry``'s ``touched``: the
+    axis of least penetration at the first touch, which ``automatic_contact`` passes), as the
+    vehicles are turned now: for aligned vehicles the longitudinal axis, however deep.
+  The sign of either axis: n points to the side where footprint 1's centre lies relative to
+  footprint 2's (n . (c_1 - c_2) > 0; the axis of least penetration decides only if that product
+  is exactly 0). It is then tilted up by ``normal_pitch``:
+  n = (cos p n_x, cos p n_y, sin p). The axis of least penetration's own sign would not do: once
+  a penetration is deeper than the overlap is wide, that axis turns across the plane, and its
   sign no longer says which way vehicle 1 lies (an inline rear-end came out "separating"). Nor
   would the CGs: a CG may sit anywhere along its box, and one 1 ft behind the front face is
   passed by the other's within a foot of penetration; the boxes' centres are passed only when
   the penetration is half a box long. Where the outlines do not cross in exactly two points more
   than ~1e-12 m inside both edges (collinear edges, also when rounding parts them by 1e-16 m;
-  containment; a degenerate overlap) n is the axis of least penetration.
+  containment; a degenerate overlap) n is the axis of least penetration, with its own sign.
 - Coordinates: the search and the geometry work about the CGs' midpoint, and the tolerances above
   (~1e3 machine epsilons of the vehicles' size) grow with the scene's distance from the origin, so
   that a scene given in survey coordinates (1e4-1e6 m) gives the contact of the same scene near the
@@ -53,8 +64,10 @@ class Contact2D(NamedTuple):
     """The automatic contact at one instant: point (3,) m, normal (3,) horizontal unit
     (from vehicle 2 into vehicle 1), overlap polygon (8, 2) m with ``count`` vertices,
     ``area`` () m^2, ``crossings`` (2, 2) m and ``crossing_ok`` () bool (the two outline
-    crossings and whether the normal came from them), ``solid`` () bool (the area is above its
-    tolerance: the point is the area centroid, else the middle of the touching features)."""
+    crossings and whether the plane was found from them), ``facing`` () bool (they lie on
+    different edges of both footprints, and the normal is the axis of least penetration, with the
+    crossings' sign rule), ``solid`` () bool (the area is above its tolerance: the point is the
+    area centroid, else the middle of the touching features)."""
 
     point: jnp.ndarray
     normal: jnp.ndarray
@@ -63,6 +76,7 @@ class Contact2D(NamedTuple):
     area: jnp.ndarray
     crossings: jnp.ndarray
     crossing_ok: jnp.ndarray
+    facing: jnp.ndarray
     solid: jnp.ndarray
 
 
@@ -74,15 +88,16 @@ def _cross2(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _next_index(count):
-    idx = jnp.arange(MAX_VERTICES)
+def _next_index(count, size=MAX_VERTICES):
+    idx = jnp.arange(size)
     return idx, jnp.where(idx + 1 < count, idx + 1, 0)
 
 
 def _clip(poly, count, a, b):
-    """Clip the convex polygon (8, 2) with ``count`` vertices by the half-plane left of the
-    directed line a -> b (Sutherland-Hodgman step). Returns (poly, count)."""
-    idx, nxt = _next_index(count)
+    """Clip the convex polygon (k, 2) with ``count`` vertices (k of room: 8 for two boxes) by the
+    half-plane left of the directed line a -> b (Sutherland-Hodgman step). Returns (poly, count)."""
+    size = poly.shape[0]
+    idx, nxt = _next_index(count, size)
     valid = idx < count
     q = poly[nxt]
     edge = b - a
@@ -92,11 +107,11 @@ def _clip(poly, count, a, b):
     crossing = valid & (in0 != in1)
     s = la.safe_div(d0, d0 - d1)
     x = poly + s[:, None] * (q - poly)
-    cand = jnp.stack([poly, x], 1).reshape(2 * MAX_VERTICES, 2)
-    keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * MAX_VERTICES)
+    cand = jnp.stack([poly, x], 1).reshape(2 * size, 2)
+    keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * size)
     pos = jnp.cumsum(keep) - 1
-    onehot = ((pos[:, None] == jnp.arange(MAX_VERTICES)[None, :]) & keep[:, None]).astype(poly.dtype)
-    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), MAX_VERTICES).astype(jnp.int32)
+    onehot = ((pos[:, None] == jnp.arange(size)[None, :]) & keep[:, None]).astype(poly.dtype)
+    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), size).astype(jnp.int32)
 
 
 def overlap_polygon(corners1, corners2):
@@ -115,7 +130,7 @@ def overlap_polygon(corners1, corners2):
 def polygon_area_centroid(poly, count):
     """Area () m^2 and area centroid (2,) m of the polygon's first ``count`` vertices (the
     vertex mean where the area is 0)."""
-    idx, nxt = _next_index(count)
+    idx, nxt = _next_index(count, poly.shape[0])
     valid = idx < count
     w = jnp.where(valid[:, None], poly, 0.0)
     origin = jnp.sum(w, 0) / jnp.maximum(count, 1)
@@ -156,6 +171,33 @@ def _first_two(points, mask):
     return sel.T @ points
 
 
+# the axis (index into ``edge_normals``' rows) perpendicular to each edge of a footprint, edges as
+# ``footprint``'s corners run: right side, front, left side, rear
+_EDGE_AXIS_1 = (1, 0, 1, 0)
+_EDGE_AXIS_2 = (3, 2, 3, 2)
+
+
+def _plane_axis(mask, axes, n_sat):
+    """The contact plane's normal axis (2,) (sign not yet chosen) from which edges the first two
+    outline crossings lie on (``mask`` (16,) from ``outline_crossings``: edge i of footprint 1 x
+    edge j of footprint 2 at 4 i + j), and ``facing`` () bool.
+
+    Both crossings on one edge of one footprint: that edge's normal (``axes``, ``edge_normals``).
+    Two crossings cannot share an edge of each footprint (two edges meet once; collinear ones do
+    not count as crossing). Otherwise (``facing``) the chord joins two different edges of each
+    footprint, the diagonal of an overlap bounded by a face of each vehicle, and the plane is
+    taken across the axis of least penetration ``n_sat``."""
+    pos = jnp.cumsum(mask) - 1
+    first = (mask & (pos < 2)).reshape(4, 4)
+    on1 = jnp.sum(first, 1) == 2  # (4,): both crossings on this edge of footprint 1
+    on2 = jnp.sum(first, 0) == 2
+    edge_axes = jnp.concatenate([axes[jnp.array(_EDGE_AXIS_1)], axes[jnp.array(_EDGE_AXIS_2)]])  # (8, 2)
+    shared = jnp.concatenate([on1, on2])
+    n_edge = jnp.sum(jnp.where(shared[:, None], edge_axes, 0.0), 0)
+    facing = ~jnp.any(shared)
+    return jnp.where(facing, n_sat, n_edge), facing
+
+
 def _manifold_point(corners1, corners2, n, tol):
     """Middle of the touching features along the axis ``n`` (from 2 into 1): vehicle 1's
     support toward -n, vehicle 2's toward +n, overlapped along the tangent."""
@@ -171,13 +213,17 @@ def _manifold_point(corners1, corners2, n, tol):
     return 0.5 * (lo1 + hi2) * n + 0.5 * (lo + hi) * t
 
 
-def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Contact2D:
+def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touched=None) -> Contact2D:
     """The automatic contact of docs/model.md, "Automatic contact" for the vehicles as they are in the given
     states (no motion): centroid of the footprints' overlap (z: middle of the vertical
     overlap) and the horizontal normal from vehicle 2 into vehicle 1. ``coordinates`` () m: how
     far from the origin the scene was given (``automatic_contact`` passes the states moved to
     the CGs' midpoint): the tolerances grow with it, so that edges the input's own rounding
-    parts are still collinear."""
+    parts are still collinear. ``touched``: () int, which of the four edge normals (``edge_normals``:
+    vehicle 1's x and y, vehicle 2's x and y) was the axis of least penetration at the first touch; where
+    the faces facing each other decide the normal, it is that axis as the vehicles are turned now, not
+    the axis of least penetration now, which turns across once the penetration is deeper than the
+    overlap is wide. None: the axis of least penetration now."""
     dtype = state1.position.dtype
     c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, manifold = _overlap(
         vehicle1, state1, vehicle2, state2, coordinates)
@@ -185,19 +231,19 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0) -> Con
 
     pts, mask = outline_crossings(c1, c2, len_tol)
     two = _first_two(pts, mask)
-    chord = two[1] - two[0]
-    chord_len = la.safe_norm(chord)
+    chord_len = la.safe_norm(two[1] - two[0])
     size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
     crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(len_tol * size))
-    n_line = jnp.stack([-chord[1], chord[0]]) / jnp.where(crossing_ok, chord_len, 1.0)
+    normals = edge_normals(state1.yaw, state2.yaw)
+    axis, facing = _plane_axis(mask, normals, n_sat if touched is None else normals[touched])
     toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
-    side = jnp.where(n_line @ toward1 != 0, n_line @ toward1, n_line @ n_sat)
-    n_line = jnp.where(side < 0, -n_line, n_line)
-    n2 = jnp.where(crossing_ok, n_line, n_sat)
+    side = jnp.where(axis @ toward1 != 0, axis @ toward1, axis @ n_sat)
+    axis = jnp.where(side < 0, -axis, axis)
+    n2 = jnp.where(crossing_ok, axis, n_sat)
 
     point = jnp.stack([xy[0], xy[1], _vertical_middle(vehicle1, state1, vehicle2, state2)])
     normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
-    return Contact2D(point, normal, poly, count, area, two, crossing_ok, solid)
+    return Contact2D(point, normal, poly, count, area, two, crossing_ok, crossing_ok & facing, solid)
 
 
 def _overlap(vehicle1, state1, vehicle2, state2, coordinates):

@@ -563,10 +563,11 @@ def test_short_graze_of_a_rotating_vehicle_is_found():
         assert abs(r.contact.time - 0.3911) < TIME_TOL, where
         dx, dy = 20.0 * dur / 4, 10.0 * 3 * dur / 4
         np.testing.assert_allclose(r.contact.point, [2.25 - dx / 2, -0.9 + dy / 2, 0.7], atol=1e-8, err_msg=where)
-        # perpendicular to the overlap's diagonal (the outlines cross at its other two corners); the
-        # turn of 4e-10 rad moves a corner ~1e-9 m, up to 1e-5 of the overlap's size
-        np.testing.assert_allclose(r.contact.normal, np.array([-dy, dx, 0.0]) / math.hypot(dx, dy),
-                                   atol=1e-5 if w else 1e-12, err_msg=where)
+        # the outlines cross at the overlap's other two corners, on vehicle 1's front and right side and
+        # vehicle 2's rear and left side: faces that face each other, so the normal is the axis of least
+        # penetration, x (dx = 0.75 dy), from vehicle 2 (ahead, to the right) into vehicle 1: -x. Turned
+        # by the 4e-10 rad vehicle 1 has turned where it yaws
+        np.testing.assert_allclose(r.contact.normal, [-1.0, 0.0, 0.0], atol=1e-9 if w else 1e-12, err_msg=where)
 
 
 def _first_touch_of_a_spinning_car(w, u, face0):
