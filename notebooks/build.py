@@ -764,16 +764,20 @@ What moves, and why (the grey line is the file's 50 ms):
   With a longer lever arm the sedan yields more by rotating, its effective mass at the centroid drops, and the
   impulse is smaller.
 - At about 78 ms the sedan's rear corner passes the pickup's left side (compare the top views below). The
-  outlines now cross on the sedan's rear face and on its side: the contact plane turns (normal azimuth from
-  90 to about 60 deg and falling), the contact starts to slide (orange), and delta-V, EES and energy drop
-  steeply. From about 138 ms the vehicles have moved so far through each other that they are no longer
-  approaching at the centroid: no exchange at all (grey).
+  outlines now cross on the sedan's rear face and on the pickup's side, each vehicle with a corner inside the
+  other: the line through the crossings is only the overlap's diagonal, so the normal is the axis the faces
+  first touched along, still across the sedan's side (90 deg; docs/model.md, "Automatic contact"). With the
+  lever arm still growing, the contact starts to slide (orange) at about 94 ms, and delta-V and energy go on
+  falling smoothly. From about 136 ms the pickup's front has gone through the sedan's whole width: the outlines
+  cross in four points, the normal falls back to the axis of least penetration, now along the sedan, and
+  the vehicles are not approaching along it: no exchange at all (grey). A staging that deep is past what the
+  footprints can say; give `contact.normal`.
 - At dt_p = 0 the exchange is at the instant of touching: the overlap has no area and there is no crush, so
   EES (which shares the energy by crush) is not drawn there.
 
 The lesson for a reconstruction: the penetration time should put the centroid where the crush says it is
-(compare the crush curve with the measured crush depth), and results near a jump like the one here deserve a
-second look at the staging.
+(compare the crush curve with the measured crush depth), and results near a change of character (stick to
+slide, an exchange to none) deserve a second look at the staging.
 """),
         ("md", """
 ## Two penetration times side by side

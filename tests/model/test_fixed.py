@@ -6,6 +6,7 @@ angular momentum about the contact point, first-contact times by hand, case file
 import json
 import math
 from importlib import resources
+from pathlib import Path
 
 import jax
 
@@ -272,3 +273,18 @@ def test_a_fit_recovers_the_speed_into_a_pole_from_its_delta_v():
                              [{"quantity": "vehicles[0].delta_v_magnitude", "value": dv, "sigma": 0.3}])
     assert result.converged
     assert result.estimate["vehicles[0].speed"] == pytest.approx(14.0, rel=1e-6)
+
+
+def test_the_example_file_of_fixed_objects_solves():
+    """docs/examples/fixed_objects.json (named in the README): a wall at 160 deg, a pole and a barrier, each
+    solved with automatic contact; the wall's normal is its own, and each EES takes all of the energy."""
+    path = Path(__file__).resolve().parents[2] / "docs" / "examples" / "fixed_objects.json"
+    wall, pole, barrier = ks_jax.solve(ks_jax.case.load_cases(path))
+    for sol in (wall, pole, barrier):
+        assert sol.status == "ok", sol.status
+        mass = float(sol.case.inputs.vehicles[0].mass)
+        assert float(sol.result.vehicles[0].ees) == pytest.approx(
+            math.sqrt(2 * float(sol.result.contact.energy_loss) / mass), rel=1e-12)
+    n = np.asarray(wall.result.contact.normal)
+    assert math.degrees(math.atan2(n[1], n[0])) == pytest.approx(160.0, abs=1e-9)
+    assert [s.case.vehicle_names[1] for s in (wall, pole, barrier)] == ["retaining wall", "utility pole", "barrier"]
