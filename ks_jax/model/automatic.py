@@ -24,9 +24,10 @@ import jax
 import jax.numpy as jnp
 
 from . import linalg as la
-from .checks import benign, input_status
+from .checks import benign, input_status, is_fixed
 from .collision import exchange
-from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, separation
+from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, scene_size
+from .first_contact import separation
 from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, tilt
 from .pole import disc_contact, disc_gap
 from .results import mask_invalid
@@ -97,7 +98,8 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
     n_sep = jnp.where(u_len > 0, u / jnp.where(u_len > 0, u_len, 1.0), x_axis)
     contact = contact._replace(point=jnp.where(found, point, mid), normal=jnp.where(found, normal, n_sep))
     gap = gap(vehicle1, near1, vehicle2, near2, t_x)  # <= 0 at t_i itself, to rounding
-    gap_tol = 1e3 * jnp.finfo(gap.dtype).eps * (reach(vehicle1) + reach(vehicle2) + la.safe_norm(origin))
+    gap_tol = 1e3 * jnp.finfo(gap.dtype).eps * (reach(vehicle1) + jnp.where(is_fixed(vehicle2), 0.0, reach(vehicle2))
+                                                + la.safe_norm(origin))
     parted = found & (contact.penetration_time > 0) & (gap > gap_tol)
     at_touch = found & ~geo.solid & (contact.penetration_time == 0) & auto_point & auto_normal
     return AutoContact(jnp.where(found, t_i, HORIZON), found, a1, a2, contact, geo, parted, at_touch, growth[2:])
@@ -107,8 +109,7 @@ def _pole_geometry(vehicle1, state1, vehicle2, state2, coordinates, touch1, touc
     """``overlap.contact_geometry`` where vehicle 2 is a pole (``pole.disc_contact``), with the same length
     tolerance; no outline crossings. ``touch1``, ``touch2``: the states at the first touch."""
     corners1 = footprint(vehicle1, state1.position[:2], state1.yaw)
-    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
-    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
     xy, n, poly, count, area, solid = disc_contact(vehicle1, state1, state2.position[:2], 0.5 * vehicle2.width,
                                                    corners1, len_tol, touch1, touch2.position[:2])
     z = _vertical_middle(vehicle1, state1, vehicle2, state2)

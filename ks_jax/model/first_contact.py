@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 
 from . import linalg as la
+from .checks import is_fixed
 from .types import State, Vehicle
 
 HORIZON = 10.0  # s, search horizon for the first contact
@@ -126,6 +127,15 @@ def _translation_contact(vehicle1, state1, vehicle2, state2):
     return lo, found
 
 
+def scene_size(vehicle1, vehicle2):
+    """() m: the size the geometry's tolerances are scaled by, sqrt(L_1 W_1 + L_2 W_2), leaving out a fixed
+    object (``checks.is_fixed``): a wall is a box kilometres long (``case.fixed``), whose size would make
+    the tolerances of a float32 scene metres wide, where its edges near the vehicle are as exact as a
+    vehicle's."""
+    area2 = jnp.where(is_fixed(vehicle2), 0.0, vehicle2.length * vehicle2.width)
+    return jnp.sqrt(vehicle1.length * vehicle1.width + area2)
+
+
 def reach(vehicle):
     """() m: the radius about the CG of the circle that holds the footprint at any yaw."""
     far = jnp.maximum(jnp.abs(vehicle.cg_to_front), jnp.abs(vehicle.cg_to_front - vehicle.length))
@@ -187,7 +197,7 @@ def _scan_contact(vehicle1, state1, vehicle2, state2, skip, gap=None):
     at_start = within & (s_a <= 0)
     init = (jnp.int32(0), t_a, s_a, t_a, s_a, at_start, ~within | at_start)
     _, t_hit, s_hit, t_before, s_before, found, _ = jax.lax.while_loop(cond, body, init)
-    tol = 16 * jnp.finfo(t_hit.dtype).eps * (reach(vehicle1) + reach(vehicle2))
+    tol = 16 * jnp.finfo(t_hit.dtype).eps * (reach(vehicle1) + jnp.where(is_fixed(vehicle2), 0.0, reach(vehicle2)))
     t_root = _refine(sep, t_before, t_hit, s_before, s_hit, tol, found & ~at_start)
     return jnp.where(at_start, t_a, t_root), found
 

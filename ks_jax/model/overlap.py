@@ -54,7 +54,7 @@ import jax
 import jax.numpy as jnp
 
 from . import linalg as la
-from .first_contact import advance, edge_normals, footprint, least_penetration_normal, separation
+from .first_contact import advance, edge_normals, footprint, least_penetration_normal, scene_size, separation
 from .results import crush_depth
 
 MAX_VERTICES = 8  # two convex quadrilaterals overlap in at most an octagon
@@ -232,7 +232,7 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touche
     pts, mask = outline_crossings(c1, c2, len_tol)
     two = _first_two(pts, mask)
     chord_len = la.safe_norm(two[1] - two[0])
-    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    size = scene_size(vehicle1, vehicle2)
     crossing_ok = solid & (jnp.sum(mask) == 2) & (chord_len > jnp.sqrt(len_tol * size))
     normals = edge_normals(state1.yaw, state2.yaw)
     axis, facing = _plane_axis(mask, normals, n_sat if touched is None else normals[touched])
@@ -255,8 +255,7 @@ def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
     c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
     n_sat, _ = least_penetration_normal(c1, c2, edge_normals(state1.yaw, state2.yaw))
-    scale2 = vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width
-    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(jnp.sqrt(scale2), coordinates)
+    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
     poly, count = overlap_polygon(c1, c2)
     area, centroid = polygon_area_centroid(poly, count)
     idx, nxt = _next_index(count)
@@ -295,7 +294,7 @@ def _overlap_growth(vehicle1, state1, vehicle2, state2, t_i, t_x, coordinates, n
     fixed shape, growing), so this is then the derivative to rounding; a turning vehicle adds an
     error of the order of the angle turned before the probe. 0 where the footprints are not closing."""
     _, closing = jax.jvp(lambda t: -separation(vehicle1, state1, vehicle2, state2, t), (t_x,), (jnp.ones_like(t_x),))
-    size = jnp.sqrt(vehicle1.length * vehicle1.width + vehicle2.length * vehicle2.width)
+    size = scene_size(vehicle1, vehicle2)
     depth = jnp.sqrt(jnp.finfo(t_x.dtype).eps) * size
     grows = closing > 0
     t_probe = t_x + jnp.where(grows, depth / jnp.where(grows, closing, 1.0), 0.0)
