@@ -28,8 +28,9 @@ jax.config.update("jax_enable_x64", True)
 # the same programs: they share one persistent compile cache, made for the run by the first process
 # that loads this file (the controller, before it starts the workers, which inherit the variable) and
 # deleted when that process ends. JAX keys each entry by the program, the compile options and its own
-# version, so a loaded program is the one a compile would give. Every program compiles with the settings
-# users get: XLA's defaults, or ``ks_jax.compilation.QUICK_CPU`` where the library chooses it.
+# version, so a loaded program is the one a compile would give. The library's programs compile with the
+# settings users get: XLA's defaults, or ``ks_jax.compilation.QUICK_CPU`` where the library chooses it; a
+# test's own wrappers and reference programs with the quick settings (``samples.reference_jit``).
 _OWN_CACHE = "KS_JAX_TEST_COMPILE_CACHE" not in os.environ
 if _OWN_CACHE:
     os.environ["KS_JAX_TEST_COMPILE_CACHE"] = tempfile.mkdtemp(prefix="ks-jax-test-xla-")
