@@ -174,8 +174,9 @@ class Solution:
             d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
             vehicles.append(d)
         out = {"name": self.case.name, "contact": contact, "vehicles": vehicles}
-        if self.notes():  # only where there is something to say: a case solved as expected has the keys of the model
-            out["notes"] = self.notes()
+        notes = self.notes()
+        if notes:  # only where there is something to say: a case solved as expected has the keys of the model
+            out["notes"] = notes
         if fixed is not None:
             out["fixed"] = {"name": self.case.vehicle_names[1],
                             **{k: _plain(v) for k, v in fixed._asdict().items() if v is not None and k != "kind"},

@@ -204,7 +204,9 @@ def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
 
     out = tmp_path / "out.csv"
     out.write_text("earlier results\n")
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    # the run's shared compile cache (tests/conftest.py): the second signal's sweep loads the first's program
+    env = dict(os.environ, JAX_PLATFORMS="cpu", JAX_COMPILATION_CACHE_DIR=os.environ["KS_JAX_TEST_COMPILE_CACHE"],
+               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
     proc = subprocess.Popen([sys.executable, "-m", "ks_jax.cli", "sweep", str(SEED1), "--over",
                              "vehicles[1].speed=1:40:3000", "--over", "contact.restitution=0:0.5:1000",
                              "--out", str(out), "--no-progress"], stderr=subprocess.PIPE, text=True, env=env)
