@@ -350,3 +350,18 @@ def _free_compiled_programs():
     jax.clear_caches()
     if _TRIM is not None:
         _TRIM(0)
+
+
+# The files that take longest (compiling is most of their time), handed to the test workers first: with
+# ``--dist loadfile`` a worker takes a whole file, and one of these started last would leave the other
+# worker idle for a minute at the end of the run.
+LONGEST_FIRST = ("sweeps/test_sweep.py", "fit/test_reconstruction.py", "model/test_automatic.py", "batch/test_chunks.py",
+                 "test_notebooks.py", "plot/test_sweep_view.py", "model/test_fixed.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        path = item.nodeid.split("::")[0]
+        return next((k for k, name in enumerate(LONGEST_FIRST) if path.endswith(name)), len(LONGEST_FIRST))
+
+    items.sort(key=rank)  # stable: the other files, and the tests within each file, keep their order
