@@ -158,8 +158,8 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
     field = _field(u.path)
-    if on_fixed_object(case, u.path):
-        raise CaseError(f"case '{name}': unknowns: {on_fixed_object(case, u.path)}")
+    if why := on_fixed_object(case, u.path):
+        raise CaseError(f"case '{name}': unknowns: {why}")
     if automatic_part(case, u.path):
         raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
                         f"give contact.{field} in the case to fit it")
@@ -197,8 +197,8 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
-    if on_fixed_object(case, path):
-        raise CaseError(f"case '{case.name}': evidence: {on_fixed_object(case, path)}")
+    if why := on_fixed_object(case, path):
+        raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)
     except PathError as out_err:

@@ -26,9 +26,8 @@ import jax.numpy as jnp
 from . import linalg as la
 from .checks import benign, input_status, is_fixed
 from .collision import exchange
-from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, scene_size
-from .first_contact import separation
-from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, tilt
+from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, separation
+from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, length_tolerance, tilt
 from .pole import disc_contact, disc_gap
 from .results import mask_invalid
 from .types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
@@ -109,7 +108,7 @@ def _pole_geometry(vehicle1, state1, vehicle2, state2, coordinates, touch1, touc
     """``overlap.contact_geometry`` where vehicle 2 is a pole (``pole.disc_contact``), with the same length
     tolerance; no outline crossings. ``touch1``, ``touch2``: the states at the first touch."""
     corners1 = footprint(vehicle1, state1.position[:2], state1.yaw)
-    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
+    len_tol = length_tolerance(vehicle1, vehicle2, state1.position.dtype, coordinates)
     xy, n, poly, count, area, solid = disc_contact(vehicle1, state1, state2.position[:2], 0.5 * vehicle2.width,
                                                    corners1, len_tol, touch1, touch2.position[:2])
     z = _vertical_middle(vehicle1, state1, vehicle2, state2)

@@ -246,6 +246,22 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touche
     return Contact2D(point, normal, poly, count, area, two, crossing_ok, crossing_ok & facing, solid)
 
 
+def length_tolerance(vehicle1, vehicle2, dtype, coordinates):
+    """() m: ~1e3 machine epsilons of the scene's size (``first_contact.scene_size``) or of its distance from
+    the origin, whichever is larger: the width below which an overlap has no area, and how far apart two
+    features may be and still count as one."""
+    return 1e3 * jnp.finfo(dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
+
+
+def is_solid(poly, count, area, len_tol):
+    """() bool: the polygon (its first ``count`` vertices, of area ``area``) is wider than ``len_tol``: its
+    area above the tolerance times half its perimeter (the inradius of a triangle; the area's rounding is
+    about the coordinates' rounding times the perimeter)."""
+    idx, nxt = _next_index(count, poly.shape[0])
+    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
+    return area > 0.5 * len_tol * perimeter
+
+
 def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
     """What ``contact_geometry`` builds on: both footprints, the axis of least penetration, the
     length tolerance, whether the overlap is solid (wider than the length tolerance: its area
@@ -255,12 +271,10 @@ def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
     c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
     n_sat, _ = least_penetration_normal(c1, c2, edge_normals(state1.yaw, state2.yaw))
-    len_tol = 1e3 * jnp.finfo(state1.position.dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
+    len_tol = length_tolerance(vehicle1, vehicle2, state1.position.dtype, coordinates)
     poly, count = overlap_polygon(c1, c2)
     area, centroid = polygon_area_centroid(poly, count)
-    idx, nxt = _next_index(count)
-    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
-    solid = area > 0.5 * len_tol * perimeter
+    solid = is_solid(poly, count, area, len_tol)
     return c1, c2, n_sat, len_tol, solid, poly, count, area, centroid, _manifold_point(c1, c2, n_sat, len_tol)
 
 

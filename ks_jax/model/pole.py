@@ -22,7 +22,7 @@ import math
 import jax.numpy as jnp
 
 from . import linalg as la
-from .overlap import _clip, polygon_area_centroid
+from .overlap import _clip, is_solid, polygon_area_centroid
 
 SIDES = 32
 CENTRED = 1e-3  # radii: a centroid this near the centre gives no radial direction to speak of
@@ -72,14 +72,11 @@ def disc_polygon(centre, radius, corners):
 def disc_contact(vehicle1, state1, centre, radius, corners1, len_tol, touch_state, touch_centre):
     """(point (2,), normal (2,) from the pole into the vehicle, polygon, count, area, solid) of the footprint
     of ``vehicle1`` in ``state1`` (corners ``corners1``) against the disc; ``len_tol`` (m): below this width
-    the overlap has no area (``overlap._overlap``'s rule). ``touch_state``, ``touch_centre``: the vehicle and
+    the overlap has no area (``overlap.is_solid``). ``touch_state``, ``touch_centre``: the vehicle and
     the pole's centre at the first touch (for a pole wholly inside the footprint: the side it came in by)."""
     poly, count = disc_polygon(centre, radius, corners1)
     area, centroid = polygon_area_centroid(poly, count)
-    idx = jnp.arange(poly.shape[0])
-    nxt = jnp.where(idx + 1 < count, idx + 1, 0)
-    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
-    solid = area > 0.5 * len_tol * perimeter
+    solid = is_solid(poly, count, area, len_tol)
 
     p, box = _body(vehicle1, state1.position[:2], state1.yaw, centre)
     _, nearest = _signed_distance(p, box)

@@ -216,8 +216,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     paths = tuple(over)
     for p in paths:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
-        if on_fixed_object(case, p):
-            raise CaseError(f"sweep over {on_fixed_object(case, p)}")
+        if why := on_fixed_object(case, p):
+            raise CaseError(f"sweep over {why}")
         if name:
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
                             f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
@@ -231,8 +231,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
             raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
         if p != "status":
             check_output_path(p)
-            if on_fixed_object(case, p):
-                raise CaseError(f"output {on_fixed_object(case, p)}")
+            if why := on_fixed_object(case, p):
+                raise CaseError(f"output {why}")
     outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
     for p in outputs:
         if p in axes:
