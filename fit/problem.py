@@ -34,6 +34,7 @@ from ks_jax import units as U
 from ks_jax.case import (
     CIRCULAR_OUTPUTS,
     Case,
+    Motion,
     CaseError,
     PathError,
     automatic_part,
@@ -47,13 +48,14 @@ from ks_jax.case import (
     parse_output_value,
     parse_path,
     set_input,
+    without_road,
 )
 from ks_jax.solve import solve_inputs
 
 from .uncertainty import fmt
 
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
-NOT_FITTABLE = {"sliding": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
+NOT_FITTABLE = {"sliding": "a yes/no flag", "at_rest": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
 # inputs that are angles on the circle (radians inside)
 CIRCULAR_INPUTS = {"yaw", "course", "roll", "normal"}
 # physical limits of inputs, checked against the bounds of an unknown: field -> (lo, hi, strict lo)
@@ -62,6 +64,8 @@ INPUT_LIMITS = {
     "penetration_time": (0.0, math.inf, False), "speed": (0.0, math.inf, False),
     "mass": (0.0, math.inf, True), "inertia": (0.0, math.inf, True), "length": (0.0, math.inf, True),
     "width": (0.0, math.inf, True), "height": (0.0, math.inf, True),
+    "brake": (0.0, 1.0, False), "rolling_resistance": (0.0, math.inf, False), "wheelbase": (0.0, math.inf, True),
+    "track": (0.0, math.inf, True), "cg_to_front_axle": (0.0, math.inf, True),
 }
 
 
@@ -105,6 +109,7 @@ class Problem:
     auto_point: bool = False
     auto_normal: bool = False
     pole: bool = False  # vehicle 2 is a pole (``Case.pole``)
+    motion: Motion | None = None  # the vehicles move on to rest (``Case.motion``)
 
     @property
     def n(self) -> int:
@@ -158,7 +163,7 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
     field = _field(u.path)
-    if why := on_fixed_object(case, u.path):
+    if why := on_fixed_object(case, u.path) or without_road(case, u.path):
         raise CaseError(f"case '{name}': unknowns: {why}")
     if automatic_part(case, u.path):
         raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
@@ -197,7 +202,7 @@ def check_unknown(case: Case, u: Unknown) -> Unknown:
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
-    if why := on_fixed_object(case, path):
+    if why := on_fixed_object(case, path) or without_road(case, path):
         raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)
@@ -348,7 +353,7 @@ def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) 
     ties = input_ties(case, [u.path for u in unknowns])
     ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
     return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal),
-                   bool(case.pole))
+                   bool(case.pole), case.motion)
 
 
 # ---------------------------------------------------------------------------------------
@@ -395,7 +400,7 @@ def predict(problem: Problem, inputs, x, smoothing):
     """(predicted evidence (m,), (status (), sliding (), |J_t| / J_n ())) for unknowns x (n,), SI / the
     result's units. |J_t| / J_n of a contact that sticks is the least friction that keeps it sticking."""
     inputs = apply_unknowns(problem, inputs, x)
-    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole)
+    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole, problem.motion)
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
     c = res.contact

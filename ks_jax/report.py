@@ -152,7 +152,21 @@ def _vehicle_rows(sol, v1, v2):
             _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
             _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
+        if sol.result.rest is not None and sol.result.rest[k] is not None:
+            lines += _rest_rows(sol.result.rest[k], sol.case.motion)
     return lines
+
+
+def _rest_rows(r, motion):
+    """A vehicle's motion to rest (``model.motion.RestResult``): where and when it stops."""
+    x, y = (float(p) for p in r.rest_position)
+    where = "at rest" if bool(r.at_rest) else f"still moving at the time limit ({motion.time_limit:g} s): where it is then"
+    return [
+        _row(f"rest position (x, y): {where}", f"{_fmt(x)} {_fmt(y)} m", f"{_fmt(x / U.FT)} {_fmt(y / U.FT)} ft"),
+        _row("rest yaw (turned to rest)", f"{angle_text(r.rest_yaw)} deg ({_fmt(r.rotation_to_rest, 1)} deg)"),
+        _row("time to rest", f"{_fmt(r.time_to_rest)} s"),
+        _row("distance to rest (CG path)", f"{_fmt(r.distance_to_rest)} m", f"{_fmt(r.distance_to_rest / U.FT)} ft"),
+    ]
 
 
 def reference_table(sol, reference: dict) -> str:

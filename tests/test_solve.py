@@ -14,6 +14,7 @@ import pytest
 
 import ks_jax
 from ks_jax.case import CaseError, case_from_dict, get_input, load_case
+from ks_jax.model.motion import RestResult
 from samples import US_CASE, run_cli
 
 
@@ -25,7 +26,9 @@ def _alone_batched_and_swept(case, monkeypatch):
     out = []
     for sol in (ks_jax.solve(case), *ks_jax.solve([case, case])):
         leaves = jax.tree_util.tree_flatten_with_path(sol.result)[0]
-        out.append((sol.status, {jax.tree_util.keystr(k): np.asarray(x, float) for k, x in leaves}))
+        # a vehicle's motion to rest (result.rest[i]) is named as its other results are: vehicles[i].rest_position
+        out.append((sol.status, {jax.tree_util.keystr(k).replace(".rest[", ".vehicles["): np.asarray(x, float)
+                                 for k, x in leaves}))
     columns = {}
     for path, x in out[0][1].items():
         if path == ".contact.status" or (path == ".contact.time" and not case.auto_point):
@@ -54,6 +57,8 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, monkeypatch):
                                                         monkeypatch)
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
+    if load_case(Path(ks_jax.__file__).parent / "cases" / name).motion is not None:
+        fields += [f".vehicles[{i}].{f}" for i in range(2) for f in RestResult._fields if f != "path"]
     assert sorted(alone) == sorted(fields) and len(others) == 3
     for (other_status, other), what in zip(others, ("batch row 0", "batch row 1", "sweep")):
         assert other_status == status, what

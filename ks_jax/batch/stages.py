@@ -35,8 +35,62 @@ def run(stages, args, in_axes=0, fenced=True):
         else:
             axes = (in_axes,) * len(args) if in_axes == 0 else tuple(in_axes)
             fn = jax.vmap(stage, in_axes=axes + (0,) * len(outs))
+            if getattr(stage, "block_rows", 0) and on_cpu():
+                fn = in_blocks(fn, stage.block_rows, axes + (0,) * len(outs))
         outs += (fence(fn, *args, *outs) if k < count else fn(*args, *outs),)
     return outs[-1]
+
+
+BLOCK_ROWS = 256  # rows per block of a ``blocked`` stage on a CPU
+
+
+def blocked(stage, rows: int = BLOCK_ROWS):
+    """``stage`` marked to run over a batch in blocks of ``rows`` rows on a CPU (``in_blocks``). For a stage
+    that loops over many small steps (the motion to rest): each step's operations over a whole batch would
+    stream it through memory, step after step; a block's stay in the cache."""
+
+    def fn(*args):
+        return stage(*args)
+
+    fn.block_rows = rows
+    return fn
+
+
+def in_blocks(fn, rows, in_axes):
+    """``fn`` (vmapped over the rows of the leaves ``in_axes`` marks 0: per argument 0, None, or a tree of them)
+    over blocks of ``rows`` rows, one after another (``lax.map``); the last block is padded with copies of the
+    last row."""
+
+    def over_blocks(*args):
+        leaves, tree = jax.tree_util.tree_flatten(args)
+        axes = []
+        for x, a in zip(args, in_axes):
+            count = len(jax.tree_util.tree_leaves(x))
+            axes += [a] * count if a is None or isinstance(a, int) else \
+                jax.tree_util.tree_leaves(a, is_leaf=lambda v: v is None)
+        rows_of = [x.shape[0] for x, a in zip(leaves, axes) if a == 0]
+        n = rows_of[0] if rows_of else 0
+        if n <= rows:
+            return fn(*args)
+        count = -(-n // rows)
+
+        def split(x):
+            pad = count * rows - x.shape[0]
+            if pad:
+                x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
+            return x.reshape((count, rows) + x.shape[1:])
+
+        batched = [split(x) for x, a in zip(leaves, axes) if a == 0]
+
+        def block(parts):
+            parts = iter(parts)
+            full = [next(parts) if a == 0 else x for x, a in zip(leaves, axes)]
+            return fn(*jax.tree_util.tree_unflatten(tree, full))
+
+        out = jax.lax.map(block, batched)
+        return jax.tree_util.tree_map(lambda x: x.reshape((count * rows,) + x.shape[2:])[:n], out)
+
+    return over_blocks
 
 
 def fence(fn, *operands):

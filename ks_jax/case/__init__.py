@@ -3,6 +3,7 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 
 - ``load``: reading files into ``Case`` objects, every number converted to SI;
 - ``fixed``: a wall, pole or barrier struck in place of a second vehicle;
+- a ``road`` (``inputs.RoadInputs``): the vehicles move on from the exchange to rest;
 - ``inputs``: ``CaseInputs``, the pytree of a case's inputs, and ``to_pytrees`` for the physics;
 - ``schema``: what each field is (its kind of quantity and shape);
 - ``paths``: getting and setting one number by its path ("vehicles[1].speed");
@@ -12,18 +13,20 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 """
 
 from .errors import CaseError, CaseWarning
-from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs, as_arrays, to_pytrees
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, Motion, RoadInputs, VehicleInputs, as_arrays
+from .inputs import to_pytrees
 from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
 from .paths import PathError, automatic_part, canonical_path, check_output_path, get_input, get_output
 from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, set_input
+from .paths import without_road
 
 __all__ = [
-    "CIRCULAR_OUTPUTS", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs", "CaseWarning", "ContactInputs",
+    "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs", "CaseWarning", "ContactInputs",
     "PathError", "VehicleInputs", "as_arrays", "at_rest_after", "automatic_part", "canonical_path",
     "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input", "get_output",
     "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases", "on_fixed_object",
     "output_kind",
-    "parse_output_value", "parse_path", "set_input", "to_pytrees", "undefined_kind",
+    "parse_output_value", "parse_path", "set_input", "to_pytrees", "undefined_kind", "without_road",
 ]

@@ -50,15 +50,52 @@ class ContactInputs(NamedTuple):
     friction: Any
     penetration_time: Any
 
+class AfterInputs(NamedTuple):
+    """One vehicle's inputs to its motion after the exchange, SI: where its wheels are (``wheelbase``,
+    ``track``, ``cg_to_front_axle``, m) and how they run (``brake`` (4,) in [0, 1] per wheel: front left,
+    front right, rear left, rear right, 0 free, 1 locked; ``steer`` rad, the front wheels' angle, left +;
+    ``rolling_resistance``)."""
+
+    wheelbase: Any
+    track: Any
+    cg_to_front_axle: Any
+    brake: Any
+    steer: Any
+    rolling_resistance: Any
+
+class RoadInputs(NamedTuple):
+    """The road the vehicles move on to rest: ``friction`` (mu), and each vehicle's ``AfterInputs`` (None for a
+    fixed object, which does not move)."""
+
+    friction: Any
+    vehicles: tuple
+
 class CaseInputs(NamedTuple):
+    """``vehicles``: two ``VehicleInputs``; ``contact``: ``ContactInputs``; ``road``: ``RoadInputs``, or None for a
+    case without motion to rest."""
+
     vehicles: tuple
     contact: ContactInputs
+    road: Any = None
+
+@dataclass(frozen=True)
+class Motion:
+    """How a case's motion to rest is integrated (static: each setting compiles a program of its own):
+    ``time_step`` and ``time_limit``, s; ``path``: keep each vehicle's state after every step (for a picture:
+    ``ks_jax.solve.motion_paths``); ``reverse``: ready for reverse-mode differentiation (``jax.grad``), which
+    runs every step to the time limit (``model.motion.to_rest``)."""
+
+    time_step: float
+    time_limit: float
+    path: bool = False
+    reverse: bool = False
 
 @dataclass(frozen=True)
 class Case:
     """One case: its name, its inputs (None if invalid), and which contact parts are automatic. ``fixed``: the
     ``case.fixed.FixedObject`` struck in place of a second vehicle (None for two vehicles); its inputs are then
-    those of vehicle 2, a box at rest of infinite mass."""
+    those of vehicle 2, a box at rest of infinite mass. ``motion``: the integration's settings where the case has a
+    ``road`` (its vehicles move on to rest), else None."""
 
     name: str
     inputs: CaseInputs | None
@@ -69,6 +106,7 @@ class Case:
     raw: dict = field(default_factory=dict, compare=False, repr=False)
     source: str | None = None
     fixed: Any = None
+    motion: Motion | None = None
 
     @property
     def valid(self) -> bool:

@@ -18,10 +18,12 @@ import numpy as np
 
 from .. import units as U
 from .errors import CaseError, CaseWarning
+from ..model.motion import TIME_LIMIT as MOTION_LIMIT
+from ..model.motion import TIME_STEP as MOTION_STEP
 from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
-from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, Motion, RoadInputs, VehicleInputs
 from .paths import check_output_path, output_kind
-from .schema import CASE_FIELDS, CONTACT_FIELDS, TEXT_FIELDS, VEHICLE_FIELDS
+from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, ROAD_FIELDS, TEXT_FIELDS, VEHICLE_FIELDS
 
 
 def _where(case_name, path):
@@ -216,11 +218,113 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
     if "reference" in d:
         _check_reference(d["reference"], name)
-    inputs = CaseInputs(veh, contact)
+    road, motion = _road(d, veh, name)
+    inputs = CaseInputs(veh, contact, road)
     names = tuple(visible(str(v.get("name", f"vehicle {i + 1}"))) for i, v in enumerate(vehicles))
     if fixed is not None:
         names = (names[0], visible(str(d["fixed"].get("name", fixed.kind))))
-    return Case(name, inputs, auto_point, auto_normal, names, None, d, source, fixed)
+    return Case(name, inputs, auto_point, auto_normal, names, None, d, source, fixed, motion)
+
+
+# Defaults of a vehicle's wheels where the file gives none (docs/model.md, "Motion to rest"): a passenger car's
+# proportions
+WHEELBASE_SHARE = 0.6  # of the length
+TRACK_SHARE = 0.85  # of the width
+ROLLING_RESISTANCE = 0.015
+MAX_STEER = 60.0  # deg
+MAX_STEPS = 1_000_000  # time_limit / time_step
+
+
+def _road(d, vehicles, case_name):
+    """(RoadInputs, Motion) of a case with a ``road``, else (None, None) (docs/model.md, "Motion to rest")."""
+    if "road" not in d:
+        for i, v in enumerate(d["vehicles"]):
+            given = [k for k in ("wheelbase", "track", "cg_to_front_axle", "after") if isinstance(v, dict) and k in v]
+            if given:
+                warnings.warn(CaseWarning(f"{_where(case_name, f'vehicles[{i}]')}: {', '.join(given)} describe the "
+                                          "motion to rest, which a case without \"road\" does not have: ignored "
+                                          "(add \"road\": {\"friction\": 0.7})"), stacklevel=3)
+        return None, None
+    road = d["road"]
+    _check_keys(road, set(ROAD_FIELDS) | TEXT_FIELDS, "road", case_name)
+    num = lambda k: _number(road[k], ROAD_FIELDS[k][0], f"road.{k}", case_name)  # noqa: E731
+    friction = num("friction") if "friction" in road else None
+    if friction is None:
+        raise CaseError(f"{_where(case_name, 'road.friction')}: missing field (the tyre-road friction, e.g. 0.7)")
+    if not friction > 0:
+        raise CaseError(f"{_where(case_name, 'road.friction')} = {_shown(road['friction'])}: must be positive (on a "
+                        "road without friction nothing stops)")
+    dt = num("time_step") if "time_step" in road else MOTION_STEP
+    if not 0 < dt <= 0.05:
+        raise CaseError(f"{_where(case_name, 'road.time_step')} = {_shown(road['time_step'])}: must be in "
+                        "(0, 0.05] s")
+    limit = num("time_limit") if "time_limit" in road else MOTION_LIMIT
+    if not 0 < limit <= 600:
+        raise CaseError(f"{_where(case_name, 'road.time_limit')} = {_shown(road['time_limit'])}: must be in "
+                        "(0, 600] s")
+    if limit / dt > MAX_STEPS:
+        raise CaseError(f"{_where(case_name, 'road')}: time_limit / time_step = {limit / dt:.4g} steps, more than "
+                        f"{MAX_STEPS}: lengthen the step or shorten the limit")
+    after = tuple(_after(d["vehicles"][i], v, i, friction, case_name) for i, v in enumerate(vehicles[:len(d["vehicles"])]))
+    if len(after) == 1:
+        after = (after[0], None)  # a fixed object does not move
+    return RoadInputs(friction, after), Motion(float(dt), float(limit))
+
+
+def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
+    """Vehicle i's ``AfterInputs``: its wheels' places (defaults: ``WHEELBASE_SHARE``, ``TRACK_SHARE``, the
+    axles set in equally from the ends) and ``after`` (default: free rolling, no steer)."""
+    path = f"vehicles[{i}]"
+    num = lambda k: _number(d[k], VEHICLE_FIELDS[k][0], f"{path}.{k}", case_name)  # noqa: E731
+    length, width = float(v.length), float(v.width)
+    wheelbase = num("wheelbase") if "wheelbase" in d else WHEELBASE_SHARE * length
+    if not 0 < wheelbase <= length:
+        raise CaseError(f"{_where(case_name, path + '.wheelbase')} = {_shown(d['wheelbase'])}: must be positive and "
+                        f"at most the length ({length:.4g} m)")
+    track = num("track") if "track" in d else TRACK_SHARE * width
+    if not 0 < track <= width:
+        raise CaseError(f"{_where(case_name, path + '.track')} = {_shown(d['track'])}: must be positive and at most "
+                        f"the width ({width:.4g} m)")
+    a = num("cg_to_front_axle") if "cg_to_front_axle" in d else float(v.cg_to_front) - 0.5 * (length - wheelbase)
+    where = path + ".cg_to_front_axle"
+    shown = _shown(d["cg_to_front_axle"]) if "cg_to_front_axle" in d else f"{a:.4g} m (from its defaults)"
+    if not 0 < a < wheelbase:
+        raise CaseError(f"{_where(case_name, where)} = {shown}: the CG must lie between the axles: "
+                        f"0 < cg_to_front_axle < wheelbase ({wheelbase:.4g} m)")
+    if a > float(v.cg_to_front) + 1e-9 or wheelbase - a > length - float(v.cg_to_front) + 1e-9:
+        raise CaseError(f"{_where(case_name, where)} = {shown}: the axles must lie within the vehicle's length "
+                        f"(front axle at most cg_to_front = {float(v.cg_to_front):.4g} m ahead of the CG, rear axle "
+                        f"at most {length - float(v.cg_to_front):.4g} m behind it)")
+    after = d.get("after", {})
+    _check_keys(after, set(AFTER_FIELDS) | TEXT_FIELDS, path + ".after", case_name)
+    brake = _wheels(after.get("wheels", "free"), f"{path}.after.wheels", case_name)
+    steer = _number(after["steer"], "angle", f"{path}.after.steer", case_name) if "steer" in after else 0.0
+    if abs(steer) > math.radians(MAX_STEER):
+        raise CaseError(f"{_where(case_name, path + '.after.steer')} = {_shown(after['steer'])}: must be within "
+                        f"+-{MAX_STEER:g} deg")
+    f = (_number(after["rolling_resistance"], "dimensionless", f"{path}.after.rolling_resistance", case_name)
+         if "rolling_resistance" in after else ROLLING_RESISTANCE)
+    if not 0 <= f < friction:
+        raise CaseError(f"{_where(case_name, path + '.after.rolling_resistance')} = {_shown(after['rolling_resistance'])}"
+                        f": must be >= 0 and below the road's friction ({friction:.4g})")
+    return AfterInputs(wheelbase, track, a, np.array(brake, dtype=float), steer, f)
+
+
+def _wheels(value, path, case_name):
+    """"free" (0, 0, 0, 0), "locked" (1, 1, 1, 1) or four brake fractions in [0, 1]."""
+    if value == "free":
+        return [0.0] * 4
+    if value == "locked":
+        return [1.0] * 4
+    if not isinstance(value, (list, tuple)) or len(value) != 4:
+        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be \"free\", \"locked\" or four brake "
+                        "fractions in [0, 1] (front left, front right, rear left, rear right)")
+    out = [_number(b, "dimensionless", f"{path}[{k}]", case_name) for k, b in enumerate(value)]
+    for k, b in enumerate(out):
+        if not 0 <= b <= 1:
+            raise CaseError(f"{_where(case_name, f'{path}[{k}]')} = {_shown(value[k])}: a brake fraction must be in "
+                            "[0, 1] (0 free rolling, 1 locked)")
+    return out
 
 
 FIXED_FIELDS = {"wall": {"point": ("length", "vec2"), "normal": ("angle", None)},

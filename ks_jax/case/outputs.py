@@ -12,10 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.types import NO_CONTACT
-from .paths import get_output, parse_path
+from .paths import get_output, output_leaf, parse_path
 
 
-CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after"})
+CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw"})
 
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
 _CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*
@@ -69,8 +69,7 @@ def defined_output(result, path: str):
     already where both crushes are 0 or the energy loss is negative. ``path`` may name a whole vector
     ("contact.point")."""
     group, vi, name, idx = parse_path(path)
-    x = get_output(result, path) if idx else getattr(result.vehicles[vi] if group == "vehicles" else result.contact,
-                                                     name)
+    x = get_output(result, path) if idx else output_leaf(result, path)
     kind = undefined_kind(path)
     if kind == "direction":
         defined = impulse_exchanged(result)

@@ -9,12 +9,13 @@ import re
 import jax.numpy as jnp
 import numpy as np
 
+from ..model.motion import RestResult
 from ..model.types import ContactResult, VehicleResult
 from .errors import CaseError
-from .inputs import Case, CaseInputs, ContactInputs, VehicleInputs
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, VehicleInputs
 from .schema import INPUT_KINDS, OUTPUT_KINDS
 
-_PATH = re.compile(r"^(vehicles)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$|^(contact)\.(\w+)((?:\[\d+\])*)$")
+_PATH = re.compile(r"^(vehicles)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$|^(contact|road)\.(\w+)((?:\[\d+\])*)$")
 
 class PathError(CaseError):
     pass
@@ -24,7 +25,8 @@ def canonical_path(path: str) -> str:
     return path.strip().replace(" ", "")
 
 def parse_path(path: str):
-    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,)).
+    """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,));
+    'road.friction' -> ('road', None, 'friction', ()).
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     if not isinstance(path, str):
         raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
@@ -35,7 +37,7 @@ def parse_path(path: str):
 def _parse_path(path: str):
     m = _PATH.match(canonical_path(path))
     if not m:
-        raise PathError(f"path '{path}': not of the form vehicles[i].field[k] or contact.field[k]")
+        raise PathError(f"path '{path}': not of the form vehicles[i].field[k], contact.field[k] or road.friction")
     if m.group(1):
         idx = tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
         vi = int(m.group(2))
@@ -43,7 +45,7 @@ def _parse_path(path: str):
             raise PathError(f"path '{path}': vehicle index must be 0 or 1")
         return "vehicles", vi, m.group(3), idx
     idx = tuple(int(k) for k in re.findall(r"\d+", m.group(7)))
-    return "contact", None, m.group(6), idx
+    return m.group(5), None, m.group(6), idx
 
 def input_leaf(path):
     """(group, vehicle index, field in CaseInputs, index tuple) for an input path."""
@@ -55,12 +57,23 @@ def input_leaf(path):
             if idx[0] > 2:
                 raise PathError(f"path '{path}': index out of range (0..2)")
             return group, vi, "inertia", (idx[0], idx[0])
+        if name in AfterInputs._fields:
+            if name == "brake" and (len(idx) != 1 or idx[0] > 3):
+                raise PathError(f"path '{path}': 'brake' holds four wheels' fractions: name one, brake[0] .. brake[3] "
+                                "(front left, front right, rear left, rear right)")
+            if name != "brake" and idx:
+                raise PathError(f"path '{path}': '{name}' is a number and takes no index")
+            return "road", vi, name, idx
         if name not in VehicleInputs._fields:
             hint = {"velocity": " (vary speed and course instead)",
                     "weight": f" (a case's weight sets its mass: use vehicles[{vi}].mass, in lb where weights "
                               "are in lbf)"}.get(name, "")
             raise PathError(f"path '{path}': '{name}' is not a vehicle input{hint}; "
-                            f"inputs are {', '.join(VehicleInputs._fields)}, yaw_rate")
+                            f"inputs are {', '.join(VehicleInputs._fields + AfterInputs._fields)}, yaw_rate")
+    elif group == "road":
+        if name != "friction" or idx:
+            raise PathError(f"path '{path}': the road's one input is road.friction")
+        return "road", None, name, idx
     elif name not in ContactInputs._fields:
         raise PathError(f"path '{path}': '{name}' is not a contact input; inputs are {', '.join(ContactInputs._fields)}")
     shapes = {"position": 1, "angular_velocity": 1, "point": 1, "inertia": 2}
@@ -82,7 +95,7 @@ def get_input(inputs: CaseInputs, path: str):
     "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``), SI (angles in rad); a PathError
     names a path that is not an input. ``set_input`` is its converse."""
     group, vi, name, idx = input_leaf(path)
-    leaf = getattr(inputs.vehicles[vi] if group == "vehicles" else inputs.contact, name)
+    leaf = getattr(_holder(inputs, group, vi, path), name)
     if not idx:
         return leaf
     if isinstance(leaf, np.ndarray):  # a value on the host: read it there (no device operation per read)
@@ -100,7 +113,7 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     if dtype is None or not jnp.issubdtype(dtype, jnp.number) or jnp.shape(value) != ():
         raise CaseError(f"set_input '{path}' = {value!r}: the value must be one number, in SI units (for a "
                         "unit string, convert it first: ks_jax.units.parse_quantity)")
-    holder = inputs.vehicles[vi] if group == "vehicles" else inputs.contact
+    holder = _holder(inputs, group, vi, path)
     leaf = getattr(holder, name)
     new = jnp.asarray(leaf).at[idx].set(value) if idx else value
     if name == "inertia" and len(idx) == 2 and idx[0] != idx[1]:
@@ -109,7 +122,38 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     if group == "vehicles":
         vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))
         return inputs._replace(vehicles=vehicles)
+    if group == "road":
+        road = inputs.road
+        if vi is not None:
+            road = road._replace(vehicles=tuple(holder if i == vi else v for i, v in enumerate(road.vehicles)))
+        else:
+            road = holder
+        return inputs._replace(road=road)
     return inputs._replace(contact=holder)
+
+
+def _holder(inputs: CaseInputs, group, vi, path):
+    """The inputs' part that holds the leaf of ``input_leaf``'s (group, vi)."""
+    if group == "vehicles":
+        return inputs.vehicles[vi]
+    if group == "contact":
+        return inputs.contact
+    if inputs.road is None or (vi is not None and inputs.road.vehicles[vi] is None):
+        raise PathError(f"path '{path}': {NO_ROAD}" if inputs.road is None else
+                        f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")
+    return inputs.road if vi is None else inputs.road.vehicles[vi]
+
+
+NO_ROAD = ("the case has no road, so no motion to rest: give it one, e.g. \"road\": {\"friction\": 0.7} "
+           "(docs/model.md, \"Motion to rest\")")
+
+
+def without_road(case: "Case", path) -> str | None:
+    """Where ``path`` names an input or result of the motion to rest (road.friction, vehicles[i].wheelbase,
+    vehicles[i].rest_position[0], ...) and ``case`` has no road: the words saying so; else None."""
+    group, _, name, _ = parse_path(path)
+    motion = group == "road" or name in AfterInputs._fields or name in RestResult._fields
+    return f"{path}: {NO_ROAD}" if motion and case.inputs is not None and case.inputs.road is None else None
 
 def automatic_part(case: "Case", path) -> str | None:
     """"point" or "normal" if ``path`` names the part of the contact that automatic contact computes
@@ -161,7 +205,9 @@ def input_ties(case: "Case", paths) -> tuple:
 def check_output_path(path: str):
     """Raise PathError unless ``path`` names a number among the section 4 results."""
     group, vi, name, idx = parse_path(path)
-    fields = VehicleResult._fields if group == "vehicles" else ContactResult._fields
+    if group == "road":
+        raise PathError(f"path '{path}': the road has no results; its input is road.friction")
+    fields = VehicleResult._fields + RestResult._fields if group == "vehicles" else ContactResult._fields
     if group == "contact" and name == "status":
         raise PathError(f"path '{path}': the status is a code, not a number to sweep, fit or compare: read "
                         "result.contact.status (ks_jax.status_text gives its words); a sweep always returns "
@@ -170,10 +216,11 @@ def check_output_path(path: str):
         raise PathError(f"path '{path}': '{name}' is not a {'vehicle' if group == 'vehicles' else 'contact'} result; "
                         f"results are {', '.join(f for f in fields if f != 'status')}")
     vector = name in {"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
-                      "delta_v_body", "velocity_after", "angular_velocity_after"}
-    if vector and (len(idx) != 1 or idx[0] > 2):
+                      "delta_v_body", "velocity_after", "angular_velocity_after", "rest_position"}
+    top = 1 if name == "rest_position" else 2
+    if vector and (len(idx) != 1 or idx[0] > top):
         raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]"
-                        if len(idx) != 1 else f"path '{path}': index out of range (0..2)")
+                        if len(idx) != 1 else f"path '{path}': index out of range (0..{top})")
     if not vector and idx:
         raise PathError(f"path '{path}': '{name}' is a number and takes no index")
     return group, vi, name, idx
@@ -181,8 +228,26 @@ def check_output_path(path: str):
 def get_output(result, path: str):
     """The number at an output path of a (possibly batched) ExchangeResult."""
     group, vi, name, idx = check_output_path(path)
-    leaf = getattr(result.vehicles[vi] if group == "vehicles" else result.contact, name)
+    leaf = getattr(_result_holder(result, group, vi, name, path), name)
     return leaf[(..., *idx)] if idx else leaf
+
+
+def output_leaf(result, path: str):
+    """The whole result that ``path`` names a part of ("vehicles[0].rest_position[1]": the (2,) rest position)."""
+    group, vi, name, _ = parse_path(path)
+    return getattr(_result_holder(result, group, vi, name, path), name)
+
+
+def _result_holder(result, group, vi, name, path):
+    """The part of ``result`` (an ExchangeResult) that holds the output ``name``."""
+    if group == "contact":
+        return result.contact
+    if name in RestResult._fields:
+        if getattr(result, "rest", None) is None or result.rest[vi] is None:
+            raise PathError(f"path '{path}': {NO_ROAD}" if getattr(result, "rest", None) is None else
+                            f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")
+        return result.rest[vi]
+    return result.vehicles[vi]
 
 def output_kind(path: str) -> str:
     """The unit kind of an output path ("degrees" for the results reported in degrees)."""

@@ -21,6 +21,22 @@ VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
     "course": ("angle", None),
     "yaw_rate": ("angular_velocity", None),
     "angular_velocity": ("angular_velocity", "vec3"),
+    "wheelbase": ("length", None),
+    "track": ("length", None),
+    "cg_to_front_axle": ("length", None),
+    "after": ("table", None),
+}
+
+AFTER_FIELDS = {  # a vehicle's "after": how its wheels run from the exchange to rest
+    "wheels": ("dimensionless", "wheels"),
+    "steer": ("angle", None),
+    "rolling_resistance": ("dimensionless", None),
+}
+
+ROAD_FIELDS = {
+    "friction": ("dimensionless", None),
+    "time_step": ("time", None),
+    "time_limit": ("time", None),
 }
 
 CONTACT_FIELDS = {
@@ -34,8 +50,8 @@ CONTACT_FIELDS = {
 
 TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
 
-CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "unknowns", "evidence",
-               "options", "reference"}
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "road", "unknowns",
+               "evidence", "options", "reference"}
 
 INPUT_KINDS = {
     "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",
@@ -44,6 +60,8 @@ INPUT_KINDS = {
     "angular_velocity": "angular_velocity", "yaw_rate": "angular_velocity",
     "point": "length", "normal": "angle", "normal_pitch": "angle", "restitution": "dimensionless",
     "friction": "dimensionless", "penetration_time": "time",
+    "wheelbase": "length", "track": "length", "cg_to_front_axle": "length", "brake": "dimensionless",
+    "steer": "angle", "rolling_resistance": "dimensionless",
 }
 
 OUTPUT_KINDS = {
@@ -56,4 +74,6 @@ OUTPUT_KINDS = {
     "course_after": "degrees", "angular_velocity_after": "angular_velocity",
     "yaw_rate_after": "angular_velocity", "pdof": "degrees", "pdof_clock": "dimensionless",
     "crush": "length", "ees": "velocity",
+    "rest_position": "length", "rest_yaw": "degrees", "rotation_to_rest": "degrees", "time_to_rest": "time",
+    "distance_to_rest": "length", "at_rest": "dimensionless",
 }

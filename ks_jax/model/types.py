@@ -219,10 +219,12 @@ class VehicleResult(NamedTuple):
 
 
 class ExchangeResult(NamedTuple):
-    """``contact``: a ContactResult; ``vehicles``: a pair of VehicleResult (vehicle 1, vehicle 2)."""
+    """``contact``: a ContactResult; ``vehicles``: a pair of VehicleResult (vehicle 1, vehicle 2); ``rest``: where a
+    case's vehicles move on to rest, a pair of ``model.motion.RestResult`` (None for a fixed object), else None."""
 
     contact: ContactResult
     vehicles: tuple
+    rest: tuple | None = None
 
 
 # Status codes carried per row inside jit (docs/model.md, "status").
@@ -245,6 +247,7 @@ INVALID_SPEED_2 = 22
 INVALID_SMOOTHING = 23  # an array ``smoothing`` (a Python number is refused by a ValueError)
 INVALID_OVERFLOW = 24  # finite inputs whose results are not (say a speed of 1e300 m/s)
 INVALID_PARTED = 25  # automatic contact: the footprints touched, then parted before t_i + penetration_time
+INVALID_MOTION = 26  # an input of the motion to rest breaks its rule (a swept or fitted one: a file is checked)
 
 STATUS_TEXT = {
     OK: "ok",
@@ -268,6 +271,9 @@ STATUS_TEXT = {
     INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
     INVALID_PARTED: ("invalid: contact.penetration_time is too long: the footprints touched but no longer overlap "
                      "at the exchange (first contact + penetration_time); shorten it"),
+    INVALID_MOTION: ("invalid: an input of the motion to rest breaks its rule: road.friction > 0, each brake "
+                     "fraction in [0, 1], 0 < cg_to_front_axle < wheelbase, track > 0, 0 <= rolling_resistance < "
+                     "road.friction"),
     INVALID_OVERFLOW: "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)",
 }
 

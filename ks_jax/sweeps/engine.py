@@ -18,7 +18,7 @@ from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
-from ..case import input_kind, input_ties, on_fixed_object, set_input, undefined_kind
+from ..case import input_kind, input_ties, on_fixed_object, set_input, undefined_kind, without_road
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiled, compiler_options
@@ -31,6 +31,8 @@ from .columns import invalid_rows
 from .result import SweepResult
 
 
+REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1) for name in ("rest_position[0]", "rest_position[1]",
+                                                                       "rest_yaw"))  # the default's, with a road
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
     "contact.energy_loss",
@@ -95,7 +97,7 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
 
 @lru_cache(maxsize=32)
 def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing, out_dtype, devices,
-             quick=False, cpu=True, pole=False):
+             quick=False, cpu=True, pole=False, motion=None):
     """The jitted program of one chunk of ``n_rows`` points, sharded over ``devices`` along the rows.
 
     Called as ``(start, stop, axes, sizes, total, base)``: it makes each row's swept values from its flat
@@ -110,7 +112,7 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
     compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced
     on the CPU's path only)."""
     rows, replicated = row_placement(devices)
-    pipeline = stages(auto_point, auto_normal, smoothing, pole)
+    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion)
 
     def chunk(start, stop, axes, sizes, total, base):
         vals = _chunk_values(start, axes, mode, sizes if static_sizes is None else static_sizes, n_rows, total)
@@ -120,6 +122,7 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
             def one(vals, *earlier):
                 out = stage(_row_inputs(base, paths, vals, ties), *earlier)
                 return _selected(out, outputs, out_dtype) if last else out
+            one.block_rows = getattr(stage, "block_rows", 0)  # the motion to rest runs in blocks on a CPU
             return one
 
         out = run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
@@ -216,7 +219,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     paths = tuple(over)
     for p in paths:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
-        if why := on_fixed_object(case, p):
+        if why := on_fixed_object(case, p) or without_road(case, p):
             raise CaseError(f"sweep over {why}")
         if name:
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
@@ -224,14 +227,14 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
                             "to vary it")
     axes = {p: _check_values(p, over[p]) for p in paths}
     if outputs is None:  # against a fixed object, vehicles[1] is the object: no results of its own
-        outputs = [p for p in DEFAULT_OUTPUTS if not on_fixed_object(case, p)]
+        outputs = [p for p in DEFAULT_OUTPUTS + (REST_OUTPUTS if case.motion else ()) if not on_fixed_object(case, p)]
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
             raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
         if p != "status":
             check_output_path(p)
-            if why := on_fixed_object(case, p):
+            if why := on_fixed_object(case, p) or without_road(case, p):
                 raise CaseError(f"output {why}")
     outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
     for p in outputs:
@@ -293,7 +296,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     one_chunk = total <= n_rows
     static_sizes = None if one_chunk else sizes
     program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes, case.auto_point,
-                       case.auto_normal, float(smoothing), out_dtype, devices, quick, on_cpu(), case.pole)
+                       case.auto_normal, float(smoothing), out_dtype, devices, quick, on_cpu(), case.pole,
+                       case.motion)
     index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
         raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
