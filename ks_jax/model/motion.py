@@ -251,13 +251,17 @@ def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, st
         first = jnp.stack([zero, start.position[0], start.position[1], start.yaw])
         samples = jnp.concatenate([first[None], samples], axis=0)
     elif not reverse:
-        count = math.ceil(n / WHILE_CHUNK)
+        count, rest = divmod(n, WHILE_CHUNK)
         _, final = jax.lax.while_loop(lambda kc: (kc[0] < count) & (kc[1].moving >= 1.0),
                                       lambda kc: (kc[0] + 1, steps(kc[1], WHILE_CHUNK)), (0, carry))
+        if rest:  # the steps left to the limit (a vehicle at rest stays so)
+            final = steps(final, rest)
     else:
         chunk = max(1, round(math.sqrt(n)))
-        final, _ = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None,
-                                length=math.ceil(n / chunk))
+        count, rest = divmod(n, chunk)
+        final, _ = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=count)
+        if rest:
+            final = steps(final, rest)
     end = final.state
     turned = end.yaw - start.yaw
     return RestResult(end.position, la.degrees_0_360(jnp.arctan2(jnp.sin(end.yaw), jnp.cos(end.yaw))),

@@ -1,0 +1,234 @@
+"""The motion to rest (``ks_jax.model.motion``) against closed forms, conservation and finite differences
+(docs/model.md, "Motion to rest").
+
+Each check batches its cases into one vmapped call, so that the module compiles a few programs only."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ks_jax.model import motion as M
+from ks_jax.units import G0
+
+MASS, IZZ, CG_HEIGHT = 1500.0, 2500.0, 0.55
+# the CG midway between the axles: the spin in place has no resultant force
+CENTRED = M.Chassis(jnp.asarray(2.8), jnp.asarray(1.6), jnp.asarray(1.4))
+FORWARD = M.Chassis(jnp.asarray(2.8), jnp.asarray(1.6), jnp.asarray(1.15))
+LOCKED = [1.0, 1.0, 1.0, 1.0]
+FREE = [0.0, 0.0, 0.0, 0.0]
+
+
+def _wheels(brake, steer=0.0, f=0.015):
+    return M.Wheels(jnp.asarray(brake, float), jnp.asarray(steer, float), jnp.asarray(f, float))
+
+
+def _start(vx, vy=0.0, r=0.0, yaw=0.0):
+    return M.Planar(jnp.zeros(2), jnp.asarray(yaw, float), jnp.asarray([vx, vy], float), jnp.asarray(r, float))
+
+
+def _batch(items):
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x, float) for x in xs]), *items)
+
+
+def _rest_many(chassis, wheels, friction, starts, dt=M.TIME_STEP, limit=M.TIME_LIMIT, reverse=False):
+    """``to_rest`` of each row of (chassis, wheels, friction, start), in one vmapped program per settings."""
+    args = _batch(chassis), _batch(wheels), jnp.asarray(friction, float), _batch(starts)
+    return _compiled(dt, limit, reverse)(*args)
+
+
+_PROGRAMS = {}
+
+
+def _compiled(dt, limit, reverse):
+    key = (dt, limit, reverse)
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = jax.jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, c, w, mu, s, dt=dt,
+                                                                          time_limit=limit, reverse=reverse)))
+    return _PROGRAMS[key]
+
+
+SKIDS = [(30.0, 0.8), (10.0, 0.7), (3.0, 0.3), (22.0, 1.0)]  # (speed m/s, friction)
+
+
+def test_locked_straight_skid_stops_at_the_closed_form_distance_and_time():
+    """All four wheels locked, no yaw rate: d = v^2 / (2 mu g), t = v / (mu g), straight; 1e-3 relative at the
+    default step (both the forward loop and the reverse-ready scan)."""
+    n = len(SKIDS)
+    for reverse in (False, True):
+        r = _rest_many([FORWARD] * n, [_wheels(LOCKED)] * n, [mu for _, mu in SKIDS],
+                       [_start(v, yaw=0.0) for v, _ in SKIDS], limit=5.0, reverse=reverse)
+        for k, (v, mu) in enumerate(SKIDS):
+            d, t = v * v / (2 * mu * G0), v / (mu * G0)
+            np.testing.assert_allclose(float(r.rest_position[k, 0]), d, rtol=1e-3)
+            np.testing.assert_allclose(float(r.distance_to_rest[k]), d, rtol=1e-3)
+            np.testing.assert_allclose(float(r.time_to_rest[k]), t, rtol=1e-3)
+            assert abs(float(r.rest_position[k, 1])) < 1e-9 and abs(float(r.rotation_to_rest[k])) < 1e-9
+            assert bool(r.at_rest[k])
+
+
+def test_free_rolling_coast_stops_at_the_closed_form_distance():
+    """All wheels free, straight: rolling resistance only, d = v^2 / (2 f g), t = v / (f g)."""
+    cases = [(8.0, 0.015), (5.0, 0.02)]
+    r = _rest_many([FORWARD] * 2, [_wheels(FREE, f=f) for _, f in cases], [0.7, 0.7],
+                   [_start(v) for v, _ in cases], limit=60.0)
+    for k, (v, f) in enumerate(cases):
+        np.testing.assert_allclose(float(r.rest_position[k, 0]), v * v / (2 * f * G0), rtol=1e-3)
+        np.testing.assert_allclose(float(r.time_to_rest[k]), v / (f * G0), rtol=1e-3)
+
+
+def test_locked_spin_in_place_stops_at_the_closed_form_time_without_moving_the_cg():
+    """All four locked, spinning in place with the CG midway between the axles: the wheel forces have no
+    resultant, so the CG stays put, and t = Izz r0 / (mu g m rho), rho the wheels' distance from the CG; the
+    yaw turned is r0 t / 2 (a constant angular deceleration)."""
+    rho = math.hypot(1.4, 0.8)
+    spins = [(3.0, 0.7), (-5.0, 0.9)]
+    r = _rest_many([CENTRED] * 2, [_wheels(LOCKED)] * 2, [mu for _, mu in spins],
+                   [_start(0.0, r=r0) for r0, _ in spins], limit=5.0)
+    for k, (r0, mu) in enumerate(spins):
+        t = IZZ * abs(r0) / (mu * G0 * MASS * rho)
+        np.testing.assert_allclose(float(r.time_to_rest[k]), t, rtol=1e-3)
+        np.testing.assert_allclose(float(r.rotation_to_rest[k]), math.degrees(0.5 * r0 * t), rtol=1e-3)
+        assert np.max(np.abs(np.asarray(r.rest_position[k]))) < 1e-9
+
+
+def test_closed_forms_hold_at_every_step_and_a_general_motion_converges_as_the_step_shrinks():
+    """The closed forms to 1e-3 at steps from 20 ms to 1.25 ms; a spinning, sliding vehicle with its fronts
+    braked (no closed form) converges: the rest position's change from one step to half of it shrinks (first
+    order: about halves)."""
+    general = (FORWARD, _wheels([1.0, 1.0, 0.0, 0.0]), 0.7, _start(12.0, 2.0, 1.5))
+    skid = (FORWARD, _wheels(LOCKED), 0.7, _start(15.0))
+    positions = []
+    for dt in (0.02, 0.01, 0.005, 0.0025, 0.00125):
+        r = _rest_many(*zip(general, skid), dt=dt, limit=6.0)
+        np.testing.assert_allclose(float(r.rest_position[1, 0]), 15.0 ** 2 / (2 * 0.7 * G0), rtol=1e-3)
+        positions.append(np.asarray(r.rest_position[0]))
+    changes = [np.linalg.norm(b - a) for a, b in zip(positions, positions[1:])]
+    assert all(later < 0.75 * earlier for earlier, later in zip(changes, changes[1:])), changes
+    assert changes[-1] < 0.01
+
+
+def _energies(chassis, wheels, friction, start, n):
+    """The kinetic energy at the start and after each of n steps (``motion.step`` itself)."""
+    m = jnp.array([MASS, MASS, IZZ])
+
+    def one(c, _):
+        c = M.step(MASS, IZZ, CG_HEIGHT, chassis, wheels, friction, c, M.TIME_STEP)
+        q = jnp.stack([c.state.velocity[0], c.state.velocity[1], c.state.yaw_rate])
+        return c, 0.5 * jnp.sum(m * q * q)
+
+    zero = jnp.zeros(())
+    carry = M._Carry(start, jnp.zeros(2), zero, zero, jnp.ones(()))
+    q0 = jnp.stack([start.velocity[0], start.velocity[1], start.yaw_rate])
+    return jnp.concatenate([(0.5 * jnp.sum(m * q0 * q0))[None], jax.lax.scan(one, carry, None, length=n)[1]])
+
+
+@pytest.mark.parametrize("brake, steer, start", [
+    (LOCKED, 0.0, (12.0, 3.0, 2.5)),
+    ([0.3, 0.3, 0.0, 0.0], 0.1, (15.0, -4.0, -3.0)),
+    (FREE, -0.2, (9.0, 6.0, 4.0)),
+])
+def test_kinetic_energy_never_increases(brake, steer, start):
+    """Friction only takes energy: at every step, sliding, rolling or spinning, the kinetic energy is at most the
+    step before's (to rounding)."""
+    e = np.asarray(jax.jit(_energies, static_argnums=4)(FORWARD, _wheels(brake, steer), 0.8, _start(*start), 1200))
+    assert e[0] > 0 and np.all(np.diff(e) <= 1e-9 * e[0]), np.diff(e).max()
+
+
+def test_a_spinning_locked_vehicle_slides_between_its_straight_skid_and_its_energy_skid_distances():
+    """All four locked with a yaw rate. The wheels' friction forces, mu Fz each against its wheel's velocity, have a
+    resultant of at most mu m g: the CG slows at most as fast as in a straight skid, so its path is at least
+    d = v^2 / (2 mu g) long. And the friction's power, sum mu Fz |w_i|, is at least mu |sum Fz w_i| = mu m g |v|
+    (the loads' centre is the CG): the kinetic energy E0 falls by at least mu m g per metre of the CG's path, which
+    is at most E0 / (mu m g). The straight line from start to rest is no longer than the path."""
+    starts = [_start(15.0, 0.0, r) for r in (1.0, 3.0, -6.0)] + [_start(8.0, 5.0, 4.0)]
+    r = _flat_many([FORWARD] * 4, [_wheels(LOCKED)] * 4, [0.7] * 4, starts)
+    for k, s in enumerate(starts):
+        v2 = float(jnp.sum(s.velocity ** 2))
+        skid, energy = v2 / (2 * 0.7 * G0), (v2 + IZZ / MASS * float(s.yaw_rate) ** 2) / (2 * 0.7 * G0)
+        path = float(r.distance_to_rest[k])
+        assert bool(r.at_rest[k]) and abs(float(r.rotation_to_rest[k])) > 1.0  # it turned as it slid
+        assert skid * (1 - 1e-3) <= path <= energy * (1 + 1e-3), (skid, path, energy)
+        assert float(jnp.linalg.norm(r.rest_position[k])) <= path * (1 + 1e-9)
+
+
+def _flat_many(chassis, wheels, friction, starts):
+    """``_rest_many`` with the CG at the ground: no load transfer, so that the loads' centre stays at the CG."""
+    args = _batch(chassis), _batch(wheels), jnp.asarray(friction, float), _batch(starts)
+    return jax.jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, 0.0, c, w, mu, s, time_limit=8.0)))(*args)
+
+
+def _rest_xy(params, reverse=False):
+    """Rest x, y of one motion as a function of (vx, vy, yaw rate, friction, front brake, steer)."""
+    vx, vy, yaw_rate, mu, brake, steer = params
+    wheels = M.Wheels(jnp.stack([brake, brake, 0.0 * brake, 0.0 * brake]), steer, jnp.asarray(0.015))
+    start = M.Planar(jnp.zeros(2), jnp.asarray(0.3), jnp.stack([vx, vy]), yaw_rate)
+    return M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=6.0, reverse=reverse).rest_position
+
+
+def test_rest_position_gradients_match_central_differences_forward_and_reverse():
+    """d(rest x, y)/d(speeds, yaw rate, friction, brake, steer) by ``jax.jacfwd`` (the forward loop) and by
+    ``jax.jacrev`` (the reverse-ready scan) against central differences, and the two modes against each other."""
+    p = jnp.array([12.0, 2.0, 1.2, 0.75, 0.6, 0.05])
+    fwd = np.asarray(jax.jit(jax.jacfwd(_rest_xy))(p))
+    rev = np.asarray(jax.jit(jax.jacrev(lambda q: _rest_xy(q, reverse=True)))(p))
+    f = jax.jit(_rest_xy)
+    h = np.array([1e-4, 1e-4, 1e-5, 1e-6, 1e-6, 1e-6])
+    fd = np.stack([(np.asarray(f(p.at[k].add(h[k]))) - np.asarray(f(p.at[k].add(-h[k])))) / (2 * h[k])
+                   for k in range(len(p))], axis=1)
+    np.testing.assert_allclose(fwd, fd, rtol=2e-3, atol=2e-3 * np.abs(fd).max())
+    np.testing.assert_allclose(rev, fwd, rtol=1e-9, atol=1e-9 * np.abs(fwd).max())
+    assert np.all(np.isfinite(fwd))
+
+
+def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
+    """A batch (vmap, in one program) gives each row what the row gives alone, unjitted; a vehicle at rest from
+    the start has time and distance 0, its yaw unchanged, and finite gradients."""
+    starts = [_start(12.0, 2.0, 1.5, 0.2), _start(0.0, 0.0, 0.0, 1.0), _start(6.0, -1.0, -2.0, -0.4)]
+    wheels = [_wheels([1, 1, 0, 0]), _wheels(LOCKED), _wheels([0.2, 0.2, 0.5, 0.5], 0.1)]
+    batched = _rest_many([FORWARD] * 3, wheels, [0.7, 0.7, 0.9], starts, limit=6.0)
+    for k in range(3):
+        alone = M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels[k], jnp.asarray([0.7, 0.7, 0.9][k]), starts[k],
+                          time_limit=6.0)
+        for name in ("rest_position", "rest_yaw", "time_to_rest", "distance_to_rest"):
+            np.testing.assert_allclose(np.asarray(getattr(batched, name)[k]), np.asarray(getattr(alone, name)),
+                                       rtol=1e-9, atol=1e-9, err_msg=name)
+    assert float(batched.time_to_rest[1]) == 0 and float(batched.distance_to_rest[1]) == 0
+    np.testing.assert_allclose(float(batched.rest_yaw[1]), math.degrees(1.0), rtol=1e-12)
+    grad = jax.grad(lambda v: jnp.sum(M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(LOCKED), 0.7, _start(v),
+                                                  time_limit=2.0, reverse=True).rest_position))(0.0)
+    assert np.isfinite(float(grad))
+
+
+def test_wheel_loads_sum_to_the_weight_and_transfer_as_the_moments_say():
+    """Static loads split by axle in the ratio of the CG's distances; braking (a < 0) moves m a h / L to the front
+    axle, turning left (lateral a > 0) moves m a h / t to the right wheels; a lifted wheel carries 0."""
+    chassis, weight = FORWARD, MASS * G0
+    a, L, t = 1.15, 2.8, 1.6
+    static = np.asarray(M.wheel_loads(MASS, CG_HEIGHT, chassis, jnp.zeros(2)))
+    np.testing.assert_allclose(static, [weight * (L - a) / L / 2] * 2 + [weight * a / L / 2] * 2, rtol=1e-12)
+    braking = np.asarray(M.wheel_loads(MASS, CG_HEIGHT, chassis, jnp.array([-6.0, 0.0])))
+    np.testing.assert_allclose(braking[:2].sum() - static[:2].sum(), MASS * 6.0 * CG_HEIGHT / L, rtol=1e-12)
+    turning = np.asarray(M.wheel_loads(MASS, CG_HEIGHT, chassis, jnp.array([0.0, 3.0])))
+    np.testing.assert_allclose(turning[[1, 3]].sum() - static[[1, 3]].sum(), MASS * 3.0 * CG_HEIGHT / t, rtol=1e-12)
+    lifted = np.asarray(M.wheel_loads(MASS, CG_HEIGHT, chassis, jnp.array([0.0, 30.0])))
+    assert lifted[0] == 0 and lifted[2] == 0
+    for loads in (braking, turning, lifted):
+        np.testing.assert_allclose(loads.sum(), weight, rtol=1e-12)
+
+
+def test_every_tyre_force_stays_inside_its_friction_circle():
+    """|F| <= mu Fz for free, locked and braked wheels, at any slip, with the friction left after rolling
+    resistance; a locked wheel's force opposes its velocity."""
+    rng = np.random.default_rng(4)
+    v = jnp.asarray(rng.normal(0, 8, (200, 4, 2)))
+    loads = jnp.asarray(rng.uniform(0, 6000, (200, 4)))
+    brake = jnp.asarray(rng.uniform(0, 1, (200, 4))).at[:50].set(1.0).at[50:100].set(0.0)
+    force, _ = jax.vmap(lambda w, fz, b: M.tyre_forces(w, fz, _wheels(b), 0.8, M.TIME_STEP))(v, loads, brake)
+    size = np.linalg.norm(np.asarray(force), axis=-1)
+    assert np.all(size <= 0.8 * np.asarray(loads) * (1 + 1e-12))
+    locked = np.asarray(force[:50])
+    cosine = np.sum(locked * np.asarray(v[:50]), -1) / (size[:50] * np.linalg.norm(np.asarray(v[:50]), axis=-1))
+    np.testing.assert_allclose(cosine, -1.0, atol=1e-6)
