@@ -2,19 +2,24 @@
 
 The text report is ``fit.report.text_report``; ``--json`` prints ``FitResult.to_dict`` (SI values, null for
 "not determined"), and with several cases in the file ``{"cases": [...]}``. Monte Carlo shows a progress
-bar on stderr.
+bar on stderr. ``--plot FILE`` draws the top view of each fitted case solved at its estimate (the case's
+inputs with the unknowns set to it), with the measured rest positions among its evidence marked and their
+sigmas drawn about them: the picture to set beside a scene diagram.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 
 from fit import reconstruct
 from fit.report import text_report
 
-from ..case import load_cases
+from ..case import input_ties, load_cases, set_input
 from ..case.errors import CaseError
+from ..plot import check_picture_path, save_top_view
+from ..solve import solve
 from .options import seed_option, smoothing_option
 
 
@@ -30,11 +35,16 @@ def add_arguments(parser) -> None:
                         help="smooth friction cone tau (> 0 keeps the fit differentiable; default 1e-3)")
     parser.add_argument("--solver", choices=("lm", "lbfgs", "adam"), default="lm",
                         help="lm: Levenberg-Marquardt (default); lbfgs, adam: optax")
+    parser.add_argument("--plot", metavar="PNG",
+                        help="write the top view of the case solved at the estimate (.png, .pdf or .svg), with the "
+                             "measured rest positions marked (matplotlib)")
 
 
 def run(args) -> int:
     """``ks-jax fit``: exit status 0 where every case was fitted, converged, with an impulse exchanged at its
     estimate; 1 where one was not (each said on stderr); 2 for a file or an argument that is refused."""
+    if args.plot:
+        check_picture_path(args.plot)  # before fitting: a bad name loses no work
     cases = load_cases(args.file)
     if args.starts < 1:
         raise CaseError(f"--starts {args.starts}: need at least one start")
@@ -74,4 +84,25 @@ def run(args) -> int:
         why = "did not converge" if not r.converged else f"ended where the exchange is '{r.status}'"
         print(f"ks-jax: case '{cases[k].name}': the fit {why} (see its notes); its estimate is not an answer",
               file=sys.stderr)
+    if args.plot:
+        drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if r is not None and k not in failed]
+        if drawn:
+            save_top_view(solve([case_at_estimate(c, r) for c, r in drawn]), args.plot,
+                          evidence=[{e.path: e.value for e in r.evidence} for _, r in drawn],
+                          sigma=[{e.path: e.sigma for e in r.evidence} for _, r in drawn])
+            print(f"\ntop view at the estimate written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
+        else:
+            print(f"ks-jax: --plot {args.plot}: no case was fitted; nothing drawn", file=sys.stderr)
     return 1 if failed or unfinished else 0
+
+
+def case_at_estimate(case, result):
+    """``case`` with its unknowns set to ``result``'s estimate (SI), and the inputs tied to them moved with them
+    (a course that follows its yaw, ``case.input_ties``), as the fit solved it; named as such for the picture."""
+    paths = list(result.estimate)
+    inputs = case.inputs
+    for path in paths:
+        inputs = set_input(inputs, path, result.estimate[path])
+    for k, path in input_ties(case, paths):
+        inputs = set_input(inputs, path, result.estimate[paths[k]])
+    return dataclasses.replace(case, inputs=inputs, name=f"{case.name}\nat the fit's estimate")

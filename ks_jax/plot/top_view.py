@@ -1,9 +1,11 @@
-"""The top view of a solved contact: footprints, overlap, centroid, plane, normal, impulse, friction cone.
+"""The top view of a solved contact: footprints, overlap, centroid, plane, normal, impulse, friction cone,
+and, for a case with a road, each vehicle's motion from the exchange to rest.
 
-matplotlib is imported only inside the functions (it is the ``plot`` extra). Everything drawn is
-computed here in NumPy from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints
-move freely from the case state (docs/model.md, "Automatic contact", as ``ks_jax.model.first_contact``
-moves them), so no picture needs a JAX call.
+matplotlib is imported only inside the functions (it is the ``plot`` extra). The contact is drawn in NumPy
+from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints move freely from the case
+state (docs/model.md, "Automatic contact", as ``ks_jax.model.first_contact`` moves them), so a case without a
+road needs no JAX call. The motion to rest is the one thing the results do not hold step by step: for a case
+with a road, ``ks_jax.solve.motion_paths`` solves the case once more, keeping every step of it.
 
 What the top view draws (global frame, metres; a second axis in feet):
 - outlines at first contact t_i (dashed; automatic contact only) and at the exchange (solid),
@@ -14,9 +16,20 @@ What the top view draws (global frame, metres; a second axis in feet):
 - the impulse on each vehicle (J on vehicle 1, -J on vehicle 2, drawn at P: its horizontal part), and
   each vehicle's CG velocity before (dotted) and after (solid);
 - whether the contact slides (the impulse on the cone's edge, |T| = mu N: that edge drawn dashed
-  beyond the wedge) or sticks (inside the cone), in the title and the legend.
+  beyond the wedge) or sticks (inside the cone), in the title and the legend;
+- where the case has a road (``solution.result.rest`` is not None), each vehicle's motion from the exchange to
+  rest: its CG's path (a thin line), its outline at ``PATH_OUTLINES`` instants evenly spaced in time along the
+  way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
+  dot at its CG; "at rest" in the legend, or "at the time limit" for one that had not stopped by then);
+- given ``evidence`` (result path -> measured value, SI), each vehicle's measured rest position where both
+  of its coordinates are given (rest_position[0] and [1]): an x, "measured rest" in the legend, and with
+  ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
 The legend states each arrow's scale as "1 m = X": an arrow's drawn length in metres is its
 quantity divided by X, X a round number (``round_scale``).
+The axes take in everything drawn: the whole paths, the rest outlines and the measured positions included.
+Artists a program may look for carry a gid: "rest-path-i" (the CG path of vehicle i, 0-based), "path-outline-i"
+(its outlines on the way), "rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and
+"measured-rest-sigma-i".
 """
 
 from __future__ import annotations
@@ -27,11 +40,14 @@ import numpy as np
 
 from .. import units as U
 from ..case import impulse_exchanged
+from ..case.paths import canonical_path
+from ..solve import motion_paths
 
 COLORS = ("tab:blue", "tab:orange")
 IMPULSE_LENGTH = 0.4  # the longest impulse arrow, in units of the larger vehicle's length or width
 VELOCITY_LENGTH = 0.5  # the longest velocity arrow, likewise
 ROUND_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # of a scale, times a power of ten
+PATH_OUTLINES = 8  # outlines drawn on the way from the exchange to rest, between the two drawn solid
 
 
 def round_scale(x):
@@ -87,10 +103,11 @@ def _vehicle_boxes(inputs, t):
     return boxes, cgs
 
 
-def _draw_box(ax, corners, color, style, label=None, alpha=1.0):
+def _draw_box(ax, corners, color, style, label=None, alpha=1.0, lw=1.4, gid=None):
+    """A footprint: its closed outline (``gid`` on it) and its front face (corners 1-2) drawn thicker."""
     closed = np.vstack([corners, corners[:1]])
-    ax.plot(closed[:, 0], closed[:, 1], style, color=color, lw=1.4, label=label, alpha=alpha)
-    ax.plot(corners[1:3, 0], corners[1:3, 1], style, color=color, lw=3.0, alpha=alpha)  # front face
+    ax.plot(closed[:, 0], closed[:, 1], style, color=color, lw=lw, label=label, alpha=alpha, gid=gid)
+    ax.plot(corners[1:3, 0], corners[1:3, 1], style, color=color, lw=lw * 15 / 7, alpha=alpha)  # front face
 
 
 def _arrow(ax, tip, tail, props, **kw):
@@ -117,9 +134,11 @@ def _friction_state(ax, c, p, n, mu, j, reach):
         ax.plot([], [], " ", label=f"sticking (inside the cone): |T| / N = {ratio} <= mu = {mu:g}")
 
 
-def top_view(solution, ax=None):
+def top_view(solution, ax=None, evidence=None, sigma=None):
     """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
-    Returns the axes."""
+    ``evidence``: None, or a mapping of result path -> measured value (SI) whose rest positions
+    ("vehicles[i].rest_position[0]" and "[1]") are marked; ``sigma``: None, or path -> standard error (SI)
+    of those, drawn about the marks. Other paths are ignored. Returns the axes."""
     import matplotlib.pyplot as plt
     from matplotlib.patches import Polygon, Wedge
     from matplotlib.transforms import offset_copy
@@ -229,6 +248,9 @@ def top_view(solution, ax=None):
         ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
     if no_contact:
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
+    if res.rest is not None:
+        _draw_motion_to_rest(ax, solution, moving)
+    _draw_measured_rest(ax, names, evidence, sigma)
 
     ax.autoscale_view()  # with the arrows' ends in the data limits
     ax.set_aspect("equal", adjustable="datalim")
@@ -244,6 +266,68 @@ def top_view(solution, ax=None):
     ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, 0.0), bbox_transform=below, ncol=2,
               frameon=False)
     return ax
+
+
+def _draw_motion_to_rest(ax, solution, moving):
+    """Each moving vehicle's path from the exchange to rest (``motion_paths``: the case solved once more,
+    every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly spaced in time
+    (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
+    results (``rest_position``, ``rest_yaw``) where the path's last step is."""
+    from matplotlib.patches import Polygon
+
+    paths = motion_paths(solution)
+    if paths is None:
+        return
+    names, inputs = solution.case.vehicle_names, solution.case.inputs
+    for i in range(moving):
+        rest, path = solution.result.rest[i], paths[i]
+        if rest is None or path is None:
+            continue
+        v = inputs.vehicles[i]
+        size = (float(v.length), float(v.width), float(v.cg_to_front))
+        t, d = float(rest.time_to_rest), float(rest.distance_to_rest)
+        step = t / (PATH_OUTLINES + 1)
+        ax.plot(path[:, 1], path[:, 2], "-", color=COLORS[i], lw=0.9, gid=f"rest-path-{i}",
+                label=f"{names[i]}: CG path to rest, {d:.2f} m ({d / U.FT:.1f} ft) in {t:.2f} s; "
+                      f"outlines every {step:.2f} s")
+        if step > 0:
+            instants = step * np.arange(1, PATH_OUTLINES + 1)
+            for k in np.unique(np.clip(np.searchsorted(path[:, 0], instants), 1, len(path) - 1)):
+                _draw_box(ax, _box(*size, path[k, 1:3], path[k, 3]), COLORS[i], "-", alpha=0.3, lw=0.6,
+                          gid=f"path-outline-{i}")
+        xy = np.asarray(rest.rest_position, float)
+        yaw = float(rest.rest_yaw)
+        corners = _box(*size, xy, math.radians(yaw))
+        where = "at rest" if bool(rest.at_rest) else f"at the time limit, {t:.2f} s (not at rest)"
+        ax.add_patch(Polygon(corners, closed=True, facecolor=COLORS[i], edgecolor="none", alpha=0.15))
+        _draw_box(ax, corners, COLORS[i], "-", gid=f"rest-outline-{i}",
+                  label=f"{names[i]} {where}: CG ({xy[0]:.2f}, {xy[1]:.2f}) m, yaw {yaw:.1f} deg "
+                        f"(turned {float(rest.rotation_to_rest):+.1f} deg)")
+        ax.plot(*xy, "o", color=COLORS[i], ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
+
+
+def _draw_measured_rest(ax, names, evidence, sigma):
+    """An x at each vehicle's measured rest position where ``evidence`` gives both its coordinates, and with
+    ``sigma`` (both coordinates' standard errors given) an ellipse of those semi-axes about it: the region
+    within one standard error in each coordinate, which the drawn rest CG is to be compared with."""
+    from matplotlib.patches import Ellipse
+
+    if not evidence:
+        return
+    given = {canonical_path(k): float(v) for k, v in evidence.items()}
+    spread = {canonical_path(k): float(v) for k, v in (sigma or {}).items()}
+    for i in range(2):
+        keys = [f"vehicles[{i}].rest_position[{k}]" for k in (0, 1)]
+        if not all(k in given for k in keys):
+            continue
+        x, y = (given[k] for k in keys)
+        s = [spread.get(k) for k in keys]
+        within = f", +/- ({s[0]:.2f}, {s[1]:.2f}) m dashed" if None not in s else ""
+        ax.plot(x, y, "x", color=COLORS[i], ms=10, mew=2.2, zorder=6, gid=f"measured-rest-{i}",
+                label=f"{names[i]} measured rest: ({x:.2f}, {y:.2f}) m, ({x / U.FT:.1f}, {y / U.FT:.1f}) ft{within}")
+        if None not in s:
+            ax.add_patch(Ellipse((x, y), 2 * s[0], 2 * s[1], fill=False, edgecolor=COLORS[i], ls="--", lw=1.0,
+                                 zorder=6, gid=f"measured-rest-sigma-{i}"))
 
 
 def _draw_fixed(ax, obj, name, box, near, extent):
@@ -270,20 +354,26 @@ def _draw_fixed(ax, obj, name, box, near, extent):
     ax.update_datalim(np.asarray(box if obj.kind == "barrier" else [near - extent, near + extent], float))
 
 
-def save_top_view(solutions, path):
+def save_top_view(solutions, path, evidence=None, sigma=None):
     """Write the top views of one ``Solution`` or a list of them (one panel each) to ``path``
-    (PNG, PDF, SVG: by the file name). Returns the path."""
+    (PNG, PDF, SVG: by the file name). ``evidence`` and ``sigma`` as for ``top_view``: one mapping for every
+    panel, or a list of them (or None), one per solution. Returns the path."""
     from matplotlib.figure import Figure  # no pyplot: works without a display, leaves no state
 
     if not isinstance(solutions, (list, tuple)):
         solutions = [solutions]
     n = len(solutions)
+    evidence = list(evidence) if isinstance(evidence, (list, tuple)) else [evidence] * n
+    sigma = list(sigma) if isinstance(sigma, (list, tuple)) else [sigma] * n
+    if len(evidence) != n or len(sigma) != n:
+        raise ValueError(f"save_top_view: {n} solution(s), {len(evidence)} evidence and {len(sigma)} sigma "
+                         "mappings: give one mapping for all, or one per solution")
     cols = min(n, 2)
     rows = math.ceil(n / cols)
     fig = Figure(figsize=(8.5 * cols, 9.0 * rows))
     axes = fig.subplots(rows, cols, squeeze=False)
-    for ax, sol in zip(axes.flat, solutions):
-        top_view(sol, ax)
+    for ax, sol, marks, sigmas in zip(axes.flat, solutions, evidence, sigma):
+        top_view(sol, ax, evidence=marks, sigma=sigmas)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
     fig.tight_layout()
