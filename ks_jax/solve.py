@@ -25,6 +25,7 @@ from .compilation import quick_jit
 from .model import collision
 from .model.automatic import automatic_stage, exchange_at_contact
 from .model.checks import check_smoothing, input_status
+from .model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from .model.motion import Chassis, Planar, Wheels
 from .model.motion import to_rest as motion_to_rest
 from .model.results import mask_invalid
@@ -140,10 +141,10 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion) 
 
 
 def motion_rules(road) -> jnp.ndarray:
-    """Whether the motion's inputs keep their rules (docs/model.md, "Motion to rest"): road.friction > 0; per
+    """Whether the motion's inputs keep their rules (docs/model.md, "Motion to rest"): road.friction in (0, 10]; per
     vehicle each brake fraction in [0, 1], 0 < cg_to_front_axle < wheelbase, track > 0 and
     0 <= rolling_resistance < road.friction; all finite. Traced, per row."""
-    ok = jnp.isfinite(road.friction) & (road.friction > 0)
+    ok = (road.friction > 0) & (road.friction <= MAX_ROAD_FRICTION)
     for after in road.vehicles:
         if after is None:
             continue

@@ -55,10 +55,15 @@ def test_a_swept_road_friction_scales_the_skids_as_one_over_mu():
     """d = v^2 / (2 mu g): over a sweep of road.friction the distance times mu is the same, and equals the closed
     form from the speed after (the exchange does not depend on the road)."""
     case = load_case(SEED_TO_REST)
+    result = ks_jax.sweep(case, {"road.friction": [0.4, 0.7, 1.0, 0.0, 12.0]},
+                          outputs=["vehicles[0].distance_to_rest", "vehicles[1].distance_to_rest",
+                                   "vehicles[0].speed_after"])
+    # a friction of 0 or above 10 breaks the road's rule: those rows are invalid, with no numbers
+    assert [ks_jax.status_text(c) for c in result["status"][3:]] == [ks_jax.status_text(ks_jax.model.types.INVALID_MOTION)] * 2
+    assert np.all(np.isnan(np.asarray(result["vehicles[0].distance_to_rest"][3:], float)))
+    result = {k: np.asarray(result[k])[:3] for k in ("vehicles[0].distance_to_rest", "vehicles[1].distance_to_rest",
+                                                       "vehicles[0].speed_after")}
     mus = np.array([0.4, 0.7, 1.0])
-    result = ks_jax.sweep(case, {"road.friction": mus}, outputs=["vehicles[0].distance_to_rest",
-                                                                  "vehicles[1].distance_to_rest",
-                                                                  "vehicles[0].speed_after"])
     v = np.asarray(result["vehicles[0].speed_after"], float)
     np.testing.assert_allclose(np.asarray(result["vehicles[0].distance_to_rest"], float) * mus, v ** 2 / (2 * G0),
                                rtol=1e-3)
@@ -97,3 +102,23 @@ def test_rest_positions_of_an_inline_crash_cannot_separate_speed_from_road_frict
     res = fit.reconstruct(case_from_dict(raw), unknowns, evidence, starts=4)
     said = " ".join(res.unidentified)
     assert res.unidentified and "vehicles[1].speed" in said and "road.friction" in said, res.unidentified
+
+
+def test_front_wheels_locked_slide_at_the_deceleration_their_load_transfer_gives():
+    """The second seed chapter's Kia brakes its front wheels only, its rears rolling: braking moves load m a h / L
+    onto the locked fronts, so the deceleration a solves m a = (mu - f) (m g (L - c) / L + m a h / L) + f m g, c the
+    CG's distance to the front axle, and the straight slide is v^2 / (2 a) long. The model's load transfer uses the
+    step before's deceleration (none in the first step), within 2e-3 of the closed form here."""
+    case = load_case(CASES / "rest_seed_001.toml")
+    sol = ks_jax.solve(case)
+    after = case.inputs.road.vehicles[1]
+    mu, f, g = float(case.inputs.road.friction), float(after.rolling_resistance), G0
+    L, c, h = float(after.wheelbase), float(after.cg_to_front_axle), float(case.inputs.vehicles[1].cg_height)
+    a = g * ((mu - f) * (L - c) / L + f) / (1 - (mu - f) * h / L)
+    v = float(sol.result.vehicles[1].speed_after)
+    rest = sol.result.rest[1]
+    np.testing.assert_allclose(float(rest.distance_to_rest), v * v / (2 * a), rtol=2e-3)
+    np.testing.assert_allclose(float(rest.time_to_rest), v / a, rtol=2e-3)
+    # the Lucid, all four locked: the straight skid, load transfer or not
+    v0 = float(sol.result.vehicles[0].speed_after)
+    np.testing.assert_allclose(float(sol.result.rest[0].distance_to_rest), v0 * v0 / (2 * mu * g), rtol=1e-3)

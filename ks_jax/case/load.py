@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import units as U
 from .errors import CaseError, CaseWarning
+from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
 from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
@@ -251,9 +252,9 @@ def _road(d, vehicles, case_name):
     friction = num("friction") if "friction" in road else None
     if friction is None:
         raise CaseError(f"{_where(case_name, 'road.friction')}: missing field (the tyre-road friction, e.g. 0.7)")
-    if not friction > 0:
+    if not 0 < friction <= MAX_ROAD_FRICTION:
         raise CaseError(f"{_where(case_name, 'road.friction')} = {_shown(road['friction'])}: must be positive (on a "
-                        "road without friction nothing stops)")
+                        f"road without friction nothing stops) and at most {MAX_ROAD_FRICTION:g} (no tyre grips more)")
     dt = num("time_step") if "time_step" in road else MOTION_STEP
     if not 0 < dt <= 0.05:
         raise CaseError(f"{_where(case_name, 'road.time_step')} = {_shown(road['time_step'])}: must be in "

@@ -46,6 +46,7 @@ from . import linalg as la
 TIME_STEP = 0.005  # s, the default step
 TIME_LIMIT = 20.0  # s, the default time limit
 CORNERING = 15.0  # 1/rad: a tyre's cornering stiffness over its load (lateral force per load per radian of slip)
+MAX_FRICTION = 10.0  # the road's friction at most (a racing tyre on a dry track reaches about 2)
 REGULARIZATION = 0.3  # the friction direction's regularizing speed, as a fraction of one step's speed change
 
 
