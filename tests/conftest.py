@@ -343,13 +343,32 @@ def _return_freed_memory():
         _TRIM(0)
 
 
+# A worker keeps its compiled and traced programs from one test file to the next while it holds less than this:
+# the next file then runs the programs it shares with earlier ones (the conftest entry points, the library's
+# solve, ...) without tracing, lowering and loading them again. Above it, they are freed.
+KEEP_PROGRAMS_BELOW = 1280 * 2**20  # bytes of resident memory between two files (a worker peaked at ~2 GiB freeing every file)
+
+
+def _resident_bytes():
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None  # not Linux: free every file's programs
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _free_compiled_programs():
-    """Each test file's compiled programs are freed when it ends (the run's compile cache keeps them on disk)."""
+    """A test file's compiled programs are freed when it ends (the run's compile cache keeps them on disk) once the
+    worker's memory has reached ``KEEP_PROGRAMS_BELOW``."""
     yield
-    jax.clear_caches()
     if _TRIM is not None:
         _TRIM(0)
+    resident = _resident_bytes()
+    if resident is None or resident > KEEP_PROGRAMS_BELOW:
+        jax.clear_caches()
+        if _TRIM is not None:
+            _TRIM(0)
 
 
 # The files that take longest (compiling is most of their time), handed to the test workers first: with
