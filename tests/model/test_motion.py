@@ -1,7 +1,8 @@
 """The motion to rest (``ks_jax.model.motion``) against closed forms, conservation and finite differences
 (docs/model.md, "Motion to rest").
 
-Each check batches its cases into one vmapped call, so that the module compiles a few programs only."""
+Each check batches its cases into one vmapped call, so that the module compiles a few programs only, with the
+quick settings (``samples.reference_jit``: the same arithmetic, half the compile time)."""
 
 import math
 
@@ -12,6 +13,7 @@ import pytest
 
 from ks_jax.model import motion as M
 from ks_jax.units import G0
+from samples import reference_jit
 
 MASS, IZZ, CG_HEIGHT = 1500.0, 2500.0, 0.55
 # the CG midway between the axles: the spin in place has no resultant force
@@ -45,7 +47,7 @@ _PROGRAMS = {}
 def _compiled(dt, limit, reverse):
     key = (dt, limit, reverse)
     if key not in _PROGRAMS:
-        _PROGRAMS[key] = jax.jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, c, w, mu, s, dt=dt,
+        _PROGRAMS[key] = reference_jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, c, w, mu, s, dt=dt,
                                                                           time_limit=limit, reverse=reverse)))
     return _PROGRAMS[key]
 
@@ -95,13 +97,13 @@ def test_locked_spin_in_place_stops_at_the_closed_form_time_without_moving_the_c
 
 
 def test_closed_forms_hold_at_every_step_and_a_general_motion_converges_as_the_step_shrinks():
-    """The closed forms to 1e-3 at steps from 20 ms to 1.25 ms; a spinning, sliding vehicle with its fronts
+    """The closed forms to 1e-3 at steps from 20 ms to 2.5 ms; a spinning, sliding vehicle with its fronts
     braked (no closed form) converges: the rest position's change from one step to half of it shrinks (first
     order: about halves)."""
     general = (FORWARD, _wheels([1.0, 1.0, 0.0, 0.0]), 0.7, _start(12.0, 2.0, 1.5))
     skid = (FORWARD, _wheels(LOCKED), 0.7, _start(15.0))
     positions = []
-    for dt in (0.02, 0.01, 0.005, 0.0025, 0.00125):
+    for dt in (0.02, 0.01, 0.005, 0.0025):
         r = _rest_many(*zip(general, skid), dt=dt, limit=6.0)
         np.testing.assert_allclose(float(r.rest_position[1, 0]), 15.0 ** 2 / (2 * 0.7 * G0), rtol=1e-3)
         positions.append(np.asarray(r.rest_position[0]))
@@ -125,6 +127,9 @@ def _energies(chassis, wheels, friction, start, n):
     return jnp.concatenate([(0.5 * jnp.sum(m * q0 * q0))[None], jax.lax.scan(one, carry, None, length=n)[1]])
 
 
+ENERGIES = reference_jit(_energies, static_argnums=4)  # one program for every case below
+
+
 @pytest.mark.parametrize("brake, steer, start", [
     (LOCKED, 0.0, (12.0, 3.0, 2.5)),
     ([0.3, 0.3, 0.0, 0.0], 0.1, (15.0, -4.0, -3.0)),
@@ -133,7 +138,7 @@ def _energies(chassis, wheels, friction, start, n):
 def test_kinetic_energy_never_increases(brake, steer, start):
     """Friction only takes energy: at every step, sliding, rolling or spinning, the kinetic energy is at most the
     step before's (to rounding)."""
-    e = np.asarray(jax.jit(_energies, static_argnums=4)(FORWARD, _wheels(brake, steer), 0.8, _start(*start), 1200))
+    e = np.asarray(ENERGIES(FORWARD, _wheels(brake, steer), 0.8, _start(*start), 1200))
     assert e[0] > 0 and np.all(np.diff(e) <= 1e-9 * e[0]), np.diff(e).max()
 
 
@@ -157,7 +162,7 @@ def test_a_spinning_locked_vehicle_slides_between_its_straight_skid_and_its_ener
 def _flat_many(chassis, wheels, friction, starts):
     """``_rest_many`` with the CG at the ground: no load transfer, so that the loads' centre stays at the CG."""
     args = _batch(chassis), _batch(wheels), jnp.asarray(friction, float), _batch(starts)
-    return jax.jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, 0.0, c, w, mu, s, time_limit=8.0)))(*args)
+    return reference_jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, 0.0, c, w, mu, s, time_limit=8.0)))(*args)
 
 
 def _rest_xy(params, reverse=False):
@@ -165,16 +170,16 @@ def _rest_xy(params, reverse=False):
     vx, vy, yaw_rate, mu, brake, steer = params
     wheels = M.Wheels(jnp.stack([brake, brake, 0.0 * brake, 0.0 * brake]), steer, jnp.asarray(0.015))
     start = M.Planar(jnp.zeros(2), jnp.asarray(0.3), jnp.stack([vx, vy]), yaw_rate)
-    return M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=6.0, reverse=reverse).rest_position
+    return M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=4.0, reverse=reverse).rest_position
 
 
 def test_rest_position_gradients_match_central_differences_forward_and_reverse():
     """d(rest x, y)/d(speeds, yaw rate, friction, brake, steer) by ``jax.jacfwd`` (the forward loop) and by
     ``jax.jacrev`` (the reverse-ready scan) against central differences, and the two modes against each other."""
     p = jnp.array([12.0, 2.0, 1.2, 0.75, 0.6, 0.05])
-    fwd = np.asarray(jax.jit(jax.jacfwd(_rest_xy))(p))
-    rev = np.asarray(jax.jit(jax.jacrev(lambda q: _rest_xy(q, reverse=True)))(p))
-    f = jax.jit(_rest_xy)
+    fwd = np.asarray(reference_jit(jax.jacfwd(_rest_xy))(p))
+    rev = np.asarray(reference_jit(jax.jacrev(lambda q: _rest_xy(q, reverse=True)))(p))
+    f = reference_jit(_rest_xy)
     h = np.array([1e-4, 1e-4, 1e-5, 1e-6, 1e-6, 1e-6])
     fd = np.stack([(np.asarray(f(p.at[k].add(h[k]))) - np.asarray(f(p.at[k].add(-h[k])))) / (2 * h[k])
                    for k in range(len(p))], axis=1)
@@ -184,14 +189,14 @@ def test_rest_position_gradients_match_central_differences_forward_and_reverse()
 
 
 def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
-    """A batch (vmap, in one program) gives each row what the row gives alone, unjitted; a vehicle at rest from
+    """A batch (vmap, in one program) gives each row what the row gives alone, unbatched; a vehicle at rest from
     the start has time and distance 0, its yaw unchanged, and finite gradients."""
     starts = [_start(12.0, 2.0, 1.5, 0.2), _start(0.0, 0.0, 0.0, 1.0), _start(6.0, -1.0, -2.0, -0.4)]
     wheels = [_wheels([1, 1, 0, 0]), _wheels(LOCKED), _wheels([0.2, 0.2, 0.5, 0.5], 0.1)]
     batched = _rest_many([FORWARD] * 3, wheels, [0.7, 0.7, 0.9], starts, limit=6.0)
+    one = reference_jit(lambda w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, w, mu, s, time_limit=6.0))
     for k in range(3):
-        alone = M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels[k], jnp.asarray([0.7, 0.7, 0.9][k]), starts[k],
-                          time_limit=6.0)
+        alone = one(wheels[k], jnp.asarray([0.7, 0.7, 0.9][k]), starts[k])
         for name in ("rest_position", "rest_yaw", "time_to_rest", "distance_to_rest"):
             np.testing.assert_allclose(np.asarray(getattr(batched, name)[k]), np.asarray(getattr(alone, name)),
                                        rtol=1e-9, atol=1e-9, err_msg=name)
