@@ -71,14 +71,20 @@ def test_locked_straight_skid_stops_at_the_closed_form_distance_and_time():
             assert bool(r.at_rest[k])
 
 
-def test_free_rolling_coast_stops_at_the_closed_form_distance():
-    """All wheels free, straight: rolling resistance only, d = v^2 / (2 f g), t = v / (f g)."""
-    cases = [(8.0, 0.015), (5.0, 0.02)]
-    r = _rest_many([FORWARD] * 2, [_wheels(FREE, f=f) for _, f in cases], [0.7, 0.7],
-                   [_start(v) for v, _ in cases], limit=60.0)
-    for k, (v, f) in enumerate(cases):
+def test_free_rolling_coast_stops_at_the_closed_form_distance_or_moves_on_at_the_time_limit():
+    """All wheels free, straight: rolling resistance only, d = v^2 / (2 f g), t = v / (f g). A coast longer than the
+    time limit (60.003 s: 12001 steps, not a whole number of the loop's chunks) is not at rest, and has moved for
+    exactly the limit's steps at constant deceleration."""
+    cases = [(8.0, 0.015), (5.0, 0.02), (15.0, 0.015)]
+    r = _rest_many([FORWARD] * 3, [_wheels(FREE, f=f) for _, f in cases], [0.7] * 3,
+                   [_start(v) for v, _ in cases], limit=60.003)
+    for k, (v, f) in enumerate(cases[:2]):
         np.testing.assert_allclose(float(r.rest_position[k, 0]), v * v / (2 * f * G0), rtol=1e-3)
         np.testing.assert_allclose(float(r.time_to_rest[k]), v / (f * G0), rtol=1e-3)
+        assert bool(r.at_rest[k])
+    t = 12001 * M.TIME_STEP
+    assert not bool(r.at_rest[2]) and float(r.time_to_rest[2]) == pytest.approx(t, rel=1e-12)
+    np.testing.assert_allclose(float(r.rest_position[2, 0]), 15.0 * t - 0.5 * 0.015 * G0 * t * t, rtol=1e-6)
 
 
 def test_locked_spin_in_place_stops_at_the_closed_form_time_without_moving_the_cg():
