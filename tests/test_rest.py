@@ -83,7 +83,7 @@ def test_noise_free_rest_positions_and_crush_recover_both_speeds():
                 for p in paths]
     raw["vehicles"][0]["speed"], raw["vehicles"][1]["speed"] = "20 mph", "30 mph"
     unknowns = {f"vehicles[{i}].speed": {"bounds": ["5 mph", "60 mph"]} for i in (0, 1)}
-    res = fit.reconstruct(case_from_dict(raw), unknowns, evidence, starts=4)
+    res = fit.reconstruct(case_from_dict(raw), unknowns, evidence)
     assert res.converged and res.unidentified == []
     np.testing.assert_allclose(res.estimate["vehicles[0].speed"], 25 * U.MPH, rtol=1e-3)
     np.testing.assert_allclose(res.estimate["vehicles[1].speed"], 35 * U.MPH, rtol=1e-3)
