@@ -114,91 +114,111 @@ def wheel_positions(chassis: Chassis):
     return jnp.stack([x, y], axis=-1)
 
 
+class Body(NamedTuple):
+    """What does not change during one vehicle's motion, computed once before the steps (``body``): the mass and
+    yaw inertia; the wheels' body positions ``x``, ``y`` (4,) and their steer's cosine and sine (4,); the static
+    loads (4,) and the loads each unit of longitudinal and lateral acceleration moves (4,); the weight; the
+    wheels' brake fractions (4,), rolling resistance, the road's friction and the lateral grip left by rolling
+    resistance; and the squares of the regularizing speeds (the module's docstring)."""
+
+    mass: jnp.ndarray
+    izz: jnp.ndarray
+    x: jnp.ndarray
+    y: jnp.ndarray
+    cos_steer: jnp.ndarray
+    sin_steer: jnp.ndarray
+    static: jnp.ndarray
+    pitch: jnp.ndarray
+    lateral: jnp.ndarray
+    weight: jnp.ndarray
+    brake: jnp.ndarray
+    rolling: jnp.ndarray
+    friction: jnp.ndarray
+    grip: jnp.ndarray
+    locked_speed2: jnp.ndarray
+    rolling_speed2: jnp.ndarray
+    slip_speed2: jnp.ndarray
+
+
+def body(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, dt) -> Body:
+    """A vehicle's ``Body`` for steps of ``dt``."""
+    a, L, t = chassis.cg_to_front_axle, chassis.wheelbase, chassis.track
+    p = wheel_positions(chassis)
+    ss, cs = la.sincos(wheels.steer)
+    one, zero = jnp.ones_like(cs), jnp.zeros_like(ss)
+    weight = mass * G0
+    front, rear = (L - a) / L, a / L
+    static = 0.5 * weight * jnp.stack([front, front, rear, rear])
+    # acceleration moves m a h / L from the front axle to the rear; lateral acceleration to the left moves
+    # m a h / t to the right (y < 0) wheels, shared by the axles as their static loads are
+    pitch = 0.5 * mass * cg_height / L * jnp.stack([-one, -one, one, one])
+    lateral = mass * cg_height / t * jnp.stack([-front, front, -rear, rear])
+    f = wheels.rolling_resistance
+    grip = la.safe_sqrt(jnp.maximum(friction * friction - f * f, 0.0))
+    step = G0 * dt
+    return Body(mass, izz, p[:, 0], p[:, 1], jnp.stack([cs, cs, one, one]), jnp.stack([ss, ss, zero, zero]),
+                static, pitch, lateral, weight, jnp.clip(wheels.brake, 0.0, 1.0), f, friction, grip,
+                (REGULARIZATION * friction * step) ** 2, (REGULARIZATION * f * step) ** 2, (CORNERING * step) ** 2)
+
+
+def _loads(b: Body, ax, ay):
+    """(4,) vertical loads at the body frame acceleration (ax, ay): a load that transfer would make negative (a
+    lifted wheel) is 0, and the others are scaled so that the four carry m g."""
+    loads = jnp.maximum(b.static + b.pitch * ax + b.lateral * ay, 0.0)
+    return loads * b.weight / jnp.sum(loads)
+
+
 def wheel_loads(mass, cg_height, chassis: Chassis, accel):
     """(4,) vertical loads, N: the static split by axle, halved per side, plus the load transfer of the body
     frame acceleration ``accel`` (2,) (longitudinal, lateral left +) at ``cg_height``. A load that transfer
     would make negative (a lifted wheel) is 0 and the others are scaled so that the four carry m g."""
-    a, L, t = chassis.cg_to_front_axle, chassis.wheelbase, chassis.track
-    weight = mass * G0
-    front, rear = weight * (L - a) / L, weight * a / L
-    pitch = mass * accel[0] * cg_height / L  # moves load from the front axle to the rear under acceleration
-    lateral = mass * accel[1] * cg_height / t  # moves load to the right (y < 0) wheels when turning left
-    share = jnp.stack([(L - a) / L, (L - a) / L, a / L, a / L])
-    side = jnp.array([-1.0, 1.0, -1.0, 1.0], dtype=share.dtype)
-    static = 0.5 * jnp.stack([front, front, rear, rear])
-    loads = static + 0.5 * pitch * jnp.array([-1.0, -1.0, 1.0, 1.0], dtype=share.dtype) + side * lateral * share
-    loads = jnp.maximum(loads, 0.0)
-    return loads * weight / jnp.sum(loads)
+    free = Wheels(jnp.zeros(4), jnp.zeros(()), jnp.zeros(()))
+    return _loads(body(mass, 1.0, cg_height, chassis, free, 1.0, TIME_STEP), accel[0], accel[1])
 
 
-def _direction(v, a):
-    """v / sqrt(|v|^2 + a^2) for (..., k) vectors: the unit direction of v, regularized within speed a."""
-    return v / jnp.sqrt(jnp.sum(v * v, axis=-1, keepdims=True) + a * a)
+def _forces(b: Body, ul, ut, fz):
+    """The tyre law (the module's docstring): each wheel's force along and across it (4,), (4,), and the
+    unregularized power the four dissipate, from the wheels' velocities over the road along and across them
+    (4,), (4,) and their loads (4,)."""
+    speed2 = ul * ul + ut * ut
+    locked = -b.friction * fz / jnp.sqrt(speed2 + b.locked_speed2)  # sliding friction against the whole velocity
+    roll = -b.rolling * fz * ul / jnp.sqrt(ul * ul + b.rolling_speed2)
+    slip = ut / jnp.sqrt(ul * ul + b.slip_speed2)  # tan of the slip angle: the same at small slip
+    has_grip = b.grip > 0
+    grip = jnp.where(has_grip, b.grip, 1.0)
+    side = -fz * jnp.where(has_grip, grip * jnp.tanh(CORNERING * slip / grip), 0.0)
+    free = 1.0 - b.brake
+    along = free * roll + b.brake * locked * ul
+    across = free * side + b.brake * locked * ut
+    power = free * (b.rolling * fz * jnp.abs(ul) + jnp.abs(side) * jnp.abs(ut)) \
+        + b.brake * b.friction * fz * la.safe_sqrt(speed2)
+    return along, across, jnp.sum(power)
 
 
 def tyre_forces(velocity_wheel, loads, wheels: Wheels, friction, dt):
-    """(4, 2) forces in each wheel's frame (rolling direction, lateral left +) and (4,) the unregularized
-    power they dissipate, from the wheels' (4, 2) velocities over the road in their own frames (see the
-    module's docstring)."""
-    ul, ut = velocity_wheel[:, 0], velocity_wheel[:, 1]
-    f = wheels.rolling_resistance
-    b = jnp.clip(wheels.brake, 0.0, 1.0)
-    step = G0 * dt
-    # locked: sliding friction against the wheel's whole velocity
-    locked_dir = _direction(velocity_wheel, REGULARIZATION * friction * step)
-    locked = -friction * loads[:, None] * locked_dir
-    # free: rolling resistance along, a saturating slip-angle force across
-    roll = -f * loads * ul / jnp.sqrt(ul * ul + (REGULARIZATION * f * step) ** 2)
-    lateral_limit = la.safe_sqrt(jnp.maximum(friction * friction - f * f, 0.0))
-    slip = ut / jnp.sqrt(ul * ul + (CORNERING * step) ** 2)  # tan of the slip angle: the same at small slip
-    grip = jnp.where(lateral_limit > 0, lateral_limit, 1.0)
-    side = -loads * jnp.where(lateral_limit > 0, grip * jnp.tanh(CORNERING * slip / grip), 0.0)
-    free = jnp.stack([roll, side], axis=-1)
-    force = (1.0 - b)[:, None] * free + b[:, None] * locked
-    speed = la.safe_sqrt(jnp.sum(velocity_wheel * velocity_wheel, axis=-1))
-    power = (1.0 - b) * (f * loads * jnp.abs(ul) + jnp.abs(side) * jnp.abs(ut)) + b * friction * loads * speed
-    return force, power
+    """(4, 2) forces in each wheel's frame (rolling direction, lateral left +) and the unregularized power they
+    dissipate, from the wheels' (4, 2) velocities over the road in their own frames and their (4,) loads."""
+    b = body(1.0, 1.0, 0.0, Chassis(jnp.asarray(2.8), jnp.asarray(1.6), jnp.asarray(1.2)), wheels, friction, dt)
+    along, across, power = _forces(b, velocity_wheel[:, 0], velocity_wheel[:, 1], loads)
+    return jnp.stack([along, across], axis=-1), power
 
 
-def _rotate(v, c, s):
-    """(..., 2) vectors rotated by the angle whose cosine and sine are c, s."""
-    return jnp.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
-
-
-def generalized_force(mass, izz, cg_height, chassis, wheels, friction, state: Planar, accel, dt):
-    """(Fx, Fy, Mz) global on the vehicle, the body frame acceleration (2,) they give, and their
-    unregularized dissipated power."""
-    s, c = la.sincos(state.yaw)
-    body_v = _rotate(state.velocity, c, -s)  # global -> body
-    r = state.yaw_rate
-    p = wheel_positions(chassis)
-    w_body = body_v[None, :] + r * jnp.stack([-p[:, 1], p[:, 0]], axis=-1)
-    ss, cs = la.sincos(wheels.steer)
-    steer_c = jnp.stack([cs, cs, jnp.ones_like(cs), jnp.ones_like(cs)])
-    steer_s = jnp.stack([ss, ss, jnp.zeros_like(ss), jnp.zeros_like(ss)])
-    w_wheel = _rotate(w_body, steer_c, -steer_s)
-    loads = wheel_loads(mass, cg_height, chassis, accel)
-    f_wheel, power = tyre_forces(w_wheel, loads, wheels, friction, dt)
-    f_body = _rotate(f_wheel, steer_c, steer_s)
-    total_body = jnp.sum(f_body, axis=0)
-    moment = jnp.sum(p[:, 0] * f_body[:, 1] - p[:, 1] * f_body[:, 0])
-    total = _rotate(total_body, c, s)
-    return jnp.stack([total[0], total[1], moment]), total_body / mass, jnp.sum(power)
-
-
-def step(mass, izz, cg_height, chassis, wheels, friction, carry: _Carry, dt):
+def _step(b: Body, carry: _Carry, dt):
     """One step of the integration (the module's docstring): the new carry."""
     state = carry.state
-    q = jnp.stack([state.velocity[0], state.velocity[1], state.yaw_rate])
-    m = jnp.stack([mass, mass, izz])
-    force, accel, power = generalized_force(mass, izz, cg_height, chassis, wheels, friction, state, carry.accel, dt)
-    dq = dt * force / m
+    vx, vy, r = state.velocity[0], state.velocity[1], state.yaw_rate
+    s, c = la.sincos(state.yaw)
+    u, v = c * vx + s * vy, c * vy - s * vx  # the CG's velocity in the body frame
+    wx, wy = u - r * b.y, v + r * b.x  # each wheel's, in the body frame
+    ul, ut = b.cos_steer * wx + b.sin_steer * wy, b.cos_steer * wy - b.sin_steer * wx  # in the wheel's frame
+    along, across, power = _forces(b, ul, ut, _loads(b, carry.accel[0], carry.accel[1]))
+    fx, fy = b.cos_steer * along - b.sin_steer * across, b.sin_steer * along + b.cos_steer * across
+    fu, fv, mz = jnp.sum(fx), jnp.sum(fy), jnp.sum(b.x * fy - b.y * fx)
+    q = jnp.stack([vx, vy, r])
+    m = jnp.stack([b.mass, b.mass, b.izz])
+    dq = dt * jnp.stack([c * fu - s * fv, s * fu + c * fv, mz]) / m
     # never more kinetic energy: scale the change back to the least energy along it where it overshoots
-    along = jnp.sum(q * m * dq)
-    curvature = jnp.sum(dq * m * dq)
-    least = la.safe_div(-along, curvature, 1.0)
-    scale = jnp.clip(least, 0.0, 1.0)
-    q_new = q + scale * dq
+    scale = jnp.clip(la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0), 0.0, 1.0)
     # the fraction of the step during which the vehicle moves: 2 E / (P dt), at most 1
     energy2 = jnp.sum(m * q * q)
     reach = power * dt
@@ -206,11 +226,18 @@ def step(mass, izz, cg_height, chassis, wheels, friction, carry: _Carry, dt):
     h = phi * dt
     # at rest from the step in which it stops: what the rules above leave is below one step's dissipation, and
     # its creep would only carry derivatives that grow without bound as the speed decays
-    q_new = jnp.where(phi < 1.0, 0.0, q_new)
+    stopped = phi < 1.0
+    q_new = jnp.where(stopped, 0.0, q + scale * dq)
     v_mean = 0.5 * (state.velocity + q_new[:2])
-    new = Planar(state.position + h * v_mean, state.yaw + h * 0.5 * (state.yaw_rate + q_new[2]), q_new[:2], q_new[2])
+    new = Planar(state.position + h * v_mean, state.yaw + h * 0.5 * (r + q_new[2]), q_new[:2], q_new[2])
     travelled = h * la.safe_sqrt(jnp.sum(v_mean * v_mean))
-    return _Carry(new, jnp.where(phi < 1.0, 0.0, scale * accel), carry.time + h, carry.distance + travelled, phi)
+    accel = jnp.where(stopped, 0.0, scale * jnp.stack([fu, fv]) / b.mass)
+    return _Carry(new, accel, carry.time + h, carry.distance + travelled, phi)
+
+
+def step(mass, izz, cg_height, chassis, wheels, friction, carry: _Carry, dt):
+    """One step of the integration (the module's docstring) from ``carry``: the new carry."""
+    return _step(body(mass, izz, cg_height, chassis, wheels, friction, dt), carry, dt)
 
 
 def steps_for(time_limit: float, dt: float) -> int:
@@ -238,9 +265,10 @@ def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, st
     n = steps_for(time_limit, dt)
     zero = jnp.zeros_like(start.yaw)
     carry = _Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+    b = body(mass, izz, cg_height, chassis, wheels, friction, dt)
 
     def one(c, _):
-        c = step(mass, izz, cg_height, chassis, wheels, friction, c, dt)
+        c = _step(b, c, dt)
         return c, (jnp.stack([c.time, c.state.position[0], c.state.position[1], c.state.yaw]) if path else None)
 
     def steps(carry, count):
