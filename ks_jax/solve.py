@@ -40,9 +40,9 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
     otherwise the exchange is at the case state. ``pole`` (static): vehicle 2 is a pole, which automatic
     contact meets as a disc (``Case.pole``). ``motion`` (static, ``Case.motion``): where the inputs have a
-    ``road``, how the vehicles' motion to rest is integrated (the result's ``rest``). A negative ``speed`` (reachable by ``set_input``, a sweep
-    or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN results (``speed_status``),
-    unless another input breaks a rule first.
+    ``road``, how the vehicles' motion to rest is integrated (the result's ``rest``). A negative ``speed``
+    (reachable by ``set_input``, a sweep or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN
+    results (``speed_status``), unless another input breaks a rule first.
 
     Of the pipeline's stages (``stages``) only automatic contact's first, the input rules, is fenced off
     (``batch.stages.run``): every later loop reads the rules, and XLA would derive them again inside each
@@ -150,7 +150,8 @@ def motion_rules(road) -> jnp.ndarray:
             continue
         b = jnp.asarray(after.brake)
         ok = ok & jnp.all((b >= 0) & (b <= 1)) & (after.cg_to_front_axle > 0) \
-            & (after.cg_to_front_axle < after.wheelbase) & (after.track > 0) & jnp.isfinite(after.steer) \
+            & (after.cg_to_front_axle < after.wheelbase) & jnp.isfinite(after.wheelbase) & (after.track > 0) \
+            & jnp.isfinite(after.track) & jnp.isfinite(after.steer) \
             & (after.rolling_resistance >= 0) & (after.rolling_resistance < road.friction)
     return ok
 

@@ -68,6 +68,10 @@ def test_a_swept_road_friction_scales_the_skids_as_one_over_mu():
     np.testing.assert_allclose(np.asarray(result["vehicles[0].distance_to_rest"], float) * mus, v ** 2 / (2 * G0),
                                rtol=1e-3)
     assert np.ptp(np.asarray(result["vehicles[1].distance_to_rest"], float) * mus) < 1e-3
+    # an infinite track (a set_input, a fit's step) breaks the rule too: its row is invalid, not NaN unexplained
+    broken = ks_jax.set_input(case.inputs, "vehicles[1].track", float("inf"))
+    res = ks_jax.solve_inputs(broken, motion=case.motion)
+    assert ks_jax.status_text(res.contact.status).startswith("invalid: an input of the motion to rest")
     with pytest.raises(CaseError, match="has no road"):
         ks_jax.sweep(load_case(CASES / "seed_000_saturn_pontiac.json"), {"road.friction": mus})
 

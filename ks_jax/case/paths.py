@@ -144,6 +144,7 @@ def _holder(inputs: CaseInputs, group, vi, path):
     return inputs.road if vi is None else inputs.road.vehicles[vi]
 
 
+REST_OUTPUTS = tuple(f for f in RestResult._fields if f != "path")  # a kept path is for pictures, not a number
 NO_ROAD = ("the case has no road, so no motion to rest: give it one, e.g. \"road\": {\"friction\": 0.7} "
            "(docs/model.md, \"Motion to rest\")")
 
@@ -152,7 +153,7 @@ def without_road(case: "Case", path) -> str | None:
     """Where ``path`` names an input or result of the motion to rest (road.friction, vehicles[i].wheelbase,
     vehicles[i].rest_position[0], ...) and ``case`` has no road: the words saying so; else None."""
     group, _, name, _ = parse_path(path)
-    motion = group == "road" or name in AfterInputs._fields or name in RestResult._fields
+    motion = group == "road" or name in AfterInputs._fields or name in REST_OUTPUTS
     return f"{path}: {NO_ROAD}" if motion and case.inputs is not None and case.inputs.road is None else None
 
 def automatic_part(case: "Case", path) -> str | None:
@@ -207,7 +208,7 @@ def check_output_path(path: str):
     group, vi, name, idx = parse_path(path)
     if group == "road":
         raise PathError(f"path '{path}': the road has no results; its input is road.friction")
-    fields = VehicleResult._fields + RestResult._fields if group == "vehicles" else ContactResult._fields
+    fields = VehicleResult._fields + REST_OUTPUTS if group == "vehicles" else ContactResult._fields
     if group == "contact" and name == "status":
         raise PathError(f"path '{path}': the status is a code, not a number to sweep, fit or compare: read "
                         "result.contact.status (ks_jax.status_text gives its words); a sweep always returns "
@@ -242,7 +243,7 @@ def _result_holder(result, group, vi, name, path):
     """The part of ``result`` (an ExchangeResult) that holds the output ``name``."""
     if group == "contact":
         return result.contact
-    if name in RestResult._fields:
+    if name in REST_OUTPUTS:
         if getattr(result, "rest", None) is None or result.rest[vi] is None:
             raise PathError(f"path '{path}': {NO_ROAD}" if getattr(result, "rest", None) is None else
                             f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")

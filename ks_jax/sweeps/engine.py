@@ -31,7 +31,7 @@ from .columns import invalid_rows
 from .result import SweepResult
 
 
-REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1) for name in ("rest_position[0]", "rest_position[1]",
+DEFAULT_REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1) for name in ("rest_position[0]", "rest_position[1]",
                                                                        "rest_yaw"))  # the default's, with a road
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
@@ -227,7 +227,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
                             "to vary it")
     axes = {p: _check_values(p, over[p]) for p in paths}
     if outputs is None:  # against a fixed object, vehicles[1] is the object: no results of its own
-        outputs = [p for p in DEFAULT_OUTPUTS + (REST_OUTPUTS if case.motion else ()) if not on_fixed_object(case, p)]
+        outputs = [p for p in DEFAULT_OUTPUTS + (DEFAULT_REST_OUTPUTS if case.motion else ()) if not on_fixed_object(case, p)]
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
