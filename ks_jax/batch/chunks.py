@@ -20,15 +20,6 @@ from .stages import run
 CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
 
 
-def as_chunks(x, count, size):
-    """The rows of ``x`` as (count, size, ...): ``count`` chunks of ``size`` rows, the last one padded
-    with copies of the last row."""
-    pad = count * size - x.shape[0]
-    if pad:
-        x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
-    return x.reshape((count, size) + x.shape[1:])
-
-
 def cut(args, start, size, in_axes=0):
     """Rows start .. start + size of every batched leaf of ``args`` (``in_axes``: 0, every leaf batched, or
     a tree like ``args`` of 0 or None per leaf)."""

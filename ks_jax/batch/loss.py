@@ -9,7 +9,8 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
 from ..backend import on_cpu
-from .chunks import CHUNK_ROWS, as_chunks
+from .chunks import CHUNK_ROWS
+from .stages import as_chunks
 from .stages import fenced_by
 
 

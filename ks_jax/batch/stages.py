@@ -56,6 +56,15 @@ def blocked(stage, rows: int = BLOCK_ROWS):
     return fn
 
 
+def as_chunks(x, count, size):
+    """The rows of ``x`` as (count, size, ...): ``count`` chunks of ``size`` rows, the last one padded
+    with copies of the last row."""
+    pad = count * size - x.shape[0]
+    if pad:
+        x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
+    return x.reshape((count, size) + x.shape[1:])
+
+
 def in_blocks(fn, rows, in_axes):
     """``fn`` (vmapped over the rows of the leaves ``in_axes`` marks 0: per argument 0, None, or a tree of them)
     over blocks of ``rows`` rows, one after another (``lax.map``); the last block is padded with copies of the
@@ -73,14 +82,7 @@ def in_blocks(fn, rows, in_axes):
         if n <= rows:
             return fn(*args)
         count = -(-n // rows)
-
-        def split(x):
-            pad = count * rows - x.shape[0]
-            if pad:
-                x = jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])])
-            return x.reshape((count, rows) + x.shape[1:])
-
-        batched = [split(x) for x, a in zip(leaves, axes) if a == 0]
+        batched = [as_chunks(x, count, rows) for x, a in zip(leaves, axes) if a == 0]
 
         def block(parts):
             parts = iter(parts)

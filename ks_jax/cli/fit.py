@@ -14,9 +14,10 @@ import json
 import sys
 
 from fit import reconstruct
+from fit.problem import Problem, apply_unknowns
 from fit.report import text_report
 
-from ..case import input_ties, load_cases, set_input
+from ..case import input_ties, load_cases
 from ..case.errors import CaseError
 from ..plot import check_picture_path, save_top_view
 from ..solve import solve
@@ -99,10 +100,7 @@ def run(args) -> int:
 def case_at_estimate(case, result):
     """``case`` with its unknowns set to ``result``'s estimate (SI), and the inputs tied to them moved with them
     (a course that follows its yaw, ``case.input_ties``), as the fit solved it; named as such for the picture."""
-    paths = list(result.estimate)
-    inputs = case.inputs
-    for path in paths:
-        inputs = set_input(inputs, path, result.estimate[path])
-    for k, path in input_ties(case, paths):
-        inputs = set_input(inputs, path, result.estimate[paths[k]])
+    paths = tuple(result.estimate)
+    inputs = apply_unknowns(Problem(paths, input_ties(case, paths), ()), case.inputs,
+                            [result.estimate[p] for p in paths])
     return dataclasses.replace(case, inputs=inputs, name=f"{case.name}\nat the fit's estimate")
