@@ -11,7 +11,10 @@ as a case's pipeline runs it:
 - forward, every step: ``to_rest(..., reverse=True)``, the scan that runs every step to the limit;
 - forward, stopping at rest: the default ``lax.while_loop``, which stops once every vehicle of a block rests;
 - gradient: ``jax.grad`` of the sum of every rest position over the batch with respect to every vehicle's speed,
-  yaw rate and road friction (reverse mode through the checkpointed scan), beside the forward of the same scan.
+  yaw rate and road friction (reverse mode through the checkpointed scan, whose steps carry the hand-written
+  adjoint ``motion._step_reverse``), beside the forward of the same scan;
+- for comparison, the same gradient through the same checkpointed scan of ``motion._step``, whose adjoint is
+  JAX's own.
 
 Reported: medians of ``repeats`` rounds (each variant once per round), the rate in vehicle-steps per second
 (vehicles x steps / time; "stopping at rest" counts the steps to the limit, as the others), and gradient / forward
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import math
 import os
 import platform
 import statistics
@@ -60,17 +64,32 @@ def programs(seconds):
         batched = jax.vmap(one)
         return in_blocks(batched, BLOCK_ROWS, (0,) * 7) if jax.default_backend() == "cpu" else batched
 
-    every, stopping = rows(True), rows(False)
+    def own_adjoint(mass, izz, h, chassis, wheels, mu, start):
+        """The rest position through ``to_rest(reverse=True)``'s checkpointed chunks, of steps that JAX
+        differentiates by its own rules."""
+        n = M.steps_for(seconds, M.TIME_STEP)
+        chunk = max(1, round(math.sqrt(n)))
+        b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
+        zero = jnp.zeros_like(start.yaw)
+        carry = M._Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+        steps = lambda c, k: jax.lax.scan(lambda c, _: (M._step(b, c, M.TIME_STEP), None), c, None, length=k)[0]  # noqa: E731
+        carry = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=n // chunk)[0]
+        return M.RestResult(steps(carry, n % chunk).state.position, *(None,) * 5)
 
-    def total(speed_scale, yaw_rate, mu, args):
-        mass, izz, h, chassis, wheels, _, start = args
-        start = start._replace(velocity=start.velocity * speed_scale[:, None], yaw_rate=yaw_rate)
-        return jnp.sum(every(mass, izz, h, chassis, wheels, mu, start).rest_position)
+    every, stopping = rows(True), rows(False)
+    own = jax.vmap(own_adjoint)
+    own = in_blocks(own, BLOCK_ROWS, (0,) * 7) if jax.default_backend() == "cpu" else own
+
+    def total(motion):
+        def f(speed_scale, yaw_rate, mu, args):
+            mass, izz, h, chassis, wheels, _, start = args
+            start = start._replace(velocity=start.velocity * speed_scale[:, None], yaw_rate=yaw_rate)
+            return jnp.sum(motion(mass, izz, h, chassis, wheels, mu, start).rest_position)
+        return jax.jit(jax.grad(f, argnums=(0, 1, 2)))
 
     forward = jax.jit(lambda *a: every(*a).rest_position)
     early = jax.jit(lambda *a: stopping(*a).rest_position)
-    grad = jax.jit(jax.grad(total, argnums=(0, 1, 2)))
-    return forward, early, grad
+    return forward, early, total(every), total(own)
 
 
 def main(argv=None):
@@ -82,12 +101,13 @@ def main(argv=None):
     n = 2 * args.pairs
     steps = M.steps_for(args.seconds, M.TIME_STEP)
     data = vehicles(n)
-    forward, early, grad = programs(args.seconds)
+    forward, early, grad, own = programs(args.seconds)
     ones = jnp.ones(n)
     calls = {
         "forward, every step": lambda: forward(*data),
         "forward, stopping at rest": lambda: early(*data),
         "gradient (reverse mode)": lambda: grad(ones, data[-1].yaw_rate, data[5], data),
+        "gradient, JAX's own adjoint": lambda: own(ones, data[-1].yaw_rate, data[5], data),
     }
     compile_s = {}
     for name, call in calls.items():
@@ -100,7 +120,8 @@ def main(argv=None):
             t = time.perf_counter()
             jax.block_until_ready(call())
             times[name].append(time.perf_counter() - t)
-    ratios = [g / f for g, f in zip(times["gradient (reverse mode)"], times["forward, every step"])]
+    ratios = {name: [g / f for g, f in zip(times[name], times["forward, every step"])]
+              for name in ("gradient (reverse mode)", "gradient, JAX's own adjoint")}
     print(f"bench_motion: {args.pairs} two-vehicle motions ({n} vehicles), {args.seconds:g} s of motion at "
           f"{M.TIME_STEP * 1000:g} ms ({steps} steps), float64")
     print(f"  {datetime.date.today()}, {platform.node()}, {jax.devices()[0].device_kind}, {os.cpu_count()} CPUs, "
@@ -109,7 +130,11 @@ def main(argv=None):
         med = statistics.median(ts)
         print(f"  {name:28s} {med:8.3f} s  {n * steps / med:10.3g} vehicle-steps/s   (first call "
               f"{compile_s[name]:.2f} s)")
-    print(f"  gradient / forward (every step): {statistics.median(ratios):.2f} (median of {len(ratios)} rounds)")
+    hand, theirs = calls["gradient (reverse mode)"](), calls["gradient, JAX's own adjoint"]()
+    differ = max(float(jnp.max(jnp.abs(x - y)) / jnp.max(jnp.abs(y))) for x, y in zip(hand, theirs))
+    print(f"  the two gradients differ by at most {differ:.1e} of their largest entry")
+    for name, rs in ratios.items():
+        print(f"  {name} / forward (every step): {statistics.median(rs):.2f} (median of {len(rs)} rounds)")
 
 
 if __name__ == "__main__":

@@ -29,11 +29,15 @@ that the force changes in one step (``REGULARIZATION``), so that forces, rest po
 gradients are smooth and finite. The tyre's slip angle is regularized over the speed at which its
 lateral stiffness would overshoot in one step (k g dt), which makes the explicit step stable.
 
+Reverse mode: the steps of ``to_rest(reverse=True)`` carry a hand-written adjoint (``_step_bwd``) that reads
+back the step's costly values instead of JAX's own adjoint of the step, which costs several steps more.
+
 Everything here is pure and unbatched: jit, vmap and differentiate at the edge.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -163,9 +167,11 @@ def body(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, dt) -
 
 def _loads(b: Body, ax, ay):
     """(4,) vertical loads at the body frame acceleration (ax, ay): a load that transfer would make negative (a
-    lifted wheel) is 0, and the others are scaled so that the four carry m g."""
+    lifted wheel) is 0, and the others are scaled so that the four carry m g. Also the loads before that scaling
+    (4,) and their sum (the step's adjoint reads them)."""
     loads = jnp.maximum(b.static + b.pitch * ax + b.lateral * ay, 0.0)
-    return loads * b.weight / jnp.sum(loads)
+    total = jnp.sum(loads)
+    return loads * b.weight / total, loads, total
 
 
 def wheel_loads(mass, cg_height, chassis: Chassis, accel):
@@ -173,26 +179,66 @@ def wheel_loads(mass, cg_height, chassis: Chassis, accel):
     frame acceleration ``accel`` (2,) (longitudinal, lateral left +) at ``cg_height``. A load that transfer
     would make negative (a lifted wheel) is 0 and the others are scaled so that the four carry m g."""
     free = Wheels(jnp.zeros(4), jnp.zeros(()), jnp.zeros(()))
-    return _loads(body(mass, 1.0, cg_height, chassis, free, 1.0, TIME_STEP), accel[0], accel[1])
+    return _loads(body(mass, 1.0, cg_height, chassis, free, 1.0, TIME_STEP), accel[0], accel[1])[0]
 
 
-def _forces(b: Body, ul, ut, fz):
-    """The tyre law (the module's docstring): each wheel's force along and across it (4,), (4,), and the
-    unregularized power the four dissipate, from the wheels' velocities over the road along and across them
+class _Forces(NamedTuple):
+    """The tyre law's values at one step, each (4,) (``_tyres``): what the forces are made of, kept for the
+    step's adjoint (``_step_bwd``)."""
+
+    along: jnp.ndarray  # the force along the wheel
+    across: jnp.ndarray  # the force across it
+    power: jnp.ndarray  # the unregularized power each wheel dissipates
+    locked: jnp.ndarray  # -mu Fz / |v|_reg: the locked force per unit of the wheel's velocity
+    roll: jnp.ndarray  # the rolling resistance force
+    side: jnp.ndarray  # the free wheel's lateral force
+    inv_locked: jnp.ndarray  # 1 / sqrt(|v|^2 + a_locked^2)
+    inv_rolling: jnp.ndarray  # 1 / sqrt(ul^2 + a_rolling^2)
+    inv_slip: jnp.ndarray  # 1 / sqrt(ul^2 + a_slip^2)
+    tanh: jnp.ndarray  # tanh(k slip / mu')
+    speed: jnp.ndarray  # |v| (safe_sqrt)
+
+
+def _grip(b: Body):
+    """Where the free wheels have lateral grip (mu > f), and that grip (1 where there is none, a stand-in)."""
+    has_grip = b.grip > 0
+    return has_grip, jnp.where(has_grip, b.grip, 1.0)
+
+
+def _tyre_terms(b: Body, fz, ul, inv_locked, inv_rolling, tanh):
+    """The locked force per unit of the wheel's velocity (-mu Fz / |v|), the rolling resistance force and the
+    free wheel's lateral force (4,) each, from the loads, the rolling speeds, and the tyre law's regularized
+    inverse speeds and tanh (``_tyres``)."""
+    has_grip, grip = _grip(b)
+    locked = -b.friction * fz * inv_locked  # sliding friction against the whole velocity
+    roll = -b.rolling * fz * ul * inv_rolling
+    side = -fz * jnp.where(has_grip, grip * tanh, 0.0)
+    return locked, roll, side
+
+
+def _tyres(b: Body, ul, ut, fz) -> _Forces:
+    """The tyre law (the module's docstring) from the wheels' velocities over the road along and across them
     (4,), (4,) and their loads (4,)."""
     speed2 = ul * ul + ut * ut
-    locked = -b.friction * fz / jnp.sqrt(speed2 + b.locked_speed2)  # sliding friction against the whole velocity
-    roll = -b.rolling * fz * ul / jnp.sqrt(ul * ul + b.rolling_speed2)
-    slip = ut / jnp.sqrt(ul * ul + b.slip_speed2)  # tan of the slip angle: the same at small slip
-    has_grip = b.grip > 0
-    grip = jnp.where(has_grip, b.grip, 1.0)
-    side = -fz * jnp.where(has_grip, grip * jnp.tanh(CORNERING * slip / grip), 0.0)
+    inv_locked = 1.0 / jnp.sqrt(speed2 + b.locked_speed2)
+    inv_rolling = 1.0 / jnp.sqrt(ul * ul + b.rolling_speed2)
+    inv_slip = 1.0 / jnp.sqrt(ul * ul + b.slip_speed2)
+    slip = ut * inv_slip  # tan of the slip angle: the same at small slip
+    tanh = jnp.tanh(CORNERING * slip / _grip(b)[1])
+    locked, roll, side = _tyre_terms(b, fz, ul, inv_locked, inv_rolling, tanh)
     free = 1.0 - b.brake
     along = free * roll + b.brake * locked * ul
     across = free * side + b.brake * locked * ut
-    power = free * (b.rolling * fz * jnp.abs(ul) + jnp.abs(side) * jnp.abs(ut)) \
-        + b.brake * b.friction * fz * la.safe_sqrt(speed2)
-    return along, across, jnp.sum(power)
+    speed = la.safe_sqrt(speed2)
+    power = free * (b.rolling * fz * jnp.abs(ul) + jnp.abs(side) * jnp.abs(ut)) + b.brake * b.friction * fz * speed
+    return _Forces(along, across, power, locked, roll, side, inv_locked, inv_rolling, inv_slip, tanh, speed)
+
+
+def _forces(b: Body, ul, ut, fz):
+    """The tyre law: each wheel's force along and across it (4,), (4,), and the unregularized power the four
+    dissipate (``_tyres``)."""
+    f = _tyres(b, ul, ut, fz)
+    return f.along, f.across, jnp.sum(f.power)
 
 
 def tyre_forces(velocity_wheel, loads, wheels: Wheels, friction, dt):
@@ -203,22 +249,69 @@ def tyre_forces(velocity_wheel, loads, wheels: Wheels, friction, dt):
     return jnp.stack([along, across], axis=-1), power
 
 
-def _step(b: Body, carry: _Carry, dt):
-    """One step of the integration (the module's docstring): the new carry."""
+def _wheel_velocities(b: Body, sin, cos, velocity, yaw_rate):
+    """Each wheel's velocity over the road (4,): in the body frame (wx, wy), and in its own (ul along it, ut
+    across it), from the yaw's sine and cosine and the CG's global velocity (2,) and yaw rate."""
+    vx, vy = velocity[0], velocity[1]
+    u, v = cos * vx + sin * vy, cos * vy - sin * vx  # the CG's velocity in the body frame
+    wx, wy = u - yaw_rate * b.y, v + yaw_rate * b.x
+    return wx, wy, b.cos_steer * wx + b.sin_steer * wy, b.cos_steer * wy - b.sin_steer * wx
+
+
+def _steered(b: Body, along, across):
+    """The wheels' forces (4,) along and across them turned into the body frame (fx, fy)."""
+    return b.cos_steer * along - b.sin_steer * across, b.sin_steer * along + b.cos_steer * across
+
+
+class _Saved(NamedTuple):
+    """What the step's adjoint (``_step_bwd``) reads back of its forward (``_advance``): the costly values (the
+    square roots, tanh, sine and cosine, the quotients) and those that many of its terms read. It derives the
+    others in a few operations each: recomputing more of the step there costs more than storing it."""
+
+    velocity: jnp.ndarray  # (2,) the CG's velocity at the start of the step
+    yaw_rate: jnp.ndarray  # at the start
+    accel: jnp.ndarray  # (2,) the last step's acceleration (load transfer)
+    sin: jnp.ndarray
+    cos: jnp.ndarray
+    ul: jnp.ndarray  # (4,) the wheels' velocities along and across them
+    ut: jnp.ndarray
+    loads: jnp.ndarray  # (4,) the loads before they are scaled to m g
+    total: jnp.ndarray  # their sum
+    along: jnp.ndarray  # (4,) the tyre forces along and across the wheels
+    across: jnp.ndarray
+    inv_locked: jnp.ndarray  # (4,) the tyre law's values (_Forces)
+    inv_rolling: jnp.ndarray
+    inv_slip: jnp.ndarray
+    tanh: jnp.ndarray
+    speed: jnp.ndarray
+    force: jnp.ndarray  # (3,) fu, fv, mz: the body frame force and the yaw moment
+    dq: jnp.ndarray  # (3,) the step's change of (vx, vy, r) before it is scaled back
+    raw: jnp.ndarray  # the energy rule's scale before its clip to [0, 1]
+    energy2: jnp.ndarray  # 2 E
+    reach: jnp.ndarray  # P dt
+    phi: jnp.ndarray
+    new_yaw_rate: jnp.ndarray
+    v_mean: jnp.ndarray  # (2,) the step's mean velocity
+    inv_v_mean: jnp.ndarray  # 1 / |v_mean|, 0 where safe_sqrt's gradient is 0
+
+
+def _advance(b: Body, carry: _Carry, dt):
+    """One step of the integration (the module's docstring): the new carry, and what the step's adjoint reads."""
     state = carry.state
     vx, vy, r = state.velocity[0], state.velocity[1], state.yaw_rate
     s, c = la.sincos(state.yaw)
-    u, v = c * vx + s * vy, c * vy - s * vx  # the CG's velocity in the body frame
-    wx, wy = u - r * b.y, v + r * b.x  # each wheel's, in the body frame
-    ul, ut = b.cos_steer * wx + b.sin_steer * wy, b.cos_steer * wy - b.sin_steer * wx  # in the wheel's frame
-    along, across, power = _forces(b, ul, ut, _loads(b, carry.accel[0], carry.accel[1]))
-    fx, fy = b.cos_steer * along - b.sin_steer * across, b.sin_steer * along + b.cos_steer * across
+    _, _, ul, ut = _wheel_velocities(b, s, c, state.velocity, r)
+    fz, loads, total = _loads(b, carry.accel[0], carry.accel[1])
+    t = _tyres(b, ul, ut, fz)
+    power = jnp.sum(t.power)
+    fx, fy = _steered(b, t.along, t.across)
     fu, fv, mz = jnp.sum(fx), jnp.sum(fy), jnp.sum(b.x * fy - b.y * fx)
     q = jnp.stack([vx, vy, r])
     m = jnp.stack([b.mass, b.mass, b.izz])
     dq = dt * jnp.stack([c * fu - s * fv, s * fu + c * fv, mz]) / m
     # never more kinetic energy: scale the change back to the least energy along it where it overshoots
-    scale = jnp.clip(la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0), 0.0, 1.0)
+    raw = la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0)
+    scale = jnp.clip(raw, 0.0, 1.0)
     # the fraction of the step during which the vehicle moves: 2 E / (P dt), at most 1
     energy2 = jnp.sum(m * q * q)
     reach = power * dt
@@ -230,9 +323,177 @@ def _step(b: Body, carry: _Carry, dt):
     q_new = jnp.where(stopped, 0.0, q + scale * dq)
     v_mean = 0.5 * (state.velocity + q_new[:2])
     new = Planar(state.position + h * v_mean, state.yaw + h * 0.5 * (r + q_new[2]), q_new[:2], q_new[2])
-    travelled = h * la.safe_sqrt(jnp.sum(v_mean * v_mean))
+    mean2 = jnp.sum(v_mean * v_mean)
+    travelled = h * la.safe_sqrt(mean2)
     accel = jnp.where(stopped, 0.0, scale * jnp.stack([fu, fv]) / b.mass)
-    return _Carry(new, accel, carry.time + h, carry.distance + travelled, phi)
+    tiny = jnp.finfo(mean2.dtype).tiny
+    inv_v_mean = jnp.where(mean2 > tiny, 1.0 / jnp.sqrt(jnp.maximum(mean2, tiny)), 0.0)
+    saved = _Saved(state.velocity, r, carry.accel, s, c, ul, ut, loads, total, t.along, t.across, t.inv_locked,
+                   t.inv_rolling, t.inv_slip, t.tanh, t.speed, jnp.stack([fu, fv, mz]), dq, raw, energy2, reach,
+                   phi, q_new[2], v_mean, inv_v_mean)
+    return _Carry(new, accel, carry.time + h, carry.distance + travelled, phi), saved
+
+
+def _step(b: Body, carry: _Carry, dt):
+    """One step of the integration (the module's docstring): the new carry. Differentiable both ways by JAX's
+    own rules: the forward loop's derivatives (``jax.jvp``) go through this."""
+    return _advance(b, carry, dt)[0]
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
+def _step_reverse(b: Body, carry: _Carry, dt):
+    """``_step``, whose reverse-mode derivative is the hand-written adjoint ``_step_bwd``, which reads back the
+    step's ``_Saved`` values: JAX's own adjoint of the step, with its many stored or recomputed intermediates,
+    costs several forward steps more (docs/performance.md). First-order reverse mode only (``jax.grad``,
+    ``jax.vjp``, ``jax.jacrev``): forward mode cannot pass a custom VJP (it goes through ``_step``, in
+    ``to_rest(reverse=False)``), and the adjoint's stored values (``la.materialize``) have no derivative."""
+    return _step(b, carry, dt)
+
+
+def _step_fwd(b: Body, carry: _Carry, dt):
+    new, saved = _advance(b, carry, dt)
+    return new, (b, saved)
+
+
+def _step_bwd(dt, residuals, ct: _Carry):
+    """The adjoint of ``_advance``: the cotangents of the body and of the carry from those of the new carry,
+    the forward's operations taken back in reverse order (``a_x`` is the cotangent of x)."""
+    b, sv = residuals
+    vx, vy, r = sv.velocity[0], sv.velocity[1], sv.yaw_rate
+    s, c, phi, ul, ut = sv.sin, sv.cos, sv.phi, sv.ul, sv.ut
+    scale = jnp.clip(sv.raw, 0.0, 1.0)
+    h = phi * dt
+    moving = phi >= 1.0  # not stopped: the new velocities and acceleration follow the step
+    fu, fv = sv.force[0], sv.force[1]
+    q = jnp.stack([vx, vy, r])
+    m = jnp.stack([b.mass, b.mass, b.izz])
+    a_pos, a_yaw = ct.state.position, ct.state.yaw
+    # the new time, distance, position and yaw: t + h, d + h |v_mean|, p + h v_mean, yaw + h (r + r') / 2
+    speed = sv.v_mean @ (sv.v_mean * sv.inv_v_mean)
+    a_h = ct.time + ct.distance * speed + a_pos @ sv.v_mean + a_yaw * 0.5 * (r + sv.new_yaw_rate)
+    a_vmean = h * a_pos + ct.distance * h * sv.v_mean * sv.inv_v_mean
+    a_qnew = jnp.concatenate([ct.state.velocity + 0.5 * a_vmean, (ct.state.yaw_rate + 0.5 * h * a_yaw)[None]])
+    a_velocity = 0.5 * a_vmean
+    a_r = 0.5 * h * a_yaw
+    # the new acceleration scale (fu, fv) / m and the new velocities q + scale dq, where still moving
+    a_acc = jnp.where(moving, ct.accel, 0.0)
+    a_qnew = jnp.where(moving, a_qnew, 0.0)
+    a_scale = a_acc @ sv.force[:2] / b.mass + a_qnew @ sv.dq
+    a_fu, a_fv = a_acc[0] * scale / b.mass, a_acc[1] * scale / b.mass
+    a_mass = -(a_acc @ sv.force[:2]) * scale / (b.mass * b.mass)
+    a_q = a_qnew
+    a_dq = a_qnew * scale
+    # phi: 1 or 0 where 2 E >= P dt, else 2 E / (P dt); h = phi dt
+    a_phi = ct.moving + dt * a_h
+    partial = sv.energy2 < sv.reach
+    reach = jnp.where(partial, sv.reach, 1.0)
+    a_energy2 = jnp.where(partial, a_phi / reach, 0.0)
+    a_power = jnp.where(partial, -a_phi * sv.energy2 / (reach * reach), 0.0) * dt
+    a_q = a_q + 2.0 * m * q * a_energy2
+    a_m = q * q * a_energy2
+    # scale = clip(-(q m dq) / (dq m dq), 0, 1)
+    den = jnp.sum(sv.dq * m * sv.dq)
+    inside = (den != 0) & (sv.raw > 0.0) & (sv.raw < 1.0)
+    den = jnp.where(inside, den, 1.0)
+    a_num = jnp.where(inside, a_scale / den, 0.0)
+    a_den = -a_num * sv.raw
+    a_q = a_q - a_num * m * sv.dq
+    a_m = a_m - a_num * q * sv.dq + a_den * sv.dq * sv.dq
+    a_dq = a_dq - a_num * q * m + 2.0 * a_den * m * sv.dq
+    # dq = dt (c fu - s fv, s fu + c fv, mz) / m
+    a_g = a_dq * dt / m
+    a_m = a_m - a_dq * sv.dq / m
+    a_fu = a_fu + c * a_g[0] + s * a_g[1]
+    a_fv = a_fv - s * a_g[0] + c * a_g[1]
+    a_mz = a_g[2]
+    a_c = a_g[0] * fu + a_g[1] * fv
+    a_s = a_g[1] * fu - a_g[0] * fv
+    a_mass = a_mass + a_m[0] + a_m[1]
+    a_izz = a_m[2]
+    # fu, fv, mz: sums of fx, fy and x fy - y fx; fx, fy: the wheels' forces turned by their steer
+    fx, fy = _steered(b, sv.along, sv.across)
+    a_fx = a_fu - b.y * a_mz
+    a_fy = a_fv + b.x * a_mz
+    a_x = fy * a_mz
+    a_y = -fx * a_mz
+    a_along = b.cos_steer * a_fx + b.sin_steer * a_fy
+    a_across = b.cos_steer * a_fy - b.sin_steer * a_fx
+    a_cos_steer = sv.along * a_fx + sv.across * a_fy
+    a_sin_steer = sv.along * a_fy - sv.across * a_fx
+    # stored once: XLA's CPU fusion would otherwise recompute these chains in each sum over the wheels below
+    a_along, a_across = la.materialize(a_along, a_across)
+    # the tyre law (_tyres)
+    fz = sv.loads * (b.weight / sv.total)
+    locked, roll, side = _tyre_terms(b, fz, ul, sv.inv_locked, sv.inv_rolling, sv.tanh)
+    brake, free = b.brake, 1.0 - b.brake
+    a_pw = a_power
+    abs_ul, abs_ut, abs_side = jnp.abs(ul), jnp.abs(ut), jnp.abs(side)
+    a_free = a_along * roll + a_across * side + a_pw * (b.rolling * fz * abs_ul + abs_side * abs_ut)
+    a_brake = (a_along * locked * ul + a_across * locked * ut + a_pw * b.friction * fz * sv.speed) - a_free
+    a_roll = a_along * free
+    a_side = a_across * free + a_pw * free * abs_ut * jnp.sign(side)
+    a_locked = brake * (a_along * ul + a_across * ut)
+    a_ul = a_along * brake * locked + a_pw * free * b.rolling * fz * jnp.sign(ul)
+    a_ut = a_across * brake * locked + a_pw * free * abs_side * jnp.sign(ut)
+    a_rolling = jnp.sum(a_pw * free * fz * abs_ul)
+    a_friction = jnp.sum(a_pw * brake * fz * sv.speed)
+    a_fz = a_pw * (free * b.rolling * abs_ul + brake * b.friction * sv.speed)
+    a_speed = a_pw * brake * b.friction * fz
+    a_speed2 = jnp.where(sv.speed > 0, 0.5 * a_speed / jnp.where(sv.speed > 0, sv.speed, 1.0), 0.0)
+    # side = -fz mu' tanh(k slip / mu') where there is grip
+    has_grip, grip = _grip(b)
+    a_side = jnp.where(has_grip, a_side, 0.0)
+    a_fz = a_fz - a_side * grip * sv.tanh
+    a_tanh = -a_side * fz * grip
+    a_z = a_tanh * (1.0 - sv.tanh * sv.tanh)
+    slip = ut * sv.inv_slip
+    a_slip = a_z * CORNERING / grip
+    a_grip = jnp.sum(-a_side * fz * sv.tanh - a_z * CORNERING * slip / (grip * grip))
+    a_ut = a_ut + a_slip * sv.inv_slip
+    a_inv_slip = a_slip * ut
+    # roll = -f fz ul / sqrt(ul^2 + a^2), locked = -mu fz / sqrt(|v|^2 + a^2)
+    a_rolling = a_rolling - jnp.sum(a_roll * fz * ul * sv.inv_rolling)
+    a_fz = a_fz - a_roll * b.rolling * ul * sv.inv_rolling - a_locked * b.friction * sv.inv_locked
+    a_ul = a_ul - a_roll * b.rolling * fz * sv.inv_rolling
+    a_inv_rolling = -a_roll * b.rolling * fz * ul
+    a_friction = a_friction - jnp.sum(a_locked * fz * sv.inv_locked)
+    a_inv_locked = -a_locked * b.friction * fz
+    # d(1 / sqrt(x)) = -dx / (2 sqrt(x)^3)
+    cube = lambda inv: -0.5 * inv * inv * inv  # noqa: E731
+    a_x_slip, a_x_rolling, a_x_locked = (a_inv_slip * cube(sv.inv_slip), a_inv_rolling * cube(sv.inv_rolling),
+                                         a_inv_locked * cube(sv.inv_locked))
+    a_speed2 = a_speed2 + a_x_locked
+    a_ul = a_ul + 2.0 * ul * (a_x_slip + a_x_rolling + a_speed2)
+    a_ut = a_ut + 2.0 * ut * a_speed2
+    a_fz, a_ul, a_ut = la.materialize(a_fz, a_ul, a_ut)
+    # the loads: fz = w max(l, 0) / sum, l = static + pitch ax + lateral ay
+    a_weight = jnp.sum(a_fz * sv.loads) / sv.total
+    a_loads = b.weight / sv.total * (a_fz - a_weight)
+    a_l = jnp.where(sv.loads > 0, a_loads, 0.0)
+    a_accel = jnp.stack([jnp.sum(a_l * b.pitch), jnp.sum(a_l * b.lateral)])
+    # the wheels' velocities: in their own frames from the body frame, and there from the CG's
+    wx, wy, _, _ = _wheel_velocities(b, s, c, sv.velocity, r)
+    a_wx = b.cos_steer * a_ul - b.sin_steer * a_ut
+    a_wy = b.sin_steer * a_ul + b.cos_steer * a_ut
+    a_cos_steer = a_cos_steer + a_ul * wx + a_ut * wy
+    a_sin_steer = a_sin_steer + a_ul * wy - a_ut * wx
+    a_u, a_v = jnp.sum(a_wx), jnp.sum(a_wy)
+    a_r = a_r + a_q[2] + jnp.sum(b.x * a_wy - b.y * a_wx)
+    a_x = a_x + a_wy * r
+    a_y = a_y - a_wx * r
+    a_velocity = a_velocity + a_q[:2] + jnp.stack([c * a_u - s * a_v, s * a_u + c * a_v])
+    a_c = a_c + a_u * vx + a_v * vy
+    a_s = a_s + a_u * vy - a_v * vx
+    a_state = Planar(ct.state.position, a_yaw + c * a_s - s * a_c, a_velocity, a_r)
+    a_carry = _Carry(a_state, a_accel, ct.time, ct.distance, jnp.zeros_like(ct.moving))
+    ax, ay = sv.accel[0], sv.accel[1]
+    a_body = Body(a_mass, a_izz, a_x, a_y, a_cos_steer, a_sin_steer, a_l, a_l * ax, a_l * ay, a_weight, a_brake,
+                  a_rolling, a_friction, jnp.where(has_grip, a_grip, 0.0),
+                  jnp.sum(a_x_locked), jnp.sum(a_x_rolling), jnp.sum(a_x_slip))
+    return a_body, a_carry
+
+
+_step_reverse.defvjp(_step_fwd, _step_bwd)
 
 
 def step(mass, izz, cg_height, chassis, wheels, friction, carry: _Carry, dt):
@@ -261,14 +522,17 @@ def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, st
     derivatives (``jax.jvp``, ``jax.jacfwd``, as the fit uses) of a motion that stops early cost only its
     steps. Reverse-mode differentiation (``jax.grad``, ``jax.vjp``) cannot pass a while loop: ``reverse`` True
     runs every step to the limit in a ``lax.scan`` cut into chunks, each recomputed in the backward pass
-    (``jax.checkpoint``), so that a gradient stores about 2 sqrt(n) states instead of n."""
+    (``jax.checkpoint``), so that a gradient stores about 2 sqrt(n) states instead of n; its steps carry a
+    hand-written adjoint (``_step_reverse``): first-order reverse mode only."""
     n = steps_for(time_limit, dt)
     zero = jnp.zeros_like(start.yaw)
     carry = _Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
     b = body(mass, izz, cg_height, chassis, wheels, friction, dt)
 
+    advance = _step_reverse if reverse and not path else _step
+
     def one(c, _):
-        c = _step(b, c, dt)
+        c = advance(b, c, dt)
         return c, (jnp.stack([c.time, c.state.position[0], c.state.position[1], c.state.yaw]) if path else None)
 
     def steps(carry, count):

@@ -194,6 +194,50 @@ def test_rest_position_gradients_match_central_differences_forward_and_reverse()
     assert np.all(np.isfinite(fwd))
 
 
+# one step's states that take each branch of the step: (brake, steer, friction, f, velocity, yaw rate, accel)
+STEP_STATES = [
+    (LOCKED, 0.0, 0.8, 0.015, (14.0, 3.0), 1.1, (-6.0, 2.0)),  # sliding, yawing
+    ([0.3, 0.7, 0.0, 1.0], -0.08, 0.6, 0.015, (-4.0, 9.0), -0.6, (1.0, -3.0)),  # braked by fractions
+    (FREE, 0.05, 0.9, 0.015, (20.0, -1.5), 0.3, (0.5, 4.0)),  # rolling, with slip
+    (FREE, 0.0, 0.7, 0.7, (8.0, 2.0), 0.4, (0.0, 1.0)),  # no lateral grip left by rolling resistance
+    (LOCKED, 0.0, 0.7, 0.015, (3.0, -5.0), 0.8, (-9.0, 12.0)),  # load transfer lifting a wheel
+    (LOCKED, 0.0, 0.75, 0.015, (0.02, 0.01), 0.01, (0.0, 0.0)),  # stops in this step (phi < 1)
+    (FREE, 0.12, 0.55, 0.015, (0.01, 0.006), -0.007, (5.9, -1.6)),  # moving, its change scaled back
+]
+
+
+def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
+    """The reverse-ready scan's step carries a hand-written adjoint (``_step_reverse``); at states that take each
+    branch of the step (sliding, braked, rolling, no grip, a lifted wheel, stopping within the step, a change
+    scaled back by the energy rule), its vector-Jacobian product for random cotangents equals JAX's own of the
+    same step, for every input of the body and the carry."""
+    def parts(brake, steer, mu, f, velocity, yaw_rate, accel):
+        b = M.body(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(brake, steer, f), mu, M.TIME_STEP)
+        start = M.Planar(jnp.asarray([1.0, -2.0]), jnp.asarray(0.3), jnp.asarray(velocity, float),
+                         jnp.asarray(yaw_rate, float))
+        one = jnp.asarray(1.0)
+        return b, M._Carry(start, jnp.asarray(accel, float), 2.0 * one, 5.0 * one, one)
+
+    bodies, carries = zip(*(parts(*state) for state in STEP_STATES))
+    b, carry = _batch(bodies), _batch(carries)
+    rng = np.random.default_rng(7)
+    cotangent = jax.tree_util.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), carry)
+
+    def vjps(b, carry, ct):
+        own = jax.vjp(lambda b, c: M._step(b, c, M.TIME_STEP), b, carry)[1](ct)
+        hand = jax.vjp(lambda b, c: M._step_reverse(b, c, M.TIME_STEP), b, carry)[1](ct)
+        return own, hand, M._advance(b, carry, M.TIME_STEP)[1]
+
+    own, hand, saved = reference_jit(jax.vmap(vjps))(b, carry, cotangent)
+    phi, raw, loads = np.asarray(saved.phi), np.asarray(saved.raw), np.asarray(saved.loads)
+    assert np.any(phi < 1) and np.any((phi >= 1) & (raw > 0) & (raw < 1)) and np.any(loads == 0)  # the branches
+    for (path, want), got in zip(jax.tree_util.tree_flatten_with_path(own)[0], jax.tree_util.tree_leaves(hand)):
+        want, got = np.asarray(want), np.asarray(got)
+        scale = np.abs(want).reshape(len(STEP_STATES), -1).max(axis=1).reshape((-1,) + (1,) * (want.ndim - 1))
+        bad = np.abs(got - want) > 1e-9 * (np.abs(want) + scale) + 1e-15
+        assert not np.any(bad), (jax.tree_util.keystr(path), got[bad], want[bad])
+
+
 def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
     """A batch (vmap, in one program) gives each row what the row gives alone, unbatched; a vehicle at rest from
     the start has time and distance 0, its yaw unchanged, and finite gradients."""
