@@ -15,7 +15,8 @@ many starts. It was measured against optax's L-BFGS and Adam on the same problem
 (``solver="lbfgs"`` / ``"adam"``).
 
 Multi-start: ``starts`` starts (the first at each unknown's ``start`` or the middle of its bounds,
-the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept.
+the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept. Where fewer than
+two starts reach the best fit, or its chi^2 is improbable, more rounds of starts follow (``max_starts``).
 ``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
 
 The package: ``problem`` (unknowns, evidence, the residual vector), ``solvers`` (Levenberg-Marquardt, optax),

@@ -23,7 +23,7 @@ from ks_jax.model.types import OK, status_text
 
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
-from .rows import best_start, rows_per_call, run_rows, stack, stick_thresholds
+from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .uncertainty import analyse, default_rtol
@@ -168,7 +168,7 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     keys = _keys(evidence)
     cost_starts = row["cost_starts"]
     best_cost = float(row["cost"])
-    at_best = int(np.sum(np.isfinite(cost_starts) & (cost_starts <= best_cost + 1e-6 * max(best_cost, 1.0) + 1e-9)))
+    at_best = count_at_best(cost_starts)
     notes = []
     res = row["residuals"][:m]
     status = status_text(row["status"])
@@ -315,7 +315,8 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
-                progress: bool = False, chunk: int = 250, dtype=None, devices=None) -> FitResult:
+                progress: bool = False, chunk: int = 250, dtype=None, devices=None,
+                max_starts: int | None = None) -> FitResult:
     """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
@@ -324,7 +325,9 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     {"quantity", "value", "sigma"} as in case files or of ``Evidence`` (result units); default:
     the case file's ``evidence``. starts: multi-start count (the first at the given starts or
     the middle of the bounds, the others a Latin hypercube within the bounds (2% margins; normal
-    draws about the first start where a bound is missing), seeded by ``seed``).
+    draws about the first start where a bound is missing), seeded by ``seed``); where the best fit is not
+    reached by two starts or more, or its chi^2 is above its distribution's 99% quantile, another ``starts``
+    are drawn, and so on up to ``max_starts`` in all (default 8 x ``starts``; ``max_starts=starts``: one round).
     monte_carlo: number of refits with the evidence perturbed by its sigmas (0: none); their
     5/50/95 percentiles go to ``result.monte_carlo``. smoothing: the engine's smooth friction
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
@@ -337,13 +340,43 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     return reconstruct_batch([case], None if unknowns is None else [unknowns],
                              None if evidence is None else [evidence], starts=starts, seed=seed,
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
-                             rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices)[0]
+                             rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices,
+                             max_starts=max_starts)[0]
+
+
+MORE_STARTS = 8  # by default a fit takes up to this many rounds of ``starts`` starts (``_settled``)
+AGREE = 2  # starts that must reach the best fit before a fit takes no more starts
+
+
+def _settled(rows, problem, arrays) -> bool:
+    """Whether a case's starts so far (``rows``: the solver's outputs, (starts, ...)) found a fit it can keep:
+    the best cost reached by ``AGREE`` starts or more, with a chi^2 within its distribution's 99% quantile (the
+    evidence's count plus the priors' less the unknowns' degrees of freedom, at least 1). A fit that no start can
+    evaluate is settled: more starts would not help it."""
+    cost = rows["cost"]
+    if not np.isfinite(cost).any():
+        return True
+    dof = len(problem.evidence) + int(np.sum(arrays["pw"] > 0)) - len(problem.unknowns)
+    chi2 = 2.0 * float(np.min(cost[np.isfinite(cost)]))
+    return count_at_best(cost) >= AGREE and chi2 <= chi2_quantile(max(dof, 1), CHI2_Z)
+
+
+MORE_BLOCKS = (1, 8, 64)  # cases per call of a further round of starts: a few row counts, a program each
+
+
+def _more_block(cases: int, todo: int, starts: int) -> int:
+    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
+    counts (``MORE_BLOCKS`` cases, at most ``cases``) that holds them all, else the largest. A call's
+    vmapped solver runs every row until its slowest converges, so a round of a few cases is not padded to
+    hundreds of rows; fixed counts keep the compiled programs to a few."""
+    sizes = sorted({min(c, cases) for c in MORE_BLOCKS})
+    return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
-                      dtype=None, devices=None) -> list[FitResult]:
+                      dtype=None, devices=None, max_starts: int | None = None) -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
@@ -392,21 +425,34 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
-    best = [best_start(out["cost"][i], out["converged"][i]) for i in range(len(cases))]
+    out = [{k: v[i] for k, v in out.items()} for i in range(len(cases))]  # per case: (starts, ...)
+    limit = MORE_STARTS * starts if max_starts is None else max(int(max_starts), starts)
+    while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
+        todo = [i for i, o in enumerate(out) if len(o["cost"]) + starts <= limit and not _settled(o, problem, arrays[i])]
+        if not todo:
+            break
+        z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
+                                arrays[i]["hi"]) for i in todo])
+        more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
+                        *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,
+                        dtype, starts, _more_block(len(cases), len(todo), starts), devices)
+        for j, i in enumerate(todo):
+            out[i] = {k: np.concatenate([v, more[k][j]]) for k, v in out[i].items()}
+    best = [best_start(o["cost"], o["converged"]) for o in out]
     threshold = np.full(len(cases), np.nan)
     # the friction at which a sliding best fit would stick, for all those cases in one call
-    sliding = [i for i, b in enumerate(best) if "contact.friction" in problem.unknowns and out["status"][i, b] == OK
-               and bool(out["sliding"][i, b])]
+    sliding = [i for i, b in enumerate(best) if "contact.friction" in problem.unknowns and out[i]["status"][b] == OK
+               and bool(out[i]["sliding"][b])]
     if sliding:
         threshold[sliding] = stick_thresholds(problem, stack([arrays[i]["inputs"] for i in sliding]),
-                                              np.stack([out["x"][i, best[i]] for i in sliding]), smoothing, dtype)
+                                              np.stack([out[i]["x"][best[i]] for i in sliding]), smoothing, dtype)
     results = []
     for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
-        if not np.isfinite(out["cost"][i]).any():  # no start could even be evaluated
-            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, starts))
+        if not np.isfinite(out[i]["cost"]).any():  # no start could even be evaluated
+            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, len(out[i]["cost"])))
             continue
-        row = {k: v[i, best[i]] for k, v in out.items()}
-        row.update(cost_starts=out["cost"][i], converged_starts=out["converged"][i], stalled_starts=out["stalled"][i],
+        row = {k: v[best[i]] for k, v in out[i].items()}
+        row.update(cost_starts=out[i]["cost"], converged_starts=out[i]["converged"], stalled_starts=out[i]["stalled"],
                    stick_threshold=threshold[i])
         r = _result(case, u, e, problem, row, a, rtol)
         if monte_carlo:

@@ -89,6 +89,19 @@ def best_start(cost, converged):
     return int(np.flatnonzero(pick)[np.argmin(cost[pick])]) if pick.any() else int(np.argmin(cost))
 
 
+AGREE_COST = 1e-6  # starts whose cost is within this fraction of the best (or 1e-9 absolute) reached the best fit
+
+
+def count_at_best(cost) -> int:
+    """How many starts (costs (S,)) reached the best cost, to ``AGREE_COST``."""
+    cost = np.asarray(cost, np.float64)
+    finite = np.isfinite(cost)
+    if not finite.any():
+        return 0
+    best = cost[finite].min()
+    return int(np.sum(finite & (cost <= best + AGREE_COST * max(best, 1.0) + 1e-9)))
+
+
 def stack(trees):
     return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
 

@@ -28,7 +28,12 @@ def add_arguments(parser) -> None:
     """The arguments of ``ks-jax fit``."""
     parser.add_argument("file", help="case file (JSON or TOML) with 'unknowns' and 'evidence'")
     parser.add_argument("--json", action="store_true", help="print the result as JSON (SI units)")
-    parser.add_argument("--starts", type=int, default=8, help="multi-start count (default 8)")
+    parser.add_argument("--starts", type=int, default=8,
+                        help="starts per round (default 8): more rounds follow until two starts reach the best fit "
+                             "and its chi^2 is probable, up to --max-starts")
+    parser.add_argument("--max-starts", type=int, default=None, metavar="N",
+                        help="starts in all, at most (default 8 x --starts; --max-starts equal to --starts: one "
+                             "round)")
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
                         help="refit N copies of the evidence perturbed by its sigmas; report 5/50/95 percentiles")
     parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts and Monte Carlo")
@@ -49,6 +54,8 @@ def run(args) -> int:
     cases = load_cases(args.file)
     if args.starts < 1:
         raise CaseError(f"--starts {args.starts}: need at least one start")
+    if args.max_starts is not None and args.max_starts < args.starts:
+        raise CaseError(f"--max-starts {args.max_starts}: must be at least --starts ({args.starts})")
     if args.monte_carlo < 0:
         raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
     results, failed = [], {}
@@ -61,7 +68,8 @@ def run(args) -> int:
                     raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
                                     "'evidence', docs/fit.md)")
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
-                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0))
+                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0,
+                                       max_starts=args.max_starts))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
                 raise
