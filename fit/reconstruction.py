@@ -22,6 +22,8 @@ from ks_jax.limits import check_memory
 from ks_jax.model.types import OK, status_text
 
 from .monte_carlo import linearisation_notes, refit_perturbed
+from .posterior import Posterior
+from .posterior import sample as sample_posterior
 from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
 from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
@@ -70,6 +72,7 @@ class FitResult:
     evidence_kinds: list = field(default_factory=list, repr=False)
     monte_carlo: dict | None = None
     notes: list = field(default_factory=list)
+    posterior: Posterior | None = None
 
     @property
     def chi2(self) -> float:
@@ -101,6 +104,8 @@ class FitResult:
             "starts": {"total": self.starts, "converged": self.starts_converged, "at_best": self.starts_at_best},
             "notes": list(self.notes),
         }
+        if self.posterior is not None:
+            out["posterior"] = self.posterior.to_dict()
         if self.monte_carlo is not None:
             mc = self.monte_carlo
             out["monte_carlo"] = {
@@ -316,7 +321,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None, devices=None,
-                max_starts: int | None = None) -> FitResult:
+                max_starts: int | None = None, posterior: int = 0, chains: int = 4) -> FitResult:
     """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
@@ -329,7 +334,9 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     reached by two starts or more, or its chi^2 is above its distribution's 99% quantile, another ``starts``
     are drawn, and so on up to ``max_starts`` in all (default 8 x ``starts``; ``max_starts=starts``: one round).
     monte_carlo: number of refits with the evidence perturbed by its sigmas (0: none); their
-    5/50/95 percentiles go to ``result.monte_carlo``. smoothing: the engine's smooth friction
+    5/50/95 percentiles go to ``result.monte_carlo``. posterior: NUTS draws per chain from the posterior of
+    the unknowns (0: none), ``chains`` chains started at the estimate, after as many adaptation steps
+    (``fit.posterior``; the ``posterior`` extra): ``result.posterior``. smoothing: the engine's smooth friction
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
     "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
@@ -341,7 +348,7 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
                              None if evidence is None else [evidence], starts=starts, seed=seed,
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
                              rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices,
-                             max_starts=max_starts)[0]
+                             max_starts=max_starts, posterior=posterior, chains=chains)[0]
 
 
 MORE_STARTS = 8  # by default a fit takes up to this many rounds of ``starts`` starts (``_settled``)
@@ -376,7 +383,8 @@ def _more_block(cases: int, todo: int, starts: int) -> int:
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
-                      dtype=None, devices=None, max_starts: int | None = None) -> list[FitResult]:
+                      dtype=None, devices=None, max_starts: int | None = None, posterior: int = 0,
+                      chains: int = 4) -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
@@ -391,6 +399,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
     if starts < 1:
         raise ValueError(f"starts = {starts}: need at least one start")
+    if posterior < 0 or chains < 1:
+        raise ValueError(f"posterior = {posterior}, chains = {chains}: draws must be >= 0 and chains >= 1")
     cases = list(cases)
     if not cases:
         return []
@@ -455,6 +465,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         row.update(cost_starts=out[i]["cost"], converged_starts=out[i]["converged"], stalled_starts=out[i]["stalled"],
                    stick_threshold=threshold[i])
         r = _result(case, u, e, problem, row, a, rtol)
+        if posterior:
+            r.posterior = sample_posterior(problem, a, row["z"], draws=int(posterior), chains=int(chains), seed=seed,
+                                           smoothing=smoothing, dtype=dtype, devices=devices, offset=a["x_offset"])
         if monte_carlo:
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
                                          smoothing, dtype, progress, chunk, block, devices)

@@ -33,6 +33,16 @@ def text_report(result) -> str:
                 continue
             p = [mc["percentiles"][q][u.path] for q in ("5", "50", "95")]
             lines.append(f"  {u.path:<{width}} " + " / ".join(fmt(v, kind) for v in p))
+    if result.posterior is not None:
+        post = result.posterior
+        lines += ["", f"Posterior (NUTS, {post.chains} chains x {post.draws} draws after {post.warmup} adaptation "
+                      f"steps; {post.divergences} divergent): mean +/- std; 2.5% / 50% / 97.5%; R-hat, ESS"]
+        for u in result.unknowns:
+            kind, s = input_kind(u.path), post.summary[u.path]
+            lines.append(f"  {u.path:<{width}} {fmt(s['mean'], kind)} +/- {fmt(s['std'], kind)}; "
+                         + " / ".join(fmt(s[q], kind) for q in ("q025", "q50", "q975"))
+                         + f"; R-hat {s['rhat']:.3f}, ESS {s['ess']:.0f}")
+        lines += [f"  warning: {w}" for w in post.warnings]
     lines += ["", "Evidence (fitted vs measured, residual in sigmas):"]
     ew = max(len(k) for k in result.residuals) + 2
     for e, kind, (key, res) in zip(result.evidence, result.evidence_kinds, result.residuals.items()):

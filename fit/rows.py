@@ -19,6 +19,16 @@ from .solvers import SOLVERS
 Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
 
 
+def whitened(problem: Problem, z, d, smoothing):
+    """The whitened residuals (m + n,) at the unconstrained unknowns z (n,): the evidence's deviations in sigmas
+    (angles wrapped), then the priors' (0 where none); and (predicted evidence (m,), the exchange's flags).
+    ``d``: one row's "inputs", "values", "sigmas", "lo", "hi", "pm" (prior means), "pw" (1 / prior sigmas)."""
+    x = to_x(z, d["lo"], d["hi"])
+    pred, flags = predict(problem, d["inputs"], x, smoothing)
+    dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
+    return jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]]), (pred, flags)
+
+
 @partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
 def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
               z0, smoothing):
@@ -32,11 +42,7 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     nothing collides, not because it reached a fit."""
 
     def fun(z, d):
-        x = to_x(z, d["lo"], d["hi"])
-        pred, flags = predict(problem, d["inputs"], x, smoothing)
-        dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
-        r = jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]])
-        return r, (pred, flags)
+        return whitened(problem, z, d, smoothing)
 
     data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
             "pw": prior_weight}

@@ -36,7 +36,12 @@ def add_arguments(parser) -> None:
                              "round)")
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
                         help="refit N copies of the evidence perturbed by its sigmas; report 5/50/95 percentiles")
-    parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts and Monte Carlo")
+    parser.add_argument("--posterior", type=int, default=0, metavar="N",
+                        help="draw N samples per chain of the unknowns' posterior by NUTS, after as many adaptation "
+                             "steps (the 'posterior' extra); report mean, std, quantiles, R-hat and ESS")
+    parser.add_argument("--chains", type=int, default=4, help="NUTS chains for --posterior (default 4)")
+    parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts, Monte Carlo and "
+                                                                       "the posterior")
     parser.add_argument("--smoothing", type=smoothing_option, default=1e-3,
                         help="smooth friction cone tau (> 0 keeps the fit differentiable; default 1e-3)")
     parser.add_argument("--solver", choices=("lm", "lbfgs", "adam"), default="lm",
@@ -56,6 +61,8 @@ def run(args) -> int:
         raise CaseError(f"--starts {args.starts}: need at least one start")
     if args.max_starts is not None and args.max_starts < args.starts:
         raise CaseError(f"--max-starts {args.max_starts}: must be at least --starts ({args.starts})")
+    if args.posterior < 0 or args.chains < 1:
+        raise CaseError(f"--posterior {args.posterior} --chains {args.chains}: draws must be >= 0 and chains >= 1")
     if args.monte_carlo < 0:
         raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
     results, failed = [], {}
@@ -69,7 +76,7 @@ def run(args) -> int:
                                     "'evidence', docs/fit.md)")
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
                                        smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0,
-                                       max_starts=args.max_starts))
+                                       max_starts=args.max_starts, posterior=args.posterior, chains=args.chains))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
                 raise

@@ -1,0 +1,168 @@
+"""The posterior of a reconstruction's unknowns by NUTS (docs/fit.md, "Posterior"; ``reconstruct(posterior=N)``,
+``ks-jax fit --posterior N``).
+
+The density, in the fit's unconstrained coordinates z (``problem.to_x``): the evidence's Gaussian likelihood
+through the smooth engine, exp(-|r|^2 / 2) with r the whitened residuals of the fit (evidence in sigmas, then
+the Gaussian priors where given), uniform priors within the bounds, and the log-Jacobian of the bound transform,
+so that the draws, mapped back to x, follow the posterior in the physical unknowns.
+
+NUTS is BlackJAX's (the ``posterior`` extra): a library of samplers over a log-density that the caller writes,
+which is what the fit already has; its kernels are pure functions that jit and vmap, so the chains run side by
+side in one compiled program (on several devices, split among them), each with its own window adaptation of
+step size and diagonal mass matrix. NumPyro's NUTS would need the density rewritten as a model of sample sites.
+
+Each chain starts at the fit's estimate, moved by a small random step (a tenth of a unit in z) so that the
+chains' agreement (R-hat) means something. Reported per unknown (SI): mean, std, the 2.5, 16, 50, 84 and 97.5%
+quantiles, the rank-normalized split R-hat and the effective sample size (BlackJAX's diagnostics), and the
+divergent transitions of all chains; a warning where R-hat exceeds 1.01, the effective sample size is below
+100 per chain, or any transition diverged.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ks_jax.backend import row_placement
+from ks_jax.compilation import quick_jit
+
+from .problem import Problem, to_x
+from .rows import whitened
+
+QUANTILES = {"q025": 2.5, "q16": 16.0, "q50": 50.0, "q84": 84.0, "q975": 97.5}
+RHAT_LIMIT = 1.01  # above: the chains disagree
+ESS_PER_CHAIN = 100  # below this many effective draws per chain: too few for the tails' quantiles
+START_JITTER = 0.1  # the chains' starts about the estimate, in z
+MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
+
+
+def _blackjax():
+    """BlackJAX, imported when a posterior is first drawn, not with ``fit``: importing it starts JAX's backend,
+    which a program of several processes must not have started before ``jax.distributed.initialize``
+    (docs/devices.md). ImportError naming the extra where it is not installed."""
+    try:
+        return importlib.import_module("blackjax")
+    except ImportError as err:
+        raise ImportError(MISSING) from err
+
+
+@dataclass
+class Posterior:
+    """NUTS draws of a fit's unknowns. ``samples``: (chains, draws, n) SI, columns in the order of ``paths``;
+    ``summary``: path -> {"mean", "std", "q025", "q16", "q50", "q84", "q975", "rhat", "ess"} (SI);
+    ``divergences``: divergent transitions, all chains; ``warnings``: what makes the draws doubtful."""
+
+    paths: list
+    chains: int
+    draws: int
+    warmup: int
+    seed: int
+    samples: np.ndarray = field(repr=False)
+    summary: dict
+    divergences: int
+    step_size: list
+    warnings: list
+
+    def to_dict(self) -> dict:
+        """JSON-ready: per unknown its summary (SI; a non-finite value as null), and the run's settings."""
+        num = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
+        return {"chains": self.chains, "draws": self.draws, "warmup": self.warmup, "seed": self.seed,
+                "divergences": self.divergences, "warnings": list(self.warnings),
+                "unknowns": {p: {k: num(v) for k, v in s.items()} for p, s in self.summary.items()}}
+
+
+def log_density(problem: Problem, z, d, smoothing):
+    """The posterior's log-density (up to a constant) at the unconstrained unknowns z (n,) of one row ``d``
+    (``rows.whitened``): -|r|^2 / 2 plus log |dx/dz|; -inf where it is not finite (no exchange can be
+    computed there)."""
+    r, _ = whitened(problem, z, d, smoothing)
+    dxdz = jax.jvp(lambda q: to_x(q, d["lo"], d["hi"]), (z,), (jnp.ones_like(z),))[1]
+    value = -0.5 * jnp.sum(r * r) + jnp.sum(jnp.log(dxdz))
+    return jnp.where(jnp.isfinite(value), value, -jnp.inf)
+
+
+@partial(quick_jit, static_argnames=("problem", "draws", "warmup"))
+def _chains(problem: Problem, d, smoothing, keys, z0, draws: int, warmup: int):
+    """Every chain (keys (C,), starts z0 (C, n)) adapted for ``warmup`` steps, then ``draws`` NUTS draws: the
+    draws (C, draws, n) in z, their divergences (C, draws) and each chain's step size (C,)."""
+    blackjax = _blackjax()
+    density = partial(log_density, problem, d=d, smoothing=smoothing)
+
+    def chain(key, start):
+        adapt_key, draw_key = jax.random.split(key)
+        (state, parameters), _ = blackjax.window_adaptation(blackjax.nuts, density).run(adapt_key, start, warmup)
+        kernel = blackjax.nuts(density, **parameters)
+
+        def step(state, key):
+            state, info = kernel.step(key, state)
+            return state, (state.position, info.is_divergent)
+
+        _, (zs, divergent) = jax.lax.scan(step, state, jax.random.split(draw_key, draws))
+        return zs, divergent, parameters["step_size"]
+
+    return jax.vmap(chain)(keys, z0)
+
+
+def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, warmup: int | None = None,
+           seed: int = 0, smoothing: float = 1e-3, dtype=None, devices=None, offset=None) -> Posterior:
+    """``draws`` NUTS draws per chain from the posterior of one fit's unknowns (the module's docstring).
+
+    row: the fit's arrays of one case ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw"); z_best (n,): its
+    estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
+    this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
+    added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``)."""
+    _blackjax()
+    if draws < 1 or chains < 1:
+        raise ValueError(f"posterior: draws = {draws}, chains = {chains}: need at least one of each")
+    warmup = draws if warmup is None else int(warmup)
+    dtype = dtype or jnp.result_type(float)
+    devices = tuple(jax.local_devices() if devices is None else devices)
+    rng = np.random.default_rng(seed)
+    n = len(problem.unknowns)
+    z0 = np.asarray(z_best, np.float64)[None] + START_JITTER * rng.standard_normal((chains, n))
+    keys = jax.random.split(jax.random.key(seed), chains)
+    d = {k: jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), row[k])
+         for k in ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw")}
+    z0 = jnp.asarray(z0, dtype)
+    if len(devices) > 1 and chains % len(devices) == 0:
+        place = row_placement(devices)
+        keys, z0 = jax.device_put(keys, place.rows), jax.device_put(z0, place.rows)
+    zs, divergent, step_size = _chains(problem, d, jnp.asarray(smoothing, dtype), keys, z0, draws, warmup)
+    x = np.asarray(jax.vmap(jax.vmap(lambda z: to_x(z, d["lo"], d["hi"])))(zs), np.float64)
+    x = x + (0.0 if offset is None else np.asarray(offset, np.float64))
+    return summarize(list(problem.unknowns), x, int(np.sum(np.asarray(divergent))), warmup, seed,
+                     [float(s) for s in np.asarray(step_size)])
+
+
+def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> Posterior:
+    """The ``Posterior`` of draws ``x`` (chains, draws, n), SI: moments, quantiles, R-hat and effective sample
+    size per unknown, and the warnings they call for."""
+    chains, draws, _ = x.shape
+    diagnostics = importlib.import_module("blackjax.diagnostics")
+    rhat = [float(diagnostics.potential_scale_reduction(x[:, :, j])) if chains > 1 else np.nan
+            for j in range(len(paths))]
+    ess = [float(diagnostics.effective_sample_size(x[:, :, j])) for j in range(len(paths))]
+    flat = x.reshape(chains * draws, -1)
+    q = {k: np.percentile(flat, v, axis=0) for k, v in QUANTILES.items()}
+    summary = {p: {"mean": float(flat[:, j].mean()), "std": float(flat[:, j].std(ddof=1)) if len(flat) > 1 else 0.0,
+                   **{k: float(v[j]) for k, v in q.items()}, "rhat": float(rhat[j]), "ess": float(ess[j])}
+               for j, p in enumerate(paths)}
+    warnings = []
+    poor = [f"{p} ({s['rhat']:.3f})" for p, s in summary.items() if s["rhat"] > RHAT_LIMIT]
+    if poor:
+        warnings.append(f"R-hat above {RHAT_LIMIT}: {', '.join(poor)}: the chains disagree (several modes, or "
+                        "too few draws); draw more, and read the quantiles as doubtful")
+    few = [f"{p} ({s['ess']:.0f})" for p, s in summary.items() if s["ess"] < ESS_PER_CHAIN * chains]
+    if few:
+        warnings.append(f"effective sample size below {ESS_PER_CHAIN} per chain: {', '.join(few)}: the 2.5% and "
+                        "97.5% quantiles are rough; draw more")
+    if divergences:
+        warnings.append(f"{divergences} divergent transition{'s' * (divergences != 1)} of {chains * draws}: the "
+                        "sampler could not follow the density everywhere (a sharp stick/slide edge, or a bound); "
+                        "the draws may miss part of the posterior")
+    return Posterior(list(paths), chains, draws, warmup, seed, x, summary, divergences, list(step_size), warnings)

@@ -1,0 +1,106 @@
+"""The posterior by NUTS (``fit.reconstruct(posterior=N)``, ``fit.posterior``) against the Laplace approximation
+where the posterior is Gaussian, and against the half-normal that a bound makes of it where the estimate sits on
+the bound. Both cases share one problem (the seed chapter's rear impact: the Kia's speed and restitution from
+both delta-Vs and both speeds after, noise-free), so that the sampler compiles once."""
+
+import dataclasses
+import math
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import fit  # noqa: E402
+from fit.report import text_report  # noqa: E402
+from ks_jax.cli import main  # noqa: E402
+from ks_jax.case import get_output, load_case, set_input  # noqa: E402
+from ks_jax.solve import solve  # noqa: E402
+from samples import CASES  # noqa: E402
+
+EVIDENCE = [("vehicles[0].delta_v_magnitude", 0.15), ("vehicles[1].delta_v_magnitude", 0.15),
+            ("vehicles[0].speed_after", 0.15), ("vehicles[1].speed_after", 0.15)]
+DRAWS = 500
+
+
+def _fit(restitution, seed=3):
+    """The seed case with ``restitution``, its evidence the engine's own values, refitted with the Kia's speed
+    and restitution unknown, and 4 chains x ``DRAWS`` draws of their posterior."""
+    case = load_case(CASES / "fit_seed_001.json")
+    case = dataclasses.replace(case, inputs=set_input(case.inputs, "contact.restitution", restitution))
+    result = solve(case, smoothing=1e-3).result
+    evidence = [fit.Evidence(p, float(get_output(result, p)), s) for p, s in EVIDENCE]
+    unknowns = [fit.Unknown("vehicles[1].speed", 0.0, 30.0), fit.Unknown("contact.restitution", 0.0, 0.6)]
+    return fit.reconstruct(case, unknowns, evidence, posterior=DRAWS, seed=seed)
+
+
+@pytest.fixture(scope="module")
+def gaussian():
+    return _fit(0.3)
+
+
+@pytest.fixture(scope="module")
+def at_bound():
+    return _fit(0.0)
+
+
+def test_a_well_determined_posterior_is_the_laplace_gaussian(gaussian):
+    """Restitution 0.3, far from its bounds [0, 0.6]: the posterior mean is the estimate and the posterior std the
+    Laplace standard error, within their Monte Carlo errors (std / sqrt(ESS), std / sqrt(2 ESS)); the 16-84% span
+    is 2 standard errors; the chains agree (R-hat < 1.01) and nothing diverged."""
+    r = gaussian
+    post = r.posterior
+    assert post.chains == 4 and post.draws == DRAWS and post.samples.shape == (4, DRAWS, 2)
+    assert post.divergences == 0 and post.warnings == []
+    for path, s in post.summary.items():
+        se = r.std[path]
+        assert s["rhat"] < 1.01 and s["ess"] > 400
+        assert abs(s["mean"] - r.estimate[path]) < 4 * s["std"] / math.sqrt(s["ess"]), path
+        assert abs(s["std"] - se) < 4 * se / math.sqrt(2 * s["ess"]), path
+        assert abs((s["q84"] - s["q16"]) / (2 * se) - 1) < 0.1, path
+    d = r.to_dict()["posterior"]
+    assert d["divergences"] == 0 and set(d["unknowns"]["contact.restitution"]) == {
+        "mean", "std", "q025", "q16", "q50", "q84", "q975", "rhat", "ess"}
+
+
+def test_restitution_on_its_bound_has_the_half_normal_posterior_that_laplace_misses(at_bound):
+    """Restitution 0 (the truth) on its lower bound: the likelihood is a Gaussian in restitution of width sigma
+    (the Laplace standard error, which ignores the bound), and the uniform prior cuts it at 0. Its posterior is
+    then half-normal: mean sigma sqrt(2/pi), median 0.674 sigma, 97.5% quantile 2.241 sigma, std
+    sigma sqrt(1 - 2/pi), where Laplace's interval would be 0 +/- 1.96 sigma, half of it below the bound. Each
+    within its Monte Carlo error (a quantile's: sqrt(p (1 - p) / ESS) over the density there)."""
+    r = at_bound
+    sigma = r.std["contact.restitution"]
+    s = r.posterior.summary["contact.restitution"]
+    assert r.estimate["contact.restitution"] < 1e-9 and any("contact.restitution" in b for b in r.at_bound)
+    draws = r.posterior.samples[:, :, 1]
+    assert np.all(draws >= 0.0) and s["rhat"] < 1.01 and r.posterior.divergences == 0
+    ess = s["ess"]
+    assert abs(s["mean"] - sigma * math.sqrt(2 / math.pi)) < 4 * s["std"] / math.sqrt(ess)
+    assert abs(s["std"] - sigma * math.sqrt(1 - 2 / math.pi)) < 4 * s["std"] / math.sqrt(2 * ess)
+    for key, p, z in (("q50", 0.5, 0.6745), ("q975", 0.975, 2.2414)):
+        density = 2 * math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) / sigma  # the half-normal's, at its quantile
+        assert abs(s[key] - z * sigma) < 4 * math.sqrt(p * (1 - p) / ess) / density, key
+    assert s["q025"] > 0 > r.estimate["contact.restitution"] - 1.96 * sigma  # Laplace's interval crosses the bound
+
+
+def test_a_seeded_posterior_draws_the_same_again_and_another_seed_does_not(gaussian):
+    again = _fit(0.3)
+    np.testing.assert_array_equal(again.posterior.samples, gaussian.posterior.samples)
+    other = _fit(0.3, seed=4)
+    assert not np.array_equal(other.posterior.samples, gaussian.posterior.samples)
+
+
+def test_the_panel_shows_the_posterior_and_bad_draws_are_refused(gaussian, capsys):
+    """The panel's posterior rows give each unknown's mean, quantiles, R-hat and ESS in the trade's units; ``ks-jax
+    fit --posterior -1`` and ``--chains 0`` are refused before any fit, naming the option and the rule."""
+    text = text_report(gaussian)
+    (row,) = [line for line in text.splitlines() if line.strip().startswith("vehicles[1].speed") and "R-hat" in line]
+    s = gaussian.posterior.summary["vehicles[1].speed"]
+    assert "mph" in row and f"R-hat {s['rhat']:.3f}" in row and f"ESS {s['ess']:.0f}" in row
+    assert "Posterior (NUTS, 4 chains x 500 draws after 500 adaptation steps; 0 divergent)" in text
+    for option in (["--posterior", "-1"], ["--posterior", "10", "--chains", "0"]):
+        assert main(["fit", str(CASES / "fit_seed_001.json"), *option]) == 2
+        assert "draws must be >= 0 and chains >= 1" in capsys.readouterr().err
