@@ -20,6 +20,7 @@ divergent transitions of all chains; a warning where R-hat exceeds 1.01, the eff
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass, field
 from functools import partial
@@ -117,6 +118,8 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
     added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``)."""
     _blackjax()
+    if problem.motion is not None:  # NUTS takes reverse-mode gradients: the motion's reverse-ready scan
+        problem = dataclasses.replace(problem, motion=dataclasses.replace(problem.motion, reverse=True))
     if draws < 1 or chains < 1:
         raise ValueError(f"posterior: draws = {draws}, chains = {chains}: need at least one of each")
     warmup = draws if warmup is None else int(warmup)

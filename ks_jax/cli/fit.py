@@ -12,14 +12,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
+from pathlib import Path
+
+import numpy as np
 
 from fit import reconstruct
 from fit.problem import Problem, apply_unknowns
 from fit.report import text_report
+from fit.uncertainty import DISPLAY
 
-from ..case import input_ties, load_cases
+from ..case import input_kind, input_ties, load_cases
 from ..case.errors import CaseError
-from ..plot import check_picture_path, save_top_view
+from ..plot import check_picture_path, save_corner, save_top_view
 from ..solve import solve
 from .options import seed_option, smoothing_option
 
@@ -48,7 +52,8 @@ def add_arguments(parser) -> None:
                         help="lm: Levenberg-Marquardt (default); lbfgs, adam: optax")
     parser.add_argument("--plot", metavar="PNG",
                         help="write the top view of the case solved at the estimate (.png, .pdf or .svg), with the "
-                             "measured rest positions marked (matplotlib)")
+                             "measured rest positions marked (matplotlib); with --posterior also the posterior's "
+                             "corner plot, to PNG's name with '_posterior'")
 
 
 def run(args) -> int:
@@ -56,6 +61,8 @@ def run(args) -> int:
     estimate; 1 where one was not (each said on stderr); 2 for a file or an argument that is refused."""
     if args.plot:
         check_picture_path(args.plot)  # before fitting: a bad name loses no work
+        if args.posterior:
+            check_picture_path(posterior_path(args.plot))
     cases = load_cases(args.file)
     if args.starts < 1:
         raise CaseError(f"--starts {args.starts}: need at least one start")
@@ -107,9 +114,35 @@ def run(args) -> int:
                           evidence=[{e.path: e.value for e in r.evidence} for _, r in drawn],
                           sigma=[{e.path: e.sigma for e in r.evidence} for _, r in drawn])
             print(f"\ntop view at the estimate written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
+            sampled = [r for _, r in drawn if r.posterior is not None]
+            for k, r in enumerate(sampled):
+                path = posterior_path(args.plot, k if len(sampled) > 1 else None)
+                save_posterior(r, path)
+                print(f"posterior corner plot written to {path}", file=sys.stderr if args.json else sys.stdout)
         else:
             print(f"ks-jax: --plot {args.plot}: no case was fitted; nothing drawn", file=sys.stderr)
     return 1 if failed or unfinished else 0
+
+
+def posterior_path(plot, k=None) -> str:
+    """Where ``--plot FILE`` puts a posterior's corner plot: FILE_posterior (FILE_posterior_2 for the second
+    sampled case of a file), of FILE's type."""
+    p = Path(plot)
+    return str(p.with_name(f"{p.stem}_posterior{'' if k is None else f'_{k + 1}'}{p.suffix}"))
+
+
+def save_posterior(result, path):
+    """The corner plot of ``result``'s posterior draws in the trade's units, the Laplace estimate and covariance
+    over them (``ks_jax.plot.corner``)."""
+    paths = [u.path for u in result.unknowns]
+    units = [DISPLAY.get(input_kind(p), ("", 1.0, 1.0)) for p in paths]
+    scale = np.array([u[1] for u in units])
+    labels = [f"{p} [{u[0]}]" if u[0] else p for p, u in zip(paths, units)]
+    post = result.posterior
+    samples = post.samples.reshape(-1, len(paths)) / scale
+    estimate = np.array([result.estimate[p] for p in paths]) / scale
+    return save_corner(path, samples, labels, estimate, np.asarray(result.covariance) / np.outer(scale, scale),
+                       title=f"{result.case_name}: posterior ({post.chains} chains x {post.draws} draws) and Laplace")
 
 
 def case_at_estimate(case, result):

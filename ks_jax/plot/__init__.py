@@ -5,6 +5,7 @@ from pathlib import Path
 
 from ..case.errors import CaseError
 from ..files import check_output_file
+from .corner import corner, save_corner
 from .sweep_view import save_sweep_view, sweep_view
 from .top_view import save_top_view, top_view
 
@@ -24,4 +25,4 @@ def check_picture_path(path, option="--plot"):
     check_output_file(path, option)
 
 
-__all__ = ["PICTURE_TYPES", "check_picture_path", "save_sweep_view", "save_top_view", "sweep_view", "top_view"]
+__all__ = ["PICTURE_TYPES", "check_picture_path", "corner", "save_corner", "save_sweep_view", "save_top_view", "sweep_view", "top_view"]

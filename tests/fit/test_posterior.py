@@ -16,6 +16,7 @@ import pytest  # noqa: E402
 import fit  # noqa: E402
 from fit.report import text_report  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
+from ks_jax.cli.fit import posterior_path, save_posterior  # noqa: E402
 from ks_jax.case import get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
 from samples import CASES  # noqa: E402
@@ -104,3 +105,13 @@ def test_the_panel_shows_the_posterior_and_bad_draws_are_refused(gaussian, capsy
     for option in (["--posterior", "-1"], ["--posterior", "10", "--chains", "0"]):
         assert main(["fit", str(CASES / "fit_seed_001.json"), *option]) == 2
         assert "draws must be >= 0 and chains >= 1" in capsys.readouterr().err
+
+
+def test_the_corner_plot_is_drawn_in_the_trades_units_beside_the_top_view(gaussian, tmp_path):
+    """``ks-jax fit --posterior N --plot FILE`` writes the corner plot to FILE_posterior (of FILE's type): the
+    speed's axis in mph, restitution without a unit; the draws are the posterior's, divided by the unit."""
+    assert posterior_path(tmp_path / "case.png") == str(tmp_path / "case_posterior.png")
+    assert posterior_path("case.svg", 1) == "case_posterior_2.svg"
+    path = save_posterior(gaussian, tmp_path / "corner.svg")
+    text = path.read_text()
+    assert "vehicles[1].speed [mph]" in text and "contact.restitution" in text
