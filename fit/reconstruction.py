@@ -368,14 +368,15 @@ def _settled(rows, problem, arrays) -> bool:
     return count_at_best(cost) >= AGREE and chi2 <= chi2_quantile(max(dof, 1), CHI2_Z)
 
 
-MORE_BLOCKS = (1, 8, 64)  # cases per call of a further round of starts: a few row counts, a program each
+MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts: a few row counts, a program each
 
 
 def _more_block(cases: int, todo: int, starts: int) -> int:
     """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
     counts (``MORE_BLOCKS`` cases, at most ``cases``) that holds them all, else the largest. A call's
-    vmapped solver runs every row until its slowest converges, so a round of a few cases is not padded to
-    hundreds of rows; fixed counts keep the compiled programs to a few."""
+    vmapped solver runs every row until its slowest converges, so a round of a few cases of a large batch is
+    not padded to hundreds of rows; fixed counts keep the compiled programs to a few, and a batch of up to 8
+    cases (a single fit among them) runs its further rounds in the program of its first."""
     sizes = sorted({min(c, cases) for c in MORE_BLOCKS})
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 
