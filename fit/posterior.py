@@ -42,7 +42,7 @@ START_JITTER = 0.1  # the chains' starts about the estimate, in z
 MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
 
 
-def _blackjax():
+def sampler():
     """BlackJAX, imported when a posterior is first drawn, not with ``fit``: importing it starts JAX's backend,
     which a program of several processes must not have started before ``jax.distributed.initialize``
     (docs/devices.md). ImportError naming the extra where it is not installed."""
@@ -91,7 +91,7 @@ def log_density(problem: Problem, z, d, smoothing):
 def _chains(problem: Problem, d, smoothing, keys, z0, draws: int, warmup: int):
     """Every chain (keys (C,), starts z0 (C, n)) adapted for ``warmup`` steps, then ``draws`` NUTS draws: the
     draws (C, draws, n) in z, their divergences (C, draws) and each chain's step size (C,)."""
-    blackjax = _blackjax()
+    blackjax = sampler()
     density = partial(log_density, problem, d=d, smoothing=smoothing)
 
     def chain(key, start):
@@ -117,7 +117,7 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
     estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
     added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``)."""
-    _blackjax()
+    sampler()
     if problem.motion is not None:  # NUTS takes reverse-mode gradients: the motion's reverse-ready scan
         problem = dataclasses.replace(problem, motion=dataclasses.replace(problem.motion, reverse=True))
     if draws < 1 or chains < 1:

@@ -24,6 +24,7 @@ from ks_jax.model.types import OK, status_text
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
+from .posterior import sampler
 from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
 from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
@@ -402,6 +403,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         raise ValueError(f"starts = {starts}: need at least one start")
     if posterior < 0 or chains < 1:
         raise ValueError(f"posterior = {posterior}, chains = {chains}: draws must be >= 0 and chains >= 1")
+    if posterior:
+        sampler()  # ImportError naming the extra, before any fit
     cases = list(cases)
     if not cases:
         return []

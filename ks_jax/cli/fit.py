@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from fit import reconstruct
+from fit.posterior import sampler as posterior_sampler
 from fit.problem import Problem, apply_unknowns
 from fit.report import text_report
 from fit.uncertainty import DISPLAY
@@ -70,6 +71,11 @@ def run(args) -> int:
         raise CaseError(f"--max-starts {args.max_starts}: must be at least --starts ({args.starts})")
     if args.posterior < 0 or args.chains < 1:
         raise CaseError(f"--posterior {args.posterior} --chains {args.chains}: draws must be >= 0 and chains >= 1")
+    if args.posterior:
+        try:  # before fitting: a missing extra loses no work
+            posterior_sampler()
+        except ImportError as err:
+            raise CaseError(f"--posterior: {err}") from None
     if args.monte_carlo < 0:
         raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
     results, failed = [], {}

@@ -4,6 +4,7 @@ the bound. Both cases share one problem (the seed chapter's rear impact: the Kia
 both delta-Vs and both speeds after, noise-free), so that the sampler compiles once."""
 
 import dataclasses
+import importlib
 import math
 
 import jax
@@ -115,3 +116,22 @@ def test_the_corner_plot_is_drawn_in_the_trades_units_beside_the_top_view(gaussi
     path = save_posterior(gaussian, tmp_path / "corner.svg")
     text = path.read_text()
     assert "vehicles[1].speed [mph]" in text and "contact.restitution" in text
+
+
+def test_without_blackjax_the_posterior_is_refused_before_any_fit(monkeypatch, capsys):
+    """Where the 'posterior' extra is not installed, ``ks-jax fit --posterior`` exits 2 with a line naming the
+    extra, before fitting, and ``reconstruct(posterior=N)`` raises ImportError naming it."""
+    real = importlib.import_module
+
+    def missing(name, *args):
+        if name.startswith("blackjax"):
+            raise ImportError(f"No module named '{name}'")
+        return real(name, *args)
+
+    monkeypatch.setattr(importlib, "import_module", missing)
+    assert main(["fit", str(CASES / "fit_seed_001.json"), "--posterior", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "--posterior: the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'" in err
+    assert "Traceback" not in err
+    with pytest.raises(ImportError, match="posterior' extra"):
+        fit.reconstruct(load_case(CASES / "fit_seed_001.json"), posterior=10)
