@@ -24,6 +24,7 @@ import dataclasses
 import importlib
 from dataclasses import dataclass, field
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -39,6 +40,7 @@ QUANTILES = {"q025": 2.5, "q16": 16.0, "q50": 50.0, "q84": 84.0, "q975": 97.5}
 RHAT_LIMIT = 1.01  # above: the chains disagree
 ESS_PER_CHAIN = 100  # below this many effective draws per chain: too few for the tails' quantiles
 START_JITTER = 0.1  # the chains' starts about the estimate, in z
+TARGET_ACCEPTANCE = 0.8  # the warmup's aim for NUTS's mean acceptance (Stan's)
 MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
 
 
@@ -87,24 +89,103 @@ def log_density(problem: Problem, z, d, smoothing):
     return jnp.where(jnp.isfinite(value), value, -jnp.inf)
 
 
+_value_and_gradient = jax.jit(jax.value_and_grad(log_density, argnums=1), static_argnums=0)
+
+
+@partial(jax.custom_vjp, nondiff_argnums=(0,))
+def _density(problem: Problem, z, d, smoothing):
+    """``log_density`` for the sampler, whose gradient is one jitted function: NUTS takes it at several places
+    of its transition, and each would otherwise trace (and batch over the chains) the engine's reverse pass
+    anew; a jitted function is traced once per program."""
+    return _value_and_gradient(problem, z, d, smoothing)[0]
+
+
+def _density_fwd(problem, z, d, smoothing):
+    value, gradient = _value_and_gradient(problem, z, d, smoothing)
+    return value, (gradient, d, smoothing)
+
+
+def _density_bwd(problem, saved, cotangent):
+    gradient, d, smoothing = saved
+    return cotangent * gradient, jax.tree_util.tree_map(jnp.zeros_like, d), jnp.zeros_like(smoothing)
+
+
+_density.defvjp(_density_fwd, _density_bwd)
+
+
+class _Tuning(NamedTuple):
+    """One chain's adaptation (Stan's windows): the step size's dual averaging, the mass matrix's running
+    variance, and the step size and inverse mass matrix that its next transition uses."""
+
+    averaging: tuple
+    variance: tuple
+    step_size: jax.Array
+    inverse_mass: jax.Array
+
+
+def _tuned(blackjax, tuning: _Tuning, slow, window_end, last, position, acceptance) -> _Tuning:
+    """``tuning`` after one warmup transition (``acceptance``, now at ``position``), as Stan's window adaptation
+    has it: the step size follows the acceptance rate by dual averaging throughout; in a slow window the mass
+    matrix's variance gathers the positions, and at the window's end becomes the new inverse mass matrix while
+    the averaging restarts from its mean step size; after the ``last`` warmup transition the step size is the
+    averaging's mean."""
+    da_init, da_update, da_final = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)
+    _, mm_update, mm_final = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)
+    pick = lambda flag, a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(flag, u, v), a, b)  # noqa: E731
+    averaging = da_update(tuning.averaging, acceptance)
+    variance = pick(slow, mm_update(tuning.variance, position), tuning.variance)
+    closed = mm_final(variance)
+    variance = pick(window_end, closed, variance)
+    averaging = pick(window_end, da_init(da_final(averaging)), averaging)
+    inverse_mass = jnp.where(window_end, closed.inverse_mass_matrix, tuning.inverse_mass)
+    step_size = jnp.where(last, jnp.exp(averaging.log_step_size_avg), jnp.exp(averaging.log_step_size))
+    return _Tuning(averaging, variance, step_size, inverse_mass)
+
+
 @partial(quick_jit, static_argnames=("problem", "draws", "warmup"))
 def _chains(problem: Problem, d, smoothing, keys, z0, draws: int, warmup: int):
-    """Every chain (keys (C,), starts z0 (C, n)) adapted for ``warmup`` steps, then ``draws`` NUTS draws: the
-    draws (C, draws, n) in z, their divergences (C, draws) and each chain's step size (C,)."""
+    """``run_chains`` of one fit's posterior density, compiled: most of a posterior's first call."""
+    return run_chains(lambda z: _density(problem, z, d, smoothing), keys, z0, draws, warmup)
+
+
+def run_chains(density, keys, z0, draws: int, warmup: int):
+    """NUTS chains of ``density`` (z (n,) -> log-density), one per key (keys (C,), starts z0 (C, n)), each
+    adapted for ``warmup`` transitions by Stan's window adaptation, then ``draws`` draws: the draws
+    (C, draws, n), their divergences (C, draws) and each chain's step size (C,).
+
+    Each chain's adaptation and draws are one scan of one NUTS transition, its step size and mass matrix
+    carried along (fixed once the warmup ends), so that the transition, with the density's gradient inside,
+    is traced and compiled once. The draws are those of BlackJAX's ``window_adaptation`` run on the chain's
+    first key and a NUTS scan on its second."""
     blackjax = sampler()
-    density = partial(log_density, problem, d=d, smoothing=smoothing)
+    transition = blackjax.nuts.build_kernel()
+    da_init = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)[0]
+    mm_init = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)[0]
+    steps = warmup + draws
+    schedule = np.zeros((steps, 2), bool)
+    if warmup:  # (slow window?, a slow window's last step?) per warmup step; a constant of the program
+        with jax.ensure_compile_time_eval():
+            schedule[:warmup] = np.asarray(blackjax.adaptation.window_adaptation.build_schedule(warmup), bool)
+    flags = (jnp.asarray(schedule[:, 0]), jnp.asarray(schedule[:, 1]), jnp.arange(steps) == warmup - 1,
+             jnp.arange(steps) < warmup)
 
     def chain(key, start):
+        def step(carry, xs):
+            state, tuning = carry
+            key, slow, window_end, last, adapting = xs
+            state, info = transition(key, state, density, tuning.step_size, tuning.inverse_mass)
+            after = _tuned(blackjax, tuning, slow, window_end, last, state.position, info.acceptance_rate)
+            tuning = jax.tree_util.tree_map(lambda a, b: jnp.where(adapting, a, b), after, tuning)
+            return (state, tuning), (state.position, info.is_divergent)
+
+        variance = mm_init(start.shape[0])
+        tuning = _Tuning(da_init(jnp.asarray(1.0, start.dtype)), variance, jnp.asarray(1.0, start.dtype),
+                         variance.inverse_mass_matrix.astype(start.dtype))
         adapt_key, draw_key = jax.random.split(key)
-        (state, parameters), _ = blackjax.window_adaptation(blackjax.nuts, density).run(adapt_key, start, warmup)
-        kernel = blackjax.nuts(density, **parameters)
-
-        def step(state, key):
-            state, info = kernel.step(key, state)
-            return state, (state.position, info.is_divergent)
-
-        _, (zs, divergent) = jax.lax.scan(step, state, jax.random.split(draw_key, draws))
-        return zs, divergent, parameters["step_size"]
+        step_keys = jnp.concatenate([jax.random.split(adapt_key, warmup), jax.random.split(draw_key, draws)])
+        carry = (blackjax.nuts.init(start, density), tuning)
+        (_, tuning), (zs, divergent) = jax.lax.scan(step, carry, (step_keys, *flags))
+        return zs[warmup:], divergent[warmup:], tuning.step_size
 
     return jax.vmap(chain)(keys, z0)
 

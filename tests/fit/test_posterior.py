@@ -11,10 +11,12 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import fit  # noqa: E402
+from fit.posterior import run_chains  # noqa: E402
 from fit.report import text_report  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
 from ks_jax.cli.fit import posterior_path, save_posterior  # noqa: E402
@@ -86,6 +88,32 @@ def test_restitution_on_its_bound_has_the_half_normal_posterior_that_laplace_mis
         density = 2 * math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) / sigma  # the half-normal's, at its quantile
         assert abs(s[key] - z * sigma) < 4 * math.sqrt(p * (1 - p) / ess) / density, key
     assert s["q025"] > 0 > r.estimate["contact.restitution"] - 1.96 * sigma  # Laplace's interval crosses the bound
+
+
+def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_draw():
+    """``run_chains`` adapts and draws in one scan of one NUTS transition (so that it compiles once); run as
+    BlackJAX's own two steps (``window_adaptation(nuts, ...).run`` on a chain's first key, then a scan of
+    ``nuts`` at the adapted step size and mass matrix on its second), the same keys give the same draws and
+    step sizes, here on a correlated Gaussian whose scales differ by 1e4 (so that the mass matrix matters)."""
+    blackjax = pytest.importorskip("blackjax")
+    scale = np.sqrt([1.0, 100.0, 0.01])
+    precision = np.linalg.inv(np.array([[1.0, 0.8, 0.0], [0.8, 2.0, 0.3], [0.0, 0.3, 0.5]]) * np.outer(scale, scale))
+    density = lambda z: -0.5 * z @ precision @ z  # noqa: E731
+    keys, z0 = jax.random.split(jax.random.key(1), 2), jnp.array([[0.1, 2.0, 0.0], [0.3, -1.0, 0.01]])
+    warmup, draws = 150, 50
+
+    def blackjax_chain(key, start):
+        adapt_key, draw_key = jax.random.split(key)
+        (state, tuned), _ = blackjax.window_adaptation(blackjax.nuts, density).run(adapt_key, start, warmup)
+        kernel = blackjax.nuts(density, **tuned)
+        step = lambda state, k: (kernel.step(k, state)[0],) * 2  # noqa: E731
+        return jax.lax.scan(step, state, jax.random.split(draw_key, draws))[1].position, tuned["step_size"]
+
+    zs, divergent, step_size = jax.jit(run_chains, static_argnums=(0, 3, 4))(density, keys, z0, draws, warmup)
+    expected, expected_step = jax.jit(jax.vmap(blackjax_chain))(keys, z0)
+    assert zs.shape == (2, draws, 3) and divergent.shape == (2, draws)
+    np.testing.assert_allclose(step_size, expected_step, rtol=1e-12)
+    np.testing.assert_allclose(zs, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_a_seeded_posterior_draws_the_same_again_and_another_seed_does_not(gaussian):
