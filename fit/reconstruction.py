@@ -369,6 +369,31 @@ def _settled(rows, problem, arrays) -> bool:
     return count_at_best(cost) >= AGREE and chi2 <= chi2_quantile(max(dof, 1), CHI2_Z)
 
 
+SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction, in parts of the friction needed to stick
+
+
+def _slide_side(rows, problem, arrays, count: int = 0):
+    """Starts (count, n) in x on the slide side of a best fit that sticks: the best fit with the friction at
+    ``SLIDE_SIDE`` parts of what it needs to stick (the count's first of them, repeated where more are asked).
+    None where there is none to make: the best fit slides or has no exchange, friction is not an unknown or has
+    a prior, or the friction needed is at its lower bound.
+
+    A contact that sticks has one cost for every friction above the one it needs (a flat plateau), so the
+    starts that reach the plateau all agree on its cost, and the rounds of starts stop there. A sliding fit
+    just below the edge, which the evidence may prefer, is then reached only from the slide side."""
+    if "contact.friction" not in problem.unknowns or not np.isfinite(rows["cost"]).any():
+        return None
+    j = problem.unknowns.index("contact.friction")
+    b = best_start(rows["cost"], rows["converged"])
+    needed = float(abs(rows["stick_ratio"][b]))
+    if rows["status"][b] != OK or bool(rows["sliding"][b]) or arrays["pw"][j] > 0 or not needed > arrays["lo"][j]:
+        return None
+    x = np.repeat(np.asarray(rows["x"][b], np.float64)[None], max(count, 1), axis=0)
+    parts = np.resize(SLIDE_SIDE, max(count, 1))
+    x[:, j] = arrays["lo"][j] + parts * (needed - arrays["lo"][j])
+    return x[:count] if count else x
+
+
 MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts: a few row counts, a program each
 
 
@@ -441,12 +466,20 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
     out = [{k: v[i] for k, v in out.items()} for i in range(len(cases))]  # per case: (starts, ...)
     limit = MORE_STARTS * starts if max_starts is None else max(int(max_starts), starts)
+    probed = set()
     while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
-        todo = [i for i, o in enumerate(out) if len(o["cost"]) + starts <= limit and not _settled(o, problem, arrays[i])]
-        if not todo:
-            break
-        z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
-                                arrays[i]["hi"]) for i in todo])
+        room = [i for i, o in enumerate(out) if len(o["cost"]) + starts <= limit]
+        todo = [i for i in room if not _settled(out[i], problem, arrays[i])]
+        if todo:
+            z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
+                                    arrays[i]["hi"]) for i in todo])
+        else:  # settled: once per case whose best fit sticks, starts on the other side of its stick/slide edge
+            todo = [i for i in room if i not in probed and _slide_side(out[i], problem, arrays[i]) is not None]
+            if not todo:
+                break
+            probed.update(todo)
+            z_more = np.stack([to_z(_slide_side(out[i], problem, arrays[i], starts), arrays[i]["lo"], arrays[i]["hi"])
+                               for i in todo])
         more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
                         *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,
                         dtype, starts, _more_block(len(cases), len(todo), starts), devices)
