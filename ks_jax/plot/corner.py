@@ -48,11 +48,22 @@ def corner(fig, samples, labels, estimate=None, covariance=None):
                             ring = vectors @ (k * np.sqrt(values)[:, None] * np.stack([np.cos(t), np.sin(t)]))
                             ax.plot(est[j] + ring[0], est[i] + ring[1], color="C3", lw=1)
             if i == n - 1:
-                ax.set_xlabel(labels[j])
+                ax.set_xlabel(labels[j], fontsize="small")
+                ax.tick_params(axis="x", labelrotation=45, labelsize="small")
             else:
                 ax.set_xticklabels([])
             if j == 0 and i > 0:
-                ax.set_ylabel(labels[i])
+                ax.set_ylabel(labels[i], fontsize="small")
+                ax.tick_params(axis="y", labelsize="small")
+            elif i > j:
+                ax.set_yticklabels([])
+    for k in range(n):  # one range per unknown, in its column and its row, so that the panels line up
+        spans = [axes[i, k].get_xlim() for i in range(k, n)] + [axes[k, j].get_ylim() for j in range(k)]
+        lo, hi = min(a for a, _ in spans), max(b for _, b in spans)
+        for i in range(k, n):
+            axes[i, k].set_xlim(lo, hi)
+        for j in range(k):
+            axes[k, j].set_ylim(lo, hi)
     if n:
         axes[0, 0].legend(fontsize="small", loc="upper right")
     return axes
