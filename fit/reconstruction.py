@@ -460,7 +460,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
     stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
     inputs = stack([a["inputs"] for a in arrays])
-    # with refits, the fit runs in calls of the refits' row count (``ROWS_PER_CALL``): one compiled program
+    # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
+    # (``ROWS_PER_CALL``): one compiled program
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
                stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
@@ -482,7 +483,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                                for i in todo])
         more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
                         *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,
-                        dtype, starts, _more_block(len(cases), len(todo), starts), devices)
+                        dtype, starts, block or _more_block(len(cases), len(todo), starts), devices)
         for j, i in enumerate(todo):
             out[i] = {k: np.concatenate([v, more[k][j]]) for k, v in out[i].items()}
     best = [best_start(o["cost"], o["converged"]) for o in out]
