@@ -223,14 +223,20 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
                      [float(s) for s in np.asarray(step_size)])
 
 
+@jax.jit
+def _diagnostics(x):
+    """BlackJAX's rank-normalized split R-hat and effective sample size of every unknown of draws x (chains,
+    draws, n), as one compiled program: run op by op they compile many small programs of their own."""
+    diagnostics = importlib.import_module("blackjax.diagnostics")
+    return diagnostics.potential_scale_reduction(x), diagnostics.effective_sample_size(x)
+
+
 def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> Posterior:
     """The ``Posterior`` of draws ``x`` (chains, draws, n), SI: moments, quantiles, R-hat and effective sample
     size per unknown, and the warnings they call for."""
     chains, draws, _ = x.shape
-    diagnostics = importlib.import_module("blackjax.diagnostics")
-    rhat = [float(diagnostics.potential_scale_reduction(x[:, :, j])) if chains > 1 else np.nan
-            for j in range(len(paths))]
-    ess = [float(diagnostics.effective_sample_size(x[:, :, j])) for j in range(len(paths))]
+    rhat, ess = (np.asarray(a, np.float64) for a in _diagnostics(jnp.asarray(x, jnp.float64)))
+    rhat = rhat if chains > 1 else np.full(len(paths), np.nan)
     flat = x.reshape(chains * draws, -1)
     q = {k: np.percentile(flat, v, axis=0) for k, v in QUANTILES.items()}
     summary = {p: {"mean": float(flat[:, j].mean()), "std": float(flat[:, j].std(ddof=1)) if len(flat) > 1 else 0.0,
