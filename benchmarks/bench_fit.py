@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/bench_fit.py                     # 1000 cases x 8 starts, Levenberg-Marquardt
     .venv/bin/python benchmarks/bench_fit.py --compare --n 200   # lm vs optax L-BFGS vs optax Adam
     .venv/bin/python benchmarks/bench_fit.py --noise-free        # evidence exactly the truth's: chi^2 0 is global
+    .venv/bin/python benchmarks/bench_fit.py --max-starts 8      # one round of starts, as before the rounds
 
 Cases: random oblique side impacts that slide at the centroid (vehicle 2's front into vehicle
 1's right side, 60-120 deg apart, friction 0.1-0.35, restitution 0.05-0.3, initial yaw rates
@@ -89,14 +90,15 @@ def score(results, truths, chi2_truth):
             "iterations": float(np.median([r.iterations for r in results]))}
 
 
-def run(solver, n, starts, seed, noise=True):
+def run(solver, n, starts, seed, noise=True, max_starts=None):
     cases, truths, evidence, unknowns, chi2_truth = sliding_cases(n, seed, noise)
     t0 = time.perf_counter()
-    fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed, solver=solver, smoothing=SMOOTHING)
+    fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed, solver=solver, smoothing=SMOOTHING,
+                          max_starts=max_starts)
     first = time.perf_counter() - t0
     t0 = time.perf_counter()
     results = fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed + 1, solver=solver,
-                                    smoothing=SMOOTHING)
+                                    smoothing=SMOOTHING, max_starts=max_starts)
     second = time.perf_counter() - t0
     return first, second, score(results, truths, chi2_truth)
 
@@ -109,6 +111,8 @@ def main(argv=None):
     ap.add_argument("--solver", default="lm", choices=sorted(SOLVERS))
     ap.add_argument("--compare", action="store_true", help="run lm, lbfgs and adam")
     ap.add_argument("--noise-free", action="store_true", help="evidence without noise: the global minimum is chi^2 0")
+    ap.add_argument("--max-starts", type=int, default=None,
+                    help="fit.reconstruct's max_starts (default: its own; --max-starts 8: one round of 8 starts)")
     args = ap.parse_args(argv)
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {jax.devices()[0].device_kind}"
     cpu = ""
@@ -123,7 +127,7 @@ def main(argv=None):
     print(f"command: {command}\ndate: {date}")
     rows = []
     for solver in (["lm", "lbfgs", "adam"] if args.compare else [args.solver]):
-        first, second, s = run(solver, args.n, args.starts, args.seed, not args.noise_free)
+        first, second, s = run(solver, args.n, args.starts, args.seed, not args.noise_free, args.max_starts)
         row = (f"| {solver} | {args.n} x {args.starts} | {second:.2f} s | {first:.2f} s | {100 * s['global']:.1f}% | "
                f"{100 * s['coverage']:.1f}% | {100 * s['all2']:.1f}% | {100 * s['converged']:.1f}% | "
                f"{s['iterations']:.0f} | {s['starts']:.0f} |")

@@ -29,7 +29,7 @@ from .problem import make_problem, output_units, parse_evidence, parse_unknowns,
 from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
-from .uncertainty import analyse, default_rtol
+from .uncertainty import AT_BOUND, analyse, default_rtol
 
 
 @dataclass
@@ -370,28 +370,44 @@ def _settled(rows, problem, arrays) -> bool:
 
 
 SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction, in parts of the friction needed to stick
+OFF_BOUND = np.linspace(0.1, 0.9, 8)  # the off-bound starts of an unknown pinned at a bound, in parts of its range
 
 
-def _slide_side(rows, problem, arrays, count: int = 0):
-    """Starts (count, n) in x on the slide side of a best fit that sticks: the best fit with the friction at
-    ``SLIDE_SIDE`` parts of what it needs to stick (the count's first of them, repeated where more are asked).
-    None where there is none to make: the best fit slides or has no exchange, friction is not an unknown or has
-    a prior, or the friction needed is at its lower bound.
+def _other_side(rows, problem, arrays, count: int = 1):
+    """``count`` starts (count, n) in x from a kept fit where the rounds of starts can stop short of the best
+    fit, or None where there is no such place: the best fit has no exchange, or neither of these holds.
 
-    A contact that sticks has one cost for every friction above the one it needs (a flat plateau), so the
-    starts that reach the plateau all agree on its cost, and the rounds of starts stop there. A sliding fit
-    just below the edge, which the evidence may prefer, is then reached only from the slide side."""
-    if "contact.friction" not in problem.unknowns or not np.isfinite(rows["cost"]).any():
+    - The contact sticks (friction an unknown without a prior, needed above its lower bound): the best fit with
+      the friction at ``SLIDE_SIDE`` parts of what it needs. A contact that sticks has one cost for every
+      friction above the one it needs (a flat plateau), so every start that reaches the plateau agrees on its
+      cost; a sliding fit just below the edge, which the evidence may prefer, is reached only from that side.
+    - Unknowns without a prior pinned at a bound: the best fit with each of them in turn at ``OFF_BOUND`` parts
+      of its range. Starts that end against the same bound agree on its cost too, where a fit inside the
+      bounds (a restitution that trades against the speeds) can be better."""
+    if not np.isfinite(rows["cost"]).any():
         return None
-    j = problem.unknowns.index("contact.friction")
     b = best_start(rows["cost"], rows["converged"])
-    needed = float(abs(rows["stick_ratio"][b]))
-    if rows["status"][b] != OK or bool(rows["sliding"][b]) or arrays["pw"][j] > 0 or not needed > arrays["lo"][j]:
+    if rows["status"][b] != OK:
         return None
-    x = np.repeat(np.asarray(rows["x"][b], np.float64)[None], max(count, 1), axis=0)
-    parts = np.resize(SLIDE_SIDE, max(count, 1))
-    x[:, j] = arrays["lo"][j] + parts * (needed - arrays["lo"][j])
-    return x[:count] if count else x
+    best = np.asarray(rows["x"][b], np.float64)
+    lo, hi = np.asarray(arrays["lo"], np.float64), np.asarray(arrays["hi"], np.float64)
+    free = np.asarray(arrays["pw"]) <= 0
+    x = np.repeat(best[None], count, axis=0)
+    if "contact.friction" in problem.unknowns and not bool(rows["sliding"][b]):
+        j = problem.unknowns.index("contact.friction")
+        needed = float(abs(rows["stick_ratio"][b]))
+        if free[j] and needed > lo[j]:
+            x[:, j] = lo[j] + np.resize(SLIDE_SIDE, count) * (needed - lo[j])
+            return x
+    width = hi - lo
+    pinned = [j for j in range(len(best)) if free[j] and np.isfinite(width[j]) and width[j] > 0
+              and min(best[j] - lo[j], hi[j] - best[j]) <= AT_BOUND * width[j]]
+    if not pinned:
+        return None
+    for k in range(count):
+        j = pinned[k % len(pinned)]
+        x[k, j] = lo[j] + OFF_BOUND[(k // len(pinned)) % len(OFF_BOUND)] * width[j]
+    return x
 
 
 MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts: a few row counts, a program each
@@ -474,12 +490,12 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         if todo:
             z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
                                     arrays[i]["hi"]) for i in todo])
-        else:  # settled: once per case whose best fit sticks, starts on the other side of its stick/slide edge
-            todo = [i for i in room if i not in probed and _slide_side(out[i], problem, arrays[i]) is not None]
+        else:  # settled: once per case, starts where the rounds can stop short (``_other_side``)
+            todo = [i for i in room if i not in probed and _other_side(out[i], problem, arrays[i]) is not None]
             if not todo:
                 break
             probed.update(todo)
-            z_more = np.stack([to_z(_slide_side(out[i], problem, arrays[i], starts), arrays[i]["lo"], arrays[i]["hi"])
+            z_more = np.stack([to_z(_other_side(out[i], problem, arrays[i], starts), arrays[i]["lo"], arrays[i]["hi"])
                                for i in todo])
         more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
                         *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,

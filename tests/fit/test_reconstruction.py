@@ -99,6 +99,30 @@ def test_a_fit_that_sticks_is_tried_from_the_slide_side_of_its_edge():
     np.testing.assert_allclose([r.estimate[p] for p in UNKNOWNS], truth, rtol=RECOVER, atol=1e-6)
 
 
+def test_a_fit_pinned_at_a_bound_is_tried_from_inside_the_bounds():
+    """A sliding oblique case with noise-free evidence: one round of 8 starts ends with the friction on its upper
+    bound of 1 at chi^2 about 0.2, reached by four starts and far below its 99% quantile, so the rounds stop
+    there. The default then starts from that fit with the friction inside its range, and reaches chi^2 0 and
+    the truth (friction 0.1-0.35)."""
+    d = oblique_case(np.random.default_rng(272))
+    case = case_from_dict(d)
+    result = solve(case, smoothing=1e-3).result
+    assert bool(result.contact.sliding)
+    evidence = [fit.Evidence(p, float(get_output(result, p)), s) for p, s in EVIDENCE]
+    truth = np.array([float(get_input(case.inputs, p)) for p in UNKNOWNS])
+    unknowns = [fit.Unknown(UNKNOWNS[0], 0.0, 40.0), fit.Unknown(UNKNOWNS[1], 0.0, 40.0),
+                fit.Unknown(UNKNOWNS[2], 0.0, 0.6), fit.Unknown(UNKNOWNS[3], 0.0, 1.0),
+                fit.Unknown(UNKNOWNS[4], truth[4] - 1.5, truth[4] + 1.5),
+                fit.Unknown(UNKNOWNS[5], truth[5] - 1.0, truth[5] + 1.0)]
+    one_round = fit.reconstruct(case, unknowns, evidence, max_starts=8)
+    assert [b.split(" is")[0] for b in one_round.at_bound] == ["contact.friction"]
+    assert one_round.estimate["contact.friction"] == pytest.approx(1.0, abs=1e-4)
+    assert 0.05 < one_round.chi2 < 13.3 and one_round.starts_at_best >= 2
+    r = fit.reconstruct(case, unknowns, evidence)
+    assert r.starts == 16 and r.chi2 < 1e-10 and r.at_bound == []
+    np.testing.assert_allclose([r.estimate[p] for p in UNKNOWNS], truth, rtol=RECOVER, atol=1e-6)
+
+
 def test_recovers_six_unknowns_of_sliding_oblique_cases(oblique):
     cases, truths, unknowns, evidence, results = oblique
     for truth, r in zip(truths, results):
