@@ -116,6 +116,25 @@ def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_dr
     np.testing.assert_allclose(zs, expected, rtol=1e-12, atol=1e-12)
 
 
+def test_with_rest_positions_the_gradient_is_forward_mode_through_the_motions_while_loop():
+    """Rest positions as evidence: the sampler's gradient of the log-density is taken in forward mode, one
+    tangent per unknown, through the motion's while loop (which stops when the vehicles rest), and equals the
+    central differences of the log-density (step 1e-5 in z) to 1e-6 of its size."""
+    case = load_case(CASES / "fit_rest_positions.json")
+    unknowns, evidence, problem = fit.reconstruction._prepare(case, None, None)
+    a = fit.reconstruction._arrays(case, unknowns, evidence, np.float64)
+    d = {k: jax.tree_util.tree_map(jnp.asarray, a[k]) for k in ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw")}
+    assert problem.motion is not None and not problem.motion.reverse
+    z = jnp.asarray(fit.problem.to_z(np.array([25.0, 35.0]) * 0.44704, a["lo"], a["hi"]))
+    smoothing = jnp.asarray(1e-3)
+    value, gradient = fit.posterior._value_and_gradient(problem, z, d, smoothing)
+    density = jax.jit(lambda q: fit.posterior.log_density(problem, q, d, smoothing))
+    assert float(value) == pytest.approx(float(density(z)), rel=1e-12)
+    h = 1e-5
+    central = [(float(density(z.at[j].add(h))) - float(density(z.at[j].add(-h)))) / (2 * h) for j in range(2)]
+    np.testing.assert_allclose(gradient, central, rtol=1e-6, atol=1e-6 * float(np.max(np.abs(central))))
+
+
 def test_a_seeded_posterior_draws_the_same_again_and_another_seed_does_not(gaussian):
     again = _fit(0.3)
     np.testing.assert_array_equal(again.posterior.samples, gaussian.posterior.samples)
