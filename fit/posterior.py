@@ -31,6 +31,7 @@ import numpy as np
 
 from ks_jax.backend import row_placement
 from ks_jax.compilation import quick_jit
+from ks_jax.progress import Progress
 
 from .problem import Problem, to_x
 from .rows import whitened
@@ -40,6 +41,8 @@ RHAT_LIMIT = 1.01  # above: the chains disagree
 ESS_PER_CHAIN = 100  # below this many effective draws per chain: too few for the tails' quantiles
 START_JITTER = 0.1  # the chains' starts about the estimate, in z
 TARGET_ACCEPTANCE = 0.8  # the warmup's aim for NUTS's mean acceptance (Stan's)
+SEGMENT = 100  # transitions per compiled call of the sampler, between which its progress is shown
+PROGRESS_DELAY = 2.0  # s: a posterior that runs longer shows a progress bar (with progress=True)
 MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
 
 
@@ -155,10 +158,49 @@ def _tuned(blackjax, tuning: _Tuning, slow, window_end, last, position, acceptan
     return _Tuning(averaging, variance, step_size, inverse_mass)
 
 
-@partial(quick_jit, static_argnames=("problem", "draws", "warmup"))
-def _chains(problem: Problem, d, smoothing, keys, z0, draws: int, warmup: int):
-    """``run_chains`` of one fit's posterior density, compiled: most of a posterior's first call."""
-    return run_chains(lambda z: _density(problem, z, d, smoothing), keys, z0, draws, warmup)
+def _pieces(blackjax, density):
+    """A chain's first carry (its NUTS state at ``start`` and its untuned adaptation) and the step of its scan:
+    one NUTS transition at the carried step size and mass matrix, then (while ``adapting``) Stan's adaptation
+    of them (``_tuned``). The step's inputs per transition: (key, slow, window_end, last, adapting)."""
+    transition = blackjax.nuts.build_kernel()
+    da_init = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)[0]
+    mm_init = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)[0]
+
+    def first(start):
+        variance = mm_init(start.shape[0])
+        tuning = _Tuning(da_init(jnp.asarray(1.0, start.dtype)), variance, jnp.asarray(1.0, start.dtype),
+                         variance.inverse_mass_matrix.astype(start.dtype))
+        return blackjax.nuts.init(start, density), tuning
+
+    def step(carry, xs):
+        state, tuning = carry
+        key, slow, window_end, last, adapting = xs
+        state, info = transition(key, state, density, tuning.step_size, tuning.inverse_mass)
+        after = _tuned(blackjax, tuning, slow, window_end, last, state.position, info.acceptance_rate)
+        tuning = jax.tree_util.tree_map(lambda a, b: jnp.where(adapting, a, b), after, tuning)
+        return (state, tuning), (state.position, info.is_divergent)
+
+    return first, step
+
+
+def _schedule(blackjax, warmup: int, steps: int):
+    """Per transition (``steps`` of them, the warmup's first): whether it is in a slow window, ends one, is the
+    warmup's last, and adapts. NumPy bool arrays (steps,)."""
+    flags = np.zeros((4, steps), bool)
+    if warmup:
+        with jax.ensure_compile_time_eval():
+            flags[:2, :warmup] = np.asarray(blackjax.adaptation.window_adaptation.build_schedule(warmup), bool).T
+        flags[2, warmup - 1] = True
+        flags[3, :warmup] = True
+    return tuple(flags)
+
+
+def _step_keys(key, warmup: int, draws: int, steps: int):
+    """A chain's key per transition: the warmup's from the first half of ``key``, the draws' from the second (as
+    BlackJAX's ``window_adaptation`` and a NUTS scan would take them), the last repeated up to ``steps``."""
+    adapt_key, draw_key = jax.random.split(key)
+    keys = jnp.concatenate([jax.random.split(adapt_key, warmup), jax.random.split(draw_key, draws)])
+    return jnp.concatenate([keys, jnp.repeat(keys[-1:], steps - warmup - draws, axis=0)])
 
 
 def run_chains(density, keys, z0, draws: int, warmup: int):
@@ -169,48 +211,47 @@ def run_chains(density, keys, z0, draws: int, warmup: int):
     Each chain's adaptation and draws are one scan of one NUTS transition, its step size and mass matrix
     carried along (fixed once the warmup ends), so that the transition, with the density's gradient inside,
     is traced and compiled once. The draws are those of BlackJAX's ``window_adaptation`` run on the chain's
-    first key and a NUTS scan on its second."""
+    first key and a NUTS scan on its second. ``sample`` runs the same scan in segments."""
     blackjax = sampler()
-    transition = blackjax.nuts.build_kernel()
-    da_init = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)[0]
-    mm_init = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)[0]
-    steps = warmup + draws
-    schedule = np.zeros((steps, 2), bool)
-    if warmup:  # (slow window?, a slow window's last step?) per warmup step; a constant of the program
-        with jax.ensure_compile_time_eval():
-            schedule[:warmup] = np.asarray(blackjax.adaptation.window_adaptation.build_schedule(warmup), bool)
-    flags = (jnp.asarray(schedule[:, 0]), jnp.asarray(schedule[:, 1]), jnp.arange(steps) == warmup - 1,
-             jnp.arange(steps) < warmup)
+    first, step = _pieces(blackjax, density)
+    flags = _schedule(blackjax, warmup, warmup + draws)
 
     def chain(key, start):
-        def step(carry, xs):
-            state, tuning = carry
-            key, slow, window_end, last, adapting = xs
-            state, info = transition(key, state, density, tuning.step_size, tuning.inverse_mass)
-            after = _tuned(blackjax, tuning, slow, window_end, last, state.position, info.acceptance_rate)
-            tuning = jax.tree_util.tree_map(lambda a, b: jnp.where(adapting, a, b), after, tuning)
-            return (state, tuning), (state.position, info.is_divergent)
-
-        variance = mm_init(start.shape[0])
-        tuning = _Tuning(da_init(jnp.asarray(1.0, start.dtype)), variance, jnp.asarray(1.0, start.dtype),
-                         variance.inverse_mass_matrix.astype(start.dtype))
-        adapt_key, draw_key = jax.random.split(key)
-        step_keys = jnp.concatenate([jax.random.split(adapt_key, warmup), jax.random.split(draw_key, draws)])
-        carry = (blackjax.nuts.init(start, density), tuning)
-        (_, tuning), (zs, divergent) = jax.lax.scan(step, carry, (step_keys, *flags))
+        xs = (_step_keys(key, warmup, draws, warmup + draws), *map(jnp.asarray, flags))
+        (_, tuning), (zs, divergent) = jax.lax.scan(step, first(start), xs)
         return zs[warmup:], divergent[warmup:], tuning.step_size
 
     return jax.vmap(chain)(keys, z0)
 
 
+@partial(quick_jit, static_argnames=("problem",))
+def _segment(problem: Problem, d, smoothing, carry, z0, begin, keys, flags):
+    """Every chain's next transitions (keys (C, S), flags: four (S,) of ``_schedule``) from ``carry``, or where
+    ``begin`` from each chain's first carry at z0 (C, n): the carry after them, and their draws (C, S, n) in z and
+    divergences (C, S). The program of a posterior, one for all its segments: most of its first call is
+    compiling it."""
+    first, step = _pieces(sampler(), lambda z: _density(problem, z, d, smoothing))
+    carry = jax.lax.cond(begin, lambda _: jax.vmap(first)(z0), lambda c: c, carry)
+    return jax.vmap(lambda c, k: jax.lax.scan(step, c, (k, *flags)))(carry, keys)
+
+
+def _no_carry(problem: Problem, d, smoothing, z0):
+    """Zeros shaped as every chain's carry: what ``_segment`` is given with ``begin``."""
+    first, _ = _pieces(sampler(), lambda z: _density(problem, z, d, smoothing))
+    shapes = jax.eval_shape(jax.vmap(first), z0)
+    return jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)
+
+
 def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, warmup: int | None = None,
-           seed: int = 0, smoothing: float = 1e-3, dtype=None, devices=None, offset=None) -> Posterior:
+           seed: int = 0, smoothing: float = 1e-3, dtype=None, devices=None, offset=None,
+           progress: bool = False) -> Posterior:
     """``draws`` NUTS draws per chain from the posterior of one fit's unknowns (the module's docstring).
 
     row: the fit's arrays of one case ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw"); z_best (n,): its
     estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
-    added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``)."""
+    added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``). progress: a bar (stderr)
+    once the draws have taken ``PROGRESS_DELAY`` s: they run in compiled segments of ``SEGMENT`` transitions."""
     sampler()
     if draws < 1 or chains < 1:
         raise ValueError(f"posterior: draws = {draws}, chains = {chains}: need at least one of each")
@@ -227,7 +268,23 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
     if len(devices) > 1 and chains % len(devices) == 0:
         place = row_placement(devices)
         keys, z0 = jax.device_put(keys, place.rows), jax.device_put(z0, place.rows)
-    zs, divergent, step_size = _chains(problem, d, jnp.asarray(smoothing, dtype), keys, z0, draws, warmup)
+    smoothing = jnp.asarray(smoothing, dtype)
+    steps = warmup + draws
+    segment = min(SEGMENT, steps)
+    total = -(-steps // segment) * segment  # padded: the transitions after the last draw are not kept
+    flags = _schedule(sampler(), warmup, total)
+    step_keys = jax.vmap(partial(_step_keys, warmup=warmup, draws=draws, steps=total))(keys)
+    carry = _no_carry(problem, d, smoothing, z0)
+    bar = Progress(steps, "ks-jax posterior", "step", progress, PROGRESS_DELAY)
+    parts = []
+    for lo in range(0, total, segment):
+        carry, part = _segment(problem, d, smoothing, carry, z0, lo == 0, step_keys[:, lo:lo + segment],
+                               tuple(jnp.asarray(f[lo:lo + segment]) for f in flags))
+        parts.append(jax.tree_util.tree_map(np.asarray, part))
+        bar.update(min(segment, steps - lo))
+    bar.close()
+    zs, divergent = (np.concatenate(a, axis=1)[:, warmup:steps] for a in zip(*parts))
+    step_size = carry[1].step_size
     x = np.asarray(jax.vmap(jax.vmap(lambda z: to_x(z, d["lo"], d["hi"])))(zs), np.float64)
     x = x + (0.0 if offset is None else np.asarray(offset, np.float64))
     return summarize(list(problem.unknowns), x, int(np.sum(np.asarray(divergent))), warmup, seed,

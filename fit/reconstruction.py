@@ -341,7 +341,7 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
     "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
-    ``chunk`` samples). devices: where the starts and refits are solved (default: this process's devices,
+    ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved (default: this process's devices,
     ``jax.local_devices()``; over several, the rows are split among them: docs/devices.md). Raises CaseError
     for a bad path, unit, bound or sigma.
     """
@@ -521,7 +521,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         r = _result(case, u, e, problem, row, a, rtol)
         if posterior:
             r.posterior = sample_posterior(problem, a, row["z"], draws=int(posterior), chains=int(chains), seed=seed,
-                                           smoothing=smoothing, dtype=dtype, devices=devices, offset=a["x_offset"])
+                                           smoothing=smoothing, dtype=dtype, devices=devices, offset=a["x_offset"],
+                                           progress=progress)
         if monte_carlo:
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
                                          smoothing, dtype, progress, chunk, block, devices)

@@ -88,7 +88,7 @@ def run(args) -> int:
                     raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
                                     "'evidence', docs/fit.md)")
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
-                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0,
+                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0 or args.posterior > 0,
                                        max_starts=args.max_starts, posterior=args.posterior, chains=args.chains))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
