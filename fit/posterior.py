@@ -31,7 +31,7 @@ import numpy as np
 
 from ks_jax.backend import row_placement
 from ks_jax.compilation import quick_jit
-from ks_jax.progress import Progress
+from ks_jax.progress import PROGRESS_DELAY, Progress
 
 from .problem import Problem, to_x
 from .rows import whitened
@@ -42,7 +42,6 @@ ESS_PER_CHAIN = 100  # below this many effective draws per chain: too few for th
 START_JITTER = 0.1  # the chains' starts about the estimate, in z
 TARGET_ACCEPTANCE = 0.8  # the warmup's aim for NUTS's mean acceptance (Stan's)
 SEGMENT = 100  # transitions per compiled call of the sampler, between which its progress is shown
-PROGRESS_DELAY = 2.0  # s: a posterior that runs longer shows a progress bar (with progress=True)
 MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
 
 

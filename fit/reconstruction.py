@@ -491,12 +491,12 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
             z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
                                     arrays[i]["hi"]) for i in todo])
         else:  # settled: once per case, starts where the rounds can stop short (``_other_side``)
-            todo = [i for i in room if i not in probed and _other_side(out[i], problem, arrays[i]) is not None]
+            sides = {i: _other_side(out[i], problem, arrays[i], starts) for i in room if i not in probed}
+            todo = [i for i, x in sides.items() if x is not None]
             if not todo:
                 break
             probed.update(todo)
-            z_more = np.stack([to_z(_other_side(out[i], problem, arrays[i], starts), arrays[i]["lo"], arrays[i]["hi"])
-                               for i in todo])
+            z_more = np.stack([to_z(sides[i], arrays[i]["lo"], arrays[i]["hi"]) for i in todo])
         more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
                         *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,
                         dtype, starts, block or _more_block(len(cases), len(todo), starts), devices)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import sys
 import time
 
+PROGRESS_DELAY = 2.0  # s: long work left to decide (a sweep, a posterior) shows a bar once it has run this long
+
 
 class Progress:
     """``update(n)`` as work is done, ``close()`` at the end. Nothing is shown unless ``enabled``, nor before

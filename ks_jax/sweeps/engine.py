@@ -24,7 +24,7 @@ from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_
 from ..compilation import compiled, compiler_options
 from ..limits import check_memory
 from ..model.types import STATUS_TEXT, status_text
-from ..progress import Progress
+from ..progress import PROGRESS_DELAY, Progress
 from ..solve import stages
 from ..units import MAX_TURNS
 from .columns import invalid_rows
@@ -51,7 +51,6 @@ STATUS_CODES = tuple(sorted(STATUS_TEXT))  # the statuses counted on the device,
 # a sweep of at most this many points compiles quickly (``compilation.quick_jit``): its one short chunk runs in
 # milliseconds, and compiling is most of its time; a larger one keeps XLA's defaults, where running counts
 QUICK_POINTS = DEFAULT_CHUNK
-PROGRESS_DELAY = 2.0  # s: with progress=None a sweep that runs longer than this shows a bar
 
 
 def _row_inputs(base, paths, values, ties=()):
