@@ -64,7 +64,8 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
     n_mc = int(samples)
     noise = rng.standard_normal((n_mc, len(a["values"])))
     values = a["values"] + a["sigmas"] * noise
-    x0 = np.stack([first_starts(unknowns, a, starts, rng) for _ in range(n_mc)])
+    paths = [u.path for u in unknowns]
+    x0 = np.stack([first_starts(paths, a, starts, rng) for _ in range(n_mc)])
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
     z0[:, 0] = z_best
     size = min(chunk, n_mc) if progress else n_mc
@@ -75,16 +76,15 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
         same = [np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pm", "pw")]
         out = run_rows(problem, solver, max_iter, stack([a["inputs"]] * k), values[s:s + k], *same, z0[s:s + k],
                    smoothing, dtype, starts, block, devices)
-        best = [best_start(out["cost"][i], out["converged"][i]) for i in range(k)]
-        xs.append(np.stack([out["x"][i, b] for i, b in enumerate(best)]))
-        conv.append(np.array([out["converged"][i, b] for i, b in enumerate(best)]))
+        best = best_start(out["cost"], out["converged"])
+        xs.append(out["x"][np.arange(k), best])
+        conv.append(out["converged"][np.arange(k), best])
         if bar is not None:
             bar.update(k)
     if bar is not None:
         bar.close()
     xs = np.concatenate(xs) + a["x_offset"]
     conv = np.concatenate(conv)
-    paths = [u.path for u in unknowns]
     use = xs[conv] if conv.any() else xs
     pct = {str(p): {path: float(v) for path, v in zip(paths, np.percentile(use, p, axis=0))} for p in PERCENTILES}
     return {"samples": n_mc, "converged_fraction": float(conv.mean()), "percentiles": pct, "x": xs, "converged": conv}

@@ -47,6 +47,7 @@ from ks_jax.case import (
     output_kind,
     parse_output_value,
     parse_path,
+    path_key,
     set_input,
     without_road,
 )
@@ -155,19 +156,48 @@ def _q(x_si, path) -> str:
     return fmt(float(x_si), kind, digits=6, si=True)
 
 
-def check_unknown(case: Case, u: Unknown) -> Unknown:
-    """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError)."""
+def unknown_path(case: Case, path: str) -> None:
+    """Refuse a path that names no input of ``case`` that a fit can vary (CaseError)."""
     name = case.name
     try:
-        get_input(case.inputs, u.path)
+        get_input(case.inputs, path)
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
-    field = _field(u.path)
-    if why := on_fixed_object(case, u.path) or without_road(case, u.path):
+    field = _field(path)
+    if why := on_fixed_object(case, path) or without_road(case, path):
         raise CaseError(f"case '{name}': unknowns: {why}")
-    if automatic_part(case, u.path):
-        raise CaseError(f"case '{name}': unknowns: {u.path}: contact.{field} is automatic in this case; "
+    if automatic_part(case, path):
+        raise CaseError(f"case '{name}': unknowns: {path}: contact.{field} is automatic in this case; "
                         f"give contact.{field} in the case to fit it")
+
+
+class PathChecks:
+    """The path checks of a batch of cases (``unknown_path``, ``evidence_kind``), each made once per path and
+    ``ks_jax.case.path_key`` (cases with one key accept and refuse the same paths); a refused path is checked
+    again for every case, so that each case's error names that case."""
+
+    def __init__(self):
+        self._seen = {}
+
+    def unknown(self, case: Case, path) -> None:
+        key = ("unknown", path, path_key(case)) if isinstance(path, str) else None  # not a path: refused below
+        if key not in self._seen:
+            unknown_path(case, path)
+            self._seen[key] = None
+
+    def evidence(self, case: Case, path):
+        key = ("evidence", path, path_key(case)) if isinstance(path, str) else None
+        if key not in self._seen:
+            self._seen[key] = evidence_kind(case, path)
+        return self._seen[key]
+
+
+def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> Unknown:
+    """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError). ``checks``: the batch's
+    path checks (default: the path checked here)."""
+    name = case.name
+    (checks or PathChecks()).unknown(case, u.path)
+    field = _field(u.path)
     lo, hi = float(u.lower), float(u.upper)
     if field in INPUT_LIMITS and not INPUT_LIMITS[field][2]:  # a missing bound: the input's own limit
         lo = INPUT_LIMITS[field][0] if lo == -math.inf else lo
@@ -229,8 +259,10 @@ MAX_MAGNITUDE = 1e12
 MIN_SIGMA = 1e-9
 
 
-def check_evidence(case: Case, e: Evidence) -> Evidence:
-    evidence_kind(case, e.path)  # raises on a bad path
+def check_evidence(case: Case, e: Evidence, checks: PathChecks | None = None) -> Evidence:
+    """Refuse evidence whose path, value or sigma break a rule (CaseError). ``checks``: the batch's path checks
+    (default: the path checked here)."""
+    (checks or PathChecks()).evidence(case, e.path)  # raises on a bad path
     if not math.isfinite(e.value):
         raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)} must be finite")
     if not abs(e.value) <= MAX_MAGNITUDE:
@@ -255,11 +287,12 @@ def _evidence_value(case, path, value, where):
     return parse_output_value(value, path, case.name, where)
 
 
-def parse_unknowns(case: Case, spec) -> list[Unknown]:
+def parse_unknowns(case: Case, spec, checks: PathChecks | None = None) -> list[Unknown]:
     """Unknowns from the file format of docs/fit.md: a map path -> {"bounds": [lo, hi],
     "start": x, "prior": {"mean": x, "sigma": s}} (quantities as numbers or unit strings; bare
     numbers are SI except angles in degrees and rates in deg/s). ``Unknown`` objects pass as
-    they are (SI). A list of paths or of ``Unknown`` is accepted too."""
+    they are (SI). A list of paths or of ``Unknown`` is accepted too. ``checks``: a batch's ``PathChecks``."""
+    checks = checks or PathChecks()
     if spec is None:
         raise CaseError(f"case '{case.name}': unknowns: missing (name at least one input to fit)")
     if isinstance(spec, (list, tuple)):
@@ -273,7 +306,7 @@ def parse_unknowns(case: Case, spec) -> list[Unknown]:
     out = []
     for path, d in items:
         if isinstance(d, Unknown):
-            out.append(check_unknown(case, d))
+            out.append(check_unknown(case, d, checks))
             continue
         try:
             get_input(case.inputs, path)  # names a scalar input? (before asking its kind)
@@ -309,7 +342,7 @@ def parse_unknowns(case: Case, spec) -> list[Unknown]:
                                 "{\"mean\": x, \"sigma\": s}")
             prior = (_num(pm, kind, f"unknowns: {path}.prior.mean", case.name),
                      _num(ps, kind, f"unknowns: {path}.prior.sigma", case.name))
-        out.append(check_unknown(case, Unknown(path, lo, hi, start, prior)))
+        out.append(check_unknown(case, Unknown(path, lo, hi, start, prior), checks))
     paths = [u.path for u in out]
     for p in paths:
         if paths.count(p) > 1:
@@ -317,9 +350,11 @@ def parse_unknowns(case: Case, spec) -> list[Unknown]:
     return out
 
 
-def parse_evidence(case: Case, spec) -> list[Evidence]:
+def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[Evidence]:
     """Evidence from the file format: a list of {"quantity": path, "value": q, "sigma": q}
-    (unit strings parsed with the path's kind); ``Evidence`` objects pass as they are."""
+    (unit strings parsed with the path's kind); ``Evidence`` objects pass as they are. ``checks``: a batch's
+    ``PathChecks``."""
+    checks = checks or PathChecks()
     if spec is None:
         raise CaseError(f"case '{case.name}': evidence: missing (give at least one measured result)")
     if not isinstance(spec, (list, tuple)) or not spec:
@@ -328,7 +363,7 @@ def parse_evidence(case: Case, spec) -> list[Evidence]:
     out = []
     for k, e in enumerate(spec):
         if isinstance(e, Evidence):
-            out.append(check_evidence(case, e))
+            out.append(check_evidence(case, e, checks))
             continue
         if not isinstance(e, dict):
             raise CaseError(f"case '{case.name}': evidence[{k}] = {e!r}: must be "
@@ -340,18 +375,20 @@ def parse_evidence(case: Case, spec) -> list[Evidence]:
         path = e.get("quantity", e.get("path"))
         if path is None or "value" not in e or "sigma" not in e:
             raise CaseError(f"case '{case.name}': evidence[{k}]: needs quantity, value and sigma")
-        evidence_kind(case, path)  # a clear error for a bad path first
+        checks.evidence(case, path)  # a clear error for a bad path first
         value = _evidence_value(case, path, e["value"], f"evidence: {path}.value")
         sigma = _evidence_value(case, path, e["sigma"], f"evidence: {path}.sigma")
-        out.append(check_evidence(case, Evidence(path, value, sigma)))
+        out.append(check_evidence(case, Evidence(path, value, sigma), checks))
     return out
 
 
-def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence]) -> Problem:
+def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence],
+                 checks: PathChecks | None = None) -> Problem:
     if not case.valid:
         raise CaseError(case.error)
     ties = input_ties(case, [u.path for u in unknowns])
-    ev = tuple((e.path, *evidence_kind(case, e.path)) for e in evidence)
+    checks = checks or PathChecks()
+    ev = tuple((e.path, *checks.evidence(case, e.path)) for e in evidence)
     return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal),
                    bool(case.pole), case.motion)
 

@@ -8,6 +8,7 @@ evidence the same way, through the same compiled program (``monte_carlo``).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -15,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ks_jax.backend import on_cpu
 from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
@@ -25,11 +27,11 @@ from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
 from .posterior import sampler
-from .problem import make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
+from .problem import PathChecks, Problem, make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
 from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
-from .uncertainty import AT_BOUND, analyse, default_rtol
+from .uncertainty import AT_BOUND, analyse_batch, default_rtol, one
 
 
 @dataclass
@@ -119,16 +121,17 @@ class FitResult:
         return out
 
 
-def _keys(evidence):
-    """Unique keys for evidence (a path named twice gets ' (2)')."""
+def _keys(paths):
+    """Unique keys for evidence paths (a path named twice gets ' (2)')."""
     keys, seen = [], {}
-    for e in evidence:
-        seen[e.path] = seen.get(e.path, 0) + 1
-        keys.append(e.path if seen[e.path] == 1 else f"{e.path} ({seen[e.path]})")
+    for path in paths:
+        seen[path] = seen.get(path, 0) + 1
+        keys.append(path if seen[path] == 1 else f"{path} ({seen[path]})")
     return keys
 
 
-def _prepare(case: Case, unknowns, evidence):
+def _prepare(case: Case, unknowns, evidence, checks: PathChecks | None = None):
+    """(unknowns, evidence, Problem) of one case, checked (CaseError); ``checks``: a batch's path checks."""
     if not isinstance(case, Case):
         raise TypeError(f"reconstruct needs a ks_jax Case, got {type(case).__name__}")
     if not case.valid:
@@ -137,51 +140,81 @@ def _prepare(case: Case, unknowns, evidence):
         unknowns = case.raw.get("unknowns")
     if evidence is None:
         evidence = case.raw.get("evidence")
-    unknowns = parse_unknowns(case, unknowns)
-    evidence = parse_evidence(case, evidence)
-    problem = make_problem(case, unknowns, evidence)
+    checks = checks or PathChecks()
+    unknowns = parse_unknowns(case, unknowns, checks)
+    evidence = parse_evidence(case, evidence, checks)
+    problem = make_problem(case, unknowns, evidence, checks)
     return unknowns, evidence, problem
 
 
 def _arrays(case, unknowns, evidence, dtype):
-    """The fit's arrays, SI, float64. In float32 with a scene more than 1 km from the origin, the scene is
-    fitted about its CGs' midpoint (``ks_jax.case.scale.scene_origin``): ``inputs``, the bounds, priors and
-    evidence values of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
-    from each unknown and each piece of evidence) move the results back. ``current`` (the case's values of
-    the unknowns, for the starts) stays unmoved."""
-    n = len(unknowns)
-    origin = scene_origin(case.inputs, dtype=dtype)
-    offsets = lambda paths: np.array([float(origin_offset(p, origin) or 0.0) for p in paths])  # noqa: E731
-    x_offset = offsets([u.path for u in unknowns])
-    e_offset = offsets([e.path for e in evidence])
-    lo = np.array([u.lower for u in unknowns]) - x_offset
-    hi = np.array([u.upper for u in unknowns]) - x_offset
-    pm = np.array([u.prior[0] if u.prior else 0.0 for u in unknowns]) - x_offset
-    pw = np.array([1.0 / u.prior[1] if u.prior else 0.0 for u in unknowns])
-    values = np.array([e.value for e in evidence]) - e_offset
-    sigmas = np.array([e.sigma for e in evidence])
-    current = np.array([float(get_input(case.inputs, u.path)) for u in unknowns]) if n else np.zeros(0)
-    inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
-    return {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": pm, "pw": pw,
-            "current": current, "x_offset": x_offset, "e_offset": e_offset}
+    """One case's ``_batch_arrays``: a dict of (n,) and (m,) arrays and its ``inputs``."""
+    stacked, inputs = _batch_arrays([case], [(unknowns, evidence, None)], dtype)
+    return {k: v[0] for k, v in stacked.items()} | {"inputs": inputs[0]}
 
 
-def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
-    paths = [u.path for u in unknowns]
+def _batch_arrays(cases, prepared, dtype):
+    """The fit's arrays of a batch of cases (``prepared``: each case's unknowns and evidence, the same paths in
+    each), SI, float64: a dict of (B, n) and (B, m) arrays, and the list of the cases' inputs.
+
+    In float32 with a scene more than 1 km from the origin, the scene is fitted about its CGs' midpoint
+    (``ks_jax.case.scale.scene_origin``): ``inputs``, the bounds (``lo``, ``hi``), prior means (``pm``) and
+    evidence ``values`` of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
+    from each unknown and each piece of evidence) move the results back. ``pw`` is 1 / the prior's sigma (0 where
+    none). ``current`` (the case's values of the unknowns) and the unknowns' own ``lower``, ``upper``, ``start``,
+    ``prior_mean`` and ``prior_sigma`` (NaN where none), for the starts and the analysis, stay unmoved."""
+    B = len(cases)
+    paths = [u.path for u in prepared[0][0]]
+    evidence_paths = [e.path for e in prepared[0][1]]
+    n, m = len(paths), len(evidence_paths)
+    nan = float("nan")
+    own = np.array([[(u.lower, u.upper, nan if u.start is None else u.start, *(u.prior or (nan, nan))) for u in us]
+                    for us, _, _ in prepared], np.float64).reshape(B, n, 5)
+    measured = np.array([[(e.value, e.sigma) for e in es] for _, es, _ in prepared], np.float64).reshape(B, m, 2)
+    current = np.array([[float(get_input(c.inputs, p)) for p in paths] for c in cases], np.float64).reshape(B, n)
+    x_offset, e_offset, inputs = np.zeros((B, n)), np.zeros((B, m)), []
+    for i, case in enumerate(cases):
+        origin = scene_origin(case.inputs, dtype=dtype)
+        inputs.append(case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point))
+        if origin is not None:
+            x_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in paths]
+            e_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in evidence_paths]
+    lower, upper, start, prior_mean, prior_sigma = np.moveaxis(own, 2, 0)
+    has_prior = ~np.isnan(prior_sigma)
+    return {"values": measured[..., 0] - e_offset, "sigmas": measured[..., 1], "lo": lower - x_offset,
+            "hi": upper - x_offset, "pm": np.where(has_prior, prior_mean, 0.0) - x_offset,
+            "pw": np.where(has_prior, 1.0 / np.where(has_prior, prior_sigma, 1.0), 0.0), "current": current,
+            "x_offset": x_offset, "e_offset": e_offset, "lower": lower, "upper": upper, "start": start,
+            "prior_mean": prior_mean, "prior_sigma": prior_sigma}, inputs
+
+
+@functools.lru_cache(maxsize=64)
+def _labels(problem: Problem):
+    """A problem's evidence keys (``_keys``), their units (``output_units``) and which are inputs: the same for
+    every case of a batch."""
+    keys = tuple(_keys([path for path, _, _ in problem.evidence]))
+    return keys, tuple(output_units(p, is_out) for p, is_out, _ in problem.evidence), \
+        tuple(not is_out for _, is_out, _ in problem.evidence)
+
+
+def _result(case, unknowns, evidence, problem, row, arrays, info) -> FitResult:
+    """One case's FitResult from its best start (``row``, with ``at_best``: how many starts reached it) and its
+    analysis (``info``: ``uncertainty.one`` of the batch's ``analyse_batch``, edited here where the contact
+    sticks)."""
+    paths = list(problem.unknowns)
     m = len(evidence)
     x = np.asarray(row["x"], np.float64) + arrays["x_offset"]  # in the case's coordinates (_arrays)
-    info = analyse(unknowns, x, row["jacobian"], m, arrays["pw"], rtol)
-    keys = _keys(evidence)
+    keys, kinds, is_input = _labels(problem)
     cost_starts = row["cost_starts"]
     best_cost = float(row["cost"])
-    at_best = count_at_best(cost_starts)
+    at_best = int(row["at_best"])
     notes = []
-    res = row["residuals"][:m]
+    res = np.asarray(row["residuals"][:m], np.float64).tolist()
     status = status_text(row["status"])
     stalled = bool(row["stalled"])
     starts = len(cost_starts)
     if stalled:
-        reached = int(np.sum(~np.asarray(row["stalled_starts"])))
+        reached = starts - int(np.count_nonzero(row["stalled_starts"]))
         info["statements"] = [
             f"nothing is determined: the fit ended where the exchange is '{status}' (no impulse), and there no "
             f"unknown changes any evidence; {reached} of {starts} starts reached an exchange. This says nothing "
@@ -193,14 +226,15 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
     if worst and not stalled:
         notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{k} ({r:+.1f} sigma)" for k, r in worst)
                      + ": " + _misfit_cause(at_best, starts))
-    chi2, dof = 2.0 * best_cost, m + int(np.sum(arrays["pw"] > 0)) - int(np.sum(~info["undetermined"]))
+    chi2 = 2.0 * best_cost
+    dof = m + int(np.count_nonzero(arrays["pw"] > 0)) - int(np.count_nonzero(~info["undetermined"]))
     if not stalled and dof > 0 and chi2 > chi2_quantile(dof, CHI2_Z):
         notes.append(f"chi^2 = {chi2:.3g} for {dof} degree{'s' * (dof != 1)} of freedom: larger than the sigmas "
                      f"allow (by chance in under 1% of fits): " + _misfit_cause(at_best, starts))
-    jac = np.asarray(row["jacobian"])[:m]
-    for k, (path, is_out, _), jrow in zip(keys, problem.evidence, jac):
-        if not is_out and np.all(jrow == 0):
-            notes.append(f"evidence {k} is an input that no unknown changes: it only adds a constant to chi^2")
+    if any(is_input):
+        moved = np.any(np.asarray(row["jacobian"])[:m] != 0, axis=1)
+        notes += [f"evidence {k} is an input that no unknown changes: it only adds a constant to chi^2"
+                  for k, inp, mv in zip(keys, is_input, moved) if inp and not mv]
     if status != "ok":
         notes.append(f"the exchange at the estimate has status '{status}'")
     if "contact.friction" in paths and status == "ok":
@@ -210,22 +244,22 @@ def _result(case, unknowns, evidence, problem, row, arrays, rtol) -> FitResult:
             _friction_bounded_below(info, j, float(row["stick_ratio"]), unknowns[j].prior)
         elif math.isfinite(s) and math.isfinite(threshold) and mu + NEAR_STICK * s >= threshold:
             _friction_bounded_below(info, j, threshold, unknowns[j].prior, sliding=(mu, s))
-    corr = {p: {q: float(info["corr"][i, j]) for j, q in enumerate(paths)} for i, p in enumerate(paths)}
+    corr = {p: dict(zip(paths, r)) for p, r in zip(paths, info["corr"].tolist())}
     return FitResult(
         case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
-        estimate={p: float(v) for p, v in zip(paths, x)},
-        std={p: float(v) for p, v in zip(paths, info["std"])},
+        estimate=dict(zip(paths, x.tolist())),
+        std=dict(zip(paths, info["std"].tolist())),
         correlation=corr,
-        fitted={k: float(v) for k, v in zip(keys, np.asarray(row["predicted"], np.float64) + arrays["e_offset"])},
-        residuals={k: float(v) for k, v in zip(keys, res)},
+        fitted=dict(zip(keys, (np.asarray(row["predicted"], np.float64) + arrays["e_offset"]).tolist())),
+        residuals=dict(zip(keys, res)),
         converged=bool(row["converged"]),
         unidentified=info["statements"], at_bound=info["at_bound"],
         not_determined=[p for p, a, b in zip(paths, info["undetermined"], info["poorly"]) if a or b],
-        cost=best_cost, status=status, starts=len(cost_starts),
-        starts_converged=int(np.sum(row["converged_starts"])), starts_at_best=at_best,
+        cost=best_cost, status=status, starts=starts,
+        starts_converged=int(np.count_nonzero(row["converged_starts"])), starts_at_best=at_best,
         iterations=int(row["iterations"]),
-        singular_values=[float(s) for s in info["singular"]], covariance=info["cov"], notes=notes,
-        evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
+        singular_values=info["singular"].tolist(), covariance=np.array(info["cov"]), notes=notes,
+        evidence_kinds=list(kinds),
     )
 
 
@@ -235,7 +269,7 @@ _predict = quick_jit(predict, static_argnums=0)  # one row: quick to compile (``
 def _friction_bounded_below(info, j, least, prior=None, sliding=None):
     """A contact that sticks at the estimate: friction only has to exceed ``least`` (|J_t| / J_n); any
     value above gives the same exchange (to the smoothing), so the evidence sets no estimate of it.
-    Marks unknown ``j`` not determined in ``info`` (``analyse``'s dict) and says so; with a prior
+    Marks unknown ``j`` not determined in ``info`` (``uncertainty.one`` of ``analyse_batch``'s dict) and says so; with a prior
     (mean, sigma) on it, the prior alone fixes it: its standard error is the prior's sigma.
     ``sliding`` = (estimate, standard error): the contact slides at the estimate, but would stick from
     ``least`` on, within NEAR_STICK standard errors: above ``least`` the fit is as flat, so the
@@ -274,8 +308,8 @@ CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quan
 def chi2_quantile(dof: int, z: float) -> float:
     """The chi^2 distribution's quantile at the normal quantile z, by Wilson and Hilferty's cube-root
     approximation (within 1% of the exact 99% quantile from 1 degree of freedom up: 6.58 for 6.63)."""
-    a = 2.0 / (9.0 * dof)
-    return dof * (1.0 - a + z * math.sqrt(a)) ** 3
+    a = 2.0 / (9.0 * np.asarray(dof, np.float64))
+    return dof * (1.0 - a + z * np.sqrt(a)) ** 3
 
 
 def _misfit_cause(at_best: int, starts: int) -> str:
@@ -295,7 +329,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
     pred, _ = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
     pred = np.asarray(pred, np.float64)
-    keys = _keys(evidence)
+    keys, kinds, _ = _labels(problem)
     bad = [k for k, v in zip(keys, pred) if not np.isfinite(v)]
     if bad:
         why = ("; EES is undefined where both crushes are 0 (the impulse centroid on or outside both boxes), "
@@ -314,8 +348,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
         converged=False, unidentified=[], at_bound=[], not_determined=[], cost=float("inf"), status=reason,
         starts=starts,
         starts_converged=0, starts_at_best=0, iterations=0, singular_values=[],
-        covariance=np.full((len(paths), len(paths)), nan), notes=[],
-        evidence_kinds=[output_units(p, is_out) for p, is_out, _ in problem.evidence],
+        covariance=np.full((len(paths), len(paths)), nan), notes=[], evidence_kinds=list(kinds),
     )
 
 
@@ -356,26 +389,24 @@ MORE_STARTS = 8  # by default a fit takes up to this many rounds of ``starts`` s
 AGREE = 2  # starts that must reach the best fit before a fit takes no more starts
 
 
-def _settled(rows, problem, arrays) -> bool:
-    """Whether a case's starts so far (``rows``: the solver's outputs, (starts, ...)) found a fit it can keep:
-    the best cost reached by ``AGREE`` starts or more, with a chi^2 within its distribution's 99% quantile (the
-    evidence's count plus the priors' less the unknowns' degrees of freedom, at least 1). A fit that no start can
-    evaluate is settled: more starts would not help it."""
-    cost = rows["cost"]
-    if not np.isfinite(cost).any():
-        return True
-    dof = len(problem.evidence) + int(np.sum(arrays["pw"] > 0)) - len(problem.unknowns)
-    chi2 = 2.0 * float(np.min(cost[np.isfinite(cost)]))
-    return count_at_best(cost) >= AGREE and chi2 <= chi2_quantile(max(dof, 1), CHI2_Z)
+def _settled(cost, dof):
+    """Which cases' starts so far (``cost`` (B, S): each start's cost, inf where a case has no such start) found
+    a fit it can keep: the best cost reached by ``AGREE`` starts or more, with a chi^2 within its distribution's
+    99% quantile (``dof`` (B,): the evidence's count plus the priors' less the unknowns' degrees of freedom). A
+    fit that no start can evaluate is settled: more starts would not help it."""
+    finite = np.isfinite(cost)
+    chi2 = 2.0 * np.where(finite, cost, np.inf).min(axis=1)
+    return ~finite.any(axis=1) | ((count_at_best(cost) >= AGREE) & (chi2 <= chi2_quantile(np.maximum(dof, 1), CHI2_Z)))
 
 
 SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction, in parts of the friction needed to stick
 OFF_BOUND = np.linspace(0.1, 0.9, 8)  # the off-bound starts of an unknown pinned at a bound, in parts of its range
 
 
-def _other_side(rows, problem, arrays, count: int = 1):
-    """``count`` starts (count, n) in x from a kept fit where the rounds of starts can stop short of the best
-    fit, or None where there is no such place: the best fit has no exchange, or neither of these holds.
+def _other_side(best, problem, lo, hi, pw, count: int):
+    """Starts from kept fits where the rounds of starts can stop short of the best fit: (cases (K,), x (K,
+    ``count``, n)), for the cases (of B) whose best fit (``best``: its "x" (B, n), "status", "sliding",
+    "stick_ratio" (B,), in the fit's coordinates; ``lo``, ``hi``, ``pw`` (B, n)) is in such a place:
 
     - The contact sticks (friction an unknown without a prior, needed above its lower bound): the best fit with
       the friction at ``SLIDE_SIDE`` parts of what it needs. A contact that sticks has one cost for every
@@ -383,44 +414,96 @@ def _other_side(rows, problem, arrays, count: int = 1):
       cost; a sliding fit just below the edge, which the evidence may prefer, is reached only from that side.
     - Unknowns without a prior pinned at a bound: the best fit with each of them in turn at ``OFF_BOUND`` parts
       of its range. Starts that end against the same bound agree on its cost too, where a fit inside the
-      bounds (a restitution that trades against the speeds) can be better."""
-    if not np.isfinite(rows["cost"]).any():
-        return None
-    b = best_start(rows["cost"], rows["converged"])
-    if rows["status"][b] != OK:
-        return None
-    best = np.asarray(rows["x"][b], np.float64)
-    lo, hi = np.asarray(arrays["lo"], np.float64), np.asarray(arrays["hi"], np.float64)
-    free = np.asarray(arrays["pw"]) <= 0
-    x = np.repeat(best[None], count, axis=0)
-    if "contact.friction" in problem.unknowns and not bool(rows["sliding"][b]):
+      bounds (a restitution that trades against the speeds) can be better.
+
+    A best fit without an exchange is in neither."""
+    x0 = np.asarray(best["x"], np.float64)
+    ok = np.asarray(best["status"]) == OK
+    free = np.asarray(pw) <= 0
+    x = np.repeat(x0[:, None], count, axis=1)
+    stick = np.zeros(len(x0), bool)
+    if "contact.friction" in problem.unknowns:
         j = problem.unknowns.index("contact.friction")
-        needed = float(abs(rows["stick_ratio"][b]))
-        if free[j] and needed > lo[j]:
-            x[:, j] = lo[j] + np.resize(SLIDE_SIDE, count) * (needed - lo[j])
-            return x
+        needed = np.abs(np.asarray(best["stick_ratio"], np.float64))
+        stick = ok & ~np.asarray(best["sliding"], bool) & free[:, j] & (needed > lo[:, j])
+        x[stick, :, j] = lo[stick, j, None] + np.resize(SLIDE_SIDE, count) * (needed - lo[:, j])[stick, None]
     width = hi - lo
-    pinned = [j for j in range(len(best)) if free[j] and np.isfinite(width[j]) and width[j] > 0
-              and min(best[j] - lo[j], hi[j] - best[j]) <= AT_BOUND * width[j]]
-    if not pinned:
-        return None
-    for k in range(count):
-        j = pinned[k % len(pinned)]
-        x[k, j] = lo[j] + OFF_BOUND[(k // len(pinned)) % len(OFF_BOUND)] * width[j]
-    return x
+    with np.errstate(invalid="ignore"):  # inf - inf where a bound is missing: not pinned
+        pinned = free & np.isfinite(width) & (width > 0) & (np.minimum(x0 - lo, hi - x0) <= AT_BOUND * width)
+    pinned_cases = ok & ~stick & pinned.any(axis=1)
+    for i in np.flatnonzero(pinned_cases):
+        js = np.flatnonzero(pinned[i])
+        for k in range(count):
+            j = js[k % len(js)]
+            x[i, k, j] = lo[i, j] + OFF_BOUND[(k // len(js)) % len(OFF_BOUND)] * width[i, j]
+    cases = np.flatnonzero(stick | pinned_cases)
+    return cases, x[cases]
 
 
-MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts: a few row counts, a program each
+MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts on a CPU: a few row counts, a program each
+# elsewhere: powers of 8 up to any batch, so that a round of any size is one call
+MORE_BLOCKS_ELSEWHERE = tuple(8**k for k in range(1, 9))
 
 
 def _more_block(cases: int, todo: int, starts: int) -> int:
     """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
-    counts (``MORE_BLOCKS`` cases, at most ``cases``) that holds them all, else the largest. A call's
-    vmapped solver runs every row until its slowest converges, so a round of a few cases of a large batch is
-    not padded to hundreds of rows; fixed counts keep the compiled programs to a few, and a batch of up to 8
-    cases (a single fit among them) runs its further rounds in the program of its first."""
-    sizes = sorted({min(c, cases) for c in MORE_BLOCKS})
+    counts (``MORE_BLOCKS`` cases on the CPU's path, ``MORE_BLOCKS_ELSEWHERE`` on an accelerator's; at most
+    ``cases``) that holds them all, else the largest. A call's vmapped solver runs every row until its slowest
+    converges, so a round of a few cases of a large batch is not padded to hundreds of rows; fixed counts keep
+    the compiled programs to a few, and a round of nearly all the cases runs in the program of the first round.
+    On a CPU the rows of a call run one after another, so that calls of 64 cases cost what one call of them all
+    does; an accelerator runs a call's rows side by side, and a round of thousands of cases in calls of 64 would
+    wait on every call in turn."""
+    ladder = MORE_BLOCKS if on_cpu() else MORE_BLOCKS_ELSEWHERE
+    sizes = sorted({min(c, cases) for c in ladder})
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
+
+
+class _Starts:
+    """Every start a batch's cases have taken, round by round: per start, the few numbers the rounds decide on
+    (``table``: cost (inf where a case has no such start), converged, stalled, status, sliding, stick_ratio,
+    ``present``; (B, S) with S growing by a round's starts), and each round's solver outputs for the cases it
+    fitted, from which ``best`` gathers the best start's whole row."""
+
+    SMALL = {"cost": np.inf, "converged": False, "stalled": False, "status": -1, "sliding": False,
+             "stick_ratio": np.nan}
+
+    def __init__(self, out):
+        B, S = out["cost"].shape
+        self.per_round = S
+        self.count = np.full(B, S)
+        self.table = {k: np.asarray(out[k]) for k in self.SMALL} | {"present": np.ones((B, S), bool)}
+        self.rounds = [(np.arange(B), out)]
+
+    def add(self, cases, out):
+        """A round's outputs (``run_rows``'s, (T, S, ...)) for ``cases`` (T,)."""
+        B = len(self.count)
+        for k, fill in (self.SMALL | {"present": False}).items():
+            column = np.full((B, self.per_round), fill, dtype=self.table[k].dtype)
+            column[cases] = True if k == "present" else out[k]
+            self.table[k] = np.concatenate([self.table[k], column], axis=1)
+        self.count[cases] += self.per_round
+        self.rounds.append((cases, out))
+
+    def best(self, cases, keys=None) -> dict:
+        """The best start's outputs (``keys``, default all) of ``cases`` (K,): arrays (K, ...)."""
+        b = best_start(self.table["cost"][cases], self.table["converged"][cases])
+        r, s = np.divmod(b, self.per_round)
+        keys = self.rounds[0][1].keys() if keys is None else keys
+        out = {k: np.empty((len(cases), *v.shape[2:]), v.dtype) for k, v in self.rounds[0][1].items() if k in keys}
+        for n, (members, o) in enumerate(self.rounds):
+            take = np.flatnonzero(r == n)
+            if take.size:
+                at = np.searchsorted(members, cases[take])  # a round's cases are in increasing order
+                for k in out:
+                    out[k][take] = o[k][at, s[take]]
+        return out
+
+    def starts_of(self, i: int) -> dict:
+        """Case ``i``'s starts: their costs, convergence and stalls, in the order taken."""
+        have = self.table["present"][i]
+        return {"cost_starts": self.table["cost"][i][have], "converged_starts": self.table["converged"][i][have],
+                "stalled_starts": self.table["stalled"][i][have]}
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
@@ -456,7 +539,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     specs_e = [None] * len(cases) if evidence is None else list(evidence)
     if len(specs_u) != len(cases) or len(specs_e) != len(cases):
         raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
-    prepared = [_prepare(c, u, e) for c, u, e in zip(cases, specs_u, specs_e)]
+    checks = PathChecks()
+    prepared = [_prepare(c, u, e, checks) for c, u, e in zip(cases, specs_u, specs_e)]
     problem = prepared[0][2]
     for c, (_, _, p) in zip(cases, prepared):
         if p != problem:
@@ -470,55 +554,61 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                  "give fewer starts (--starts) or fit fewer cases at once")
     check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
                  "give fewer refits")
-    arrays = [_arrays(c, u, e, dtype) for c, (u, e, _) in zip(cases, prepared)]
+    stacked, case_inputs = _batch_arrays(cases, prepared, dtype)
+    inputs = stack(case_inputs)
     rng = np.random.default_rng(seed)
-    x0 = np.stack([first_starts(u, a, starts, rng) for (u, _, _), a in zip(prepared, arrays)])
-    z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x, a in zip(x0, arrays)])
-    stacked = {k: np.stack([a[k] for a in arrays]) for k in ("values", "sigmas", "lo", "hi", "pm", "pw")}
-    inputs = stack([a["inputs"] for a in arrays])
+    x0 = first_starts(problem.unknowns, stacked, starts, rng)
+    per_case = ("values", "sigmas", "lo", "hi", "pm", "pw")
     # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
     # (``ROWS_PER_CALL``): one compiled program
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
-    out = run_rows(problem, solver, max_iter, inputs, stacked["values"], stacked["sigmas"], stacked["lo"],
-               stacked["hi"], stacked["pm"], stacked["pw"], z0, smoothing, dtype, starts, block, devices)
-    out = [{k: v[i] for k, v in out.items()} for i in range(len(cases))]  # per case: (starts, ...)
+    first = run_rows(problem, solver, max_iter, inputs, *(stacked[k] for k in per_case),
+                     to_z(x0, stacked["lo"][:, None], stacked["hi"][:, None]), smoothing, dtype, starts, block, devices)
+    found = _Starts(first)
     limit = MORE_STARTS * starts if max_starts is None else max(int(max_starts), starts)
-    probed = set()
+    dof = len(problem.evidence) + np.sum(stacked["pw"] > 0, axis=1) - len(problem.unknowns)
+    probed = np.zeros(len(cases), bool)
     while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
-        room = [i for i, o in enumerate(out) if len(o["cost"]) + starts <= limit]
-        todo = [i for i in room if not _settled(out[i], problem, arrays[i])]
-        if todo:
-            z_more = np.stack([to_z(first_starts(prepared[i][0], arrays[i], starts + 1, rng)[1:], arrays[i]["lo"],
-                                    arrays[i]["hi"]) for i in todo])
+        room = found.count + starts <= limit
+        todo = np.flatnonzero(room & ~_settled(found.table["cost"], dof))
+        if todo.size:
+            x_more = first_starts(problem.unknowns, {k: v[todo] for k, v in stacked.items()}, starts + 1, rng)[:, 1:]
         else:  # settled: once per case, starts where the rounds can stop short (``_other_side``)
-            sides = {i: _other_side(out[i], problem, arrays[i], starts) for i in room if i not in probed}
-            todo = [i for i, x in sides.items() if x is not None]
-            if not todo:
+            ask = np.flatnonzero(room & ~probed & np.isfinite(found.table["cost"]).any(axis=1))
+            best = found.best(ask, ("x", "status", "sliding", "stick_ratio"))
+            sides, x_more = _other_side(best, problem, *(stacked[k][ask] for k in ("lo", "hi", "pw")), starts)
+            todo = ask[sides]
+            if not todo.size:
                 break
-            probed.update(todo)
-            z_more = np.stack([to_z(sides[i], arrays[i]["lo"], arrays[i]["hi"]) for i in todo])
-        more = run_rows(problem, solver, max_iter, stack([arrays[i]["inputs"] for i in todo]),
-                        *(stacked[k][todo] for k in ("values", "sigmas", "lo", "hi", "pm", "pw")), z_more, smoothing,
-                        dtype, starts, block or _more_block(len(cases), len(todo), starts), devices)
-        for j, i in enumerate(todo):
-            out[i] = {k: np.concatenate([v, more[k][j]]) for k, v in out[i].items()}
-    best = [best_start(o["cost"], o["converged"]) for o in out]
-    threshold = np.full(len(cases), np.nan)
+            probed[todo] = True
+        z_more = to_z(x_more, stacked["lo"][todo, None], stacked["hi"][todo, None])
+        found.add(todo, run_rows(problem, solver, max_iter, jax.tree_util.tree_map(lambda v: v[todo], inputs),
+                                 *(stacked[k][todo] for k in per_case), z_more, smoothing, dtype, starts,
+                                 block or _more_block(len(cases), todo.size, starts), devices))
+    everyone = np.arange(len(cases))
+    rows = found.best(everyone)
+    rows["at_best"] = count_at_best(found.table["cost"])
+    fitted = np.flatnonzero(np.isfinite(found.table["cost"]).any(axis=1))
     # the friction at which a sliding best fit would stick, for all those cases in one call
-    sliding = [i for i, b in enumerate(best) if "contact.friction" in problem.unknowns and out[i]["status"][b] == OK
-               and bool(out[i]["sliding"][b])]
-    if sliding:
-        threshold[sliding] = stick_thresholds(problem, stack([arrays[i]["inputs"] for i in sliding]),
-                                              np.stack([out[i]["x"][best[i]] for i in sliding]), smoothing, dtype)
+    rows["stick_threshold"] = np.full(len(cases), np.nan)
+    if "contact.friction" in problem.unknowns:
+        sliding = fitted[(rows["status"][fitted] == OK) & rows["sliding"][fitted].astype(bool)]
+        if sliding.size:
+            rows["stick_threshold"][sliding] = stick_thresholds(
+                problem, jax.tree_util.tree_map(lambda v: v[sliding], inputs), rows["x"][sliding], smoothing, dtype)
+    info = analyse_batch(problem.unknowns, rows["x"][fitted] + stacked["x_offset"][fitted], rows["jacobian"][fitted],
+                         len(problem.evidence), *(stacked[k][fitted] for k in ("lower", "upper", "prior_sigma", "pw")),
+                         rtol)
+    where = dict(zip(fitted.tolist(), range(fitted.size)))
     results = []
-    for i, (case, (u, e, _), a) in enumerate(zip(cases, prepared, arrays)):
-        if not np.isfinite(out[i]["cost"]).any():  # no start could even be evaluated
-            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, len(out[i]["cost"])))
+    for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
+        a = {k: v[i] for k, v in stacked.items()} | {"inputs": case_inputs[i]}
+        if i not in where:  # no start could even be evaluated
+            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, int(found.count[i])))
             continue
-        row = {k: v[best[i]] for k, v in out[i].items()}
-        row.update(cost_starts=out[i]["cost"], converged_starts=out[i]["converged"], stalled_starts=out[i]["stalled"],
-                   stick_threshold=threshold[i])
-        r = _result(case, u, e, problem, row, a, rtol)
+        row = {k: v[i] for k, v in rows.items()}
+        row.update(found.starts_of(i))
+        r = _result(case, u, e, problem, row, a, one(info, where[i]))
         if posterior:
             r.posterior = sample_posterior(problem, a, row["z"], draws=int(posterior), chains=int(chains), seed=seed,
                                            smoothing=smoothing, dtype=dtype, devices=devices, offset=a["x_offset"],

@@ -87,25 +87,31 @@ def stick_thresholds(problem: Problem, inputs, x, smoothing, dtype):
 
 
 def best_start(cost, converged):
-    """Index of the best start: the lowest cost, preferring a converged start whose cost ties it."""
+    """Index of the best start along the last axis of ``cost`` and ``converged`` ((..., S)): the lowest cost,
+    preferring a converged start whose cost ties it (the first such of the lowest cost). An int for one fit's
+    (S,), else an array of the leading shape."""
+    cost = np.asarray(cost, np.float64)
     cost = np.where(np.isfinite(cost), cost, np.inf)
-    lowest = cost.min()
-    tie = cost <= lowest + 1e-9 * max(abs(lowest), 1.0) + 1e-12
-    pick = tie & converged
-    return int(np.flatnonzero(pick)[np.argmin(cost[pick])]) if pick.any() else int(np.argmin(cost))
+    lowest = cost.min(axis=-1, keepdims=True)
+    tie = cost <= lowest + 1e-9 * np.maximum(np.abs(lowest), 1.0) + 1e-12
+    pick = tie & np.asarray(converged, bool)
+    key = np.where(pick, cost, np.inf)
+    first_pick = np.argmax(pick & (key == key.min(axis=-1, keepdims=True)), axis=-1)
+    b = np.where(pick.any(axis=-1), first_pick, np.argmin(cost, axis=-1))
+    return int(b) if b.ndim == 0 else b
 
 
 AGREE_COST = 1e-6  # starts whose cost is within this fraction of the best (or 1e-9 absolute) reached the best fit
 
 
-def count_at_best(cost) -> int:
-    """How many starts (costs (S,)) reached the best cost, to ``AGREE_COST``."""
+def count_at_best(cost):
+    """How many starts (costs (..., S), along the last axis) reached the best cost, to ``AGREE_COST``: an int for
+    one fit's (S,), else an array of the leading shape."""
     cost = np.asarray(cost, np.float64)
     finite = np.isfinite(cost)
-    if not finite.any():
-        return 0
-    best = cost[finite].min()
-    return int(np.sum(finite & (cost <= best + AGREE_COST * max(best, 1.0) + 1e-9)))
+    best = np.where(finite, cost, np.inf).min(axis=-1, keepdims=True)
+    n = np.sum(finite & (cost <= best + AGREE_COST * np.maximum(best, 1.0) + 1e-9), axis=-1)
+    return int(n) if n.ndim == 0 else n
 
 
 def stack(trees):

@@ -1,6 +1,7 @@
 """Uncertainty at the optimum: Laplace covariance, what the evidence does not determine, in words.
 
-Everything here is NumPy on one case (small n x n matrices), after the jitted fit.
+Everything here is NumPy, after the jitted fit, on a batch of fits of the same unknowns (small n x n
+matrices, decomposed in one batched call each).
 
 Covariance. With J the Jacobian of the whitened residuals (evidence rows and prior rows) with
 respect to the *physical* unknowns x at the optimum, the Gauss-Newton (Laplace) covariance is
@@ -87,17 +88,12 @@ def _number(v: float, digits: int) -> str:
     return f"{v:.{digits}g}"
 
 
-def scales(unknowns, x) -> np.ndarray:
-    """Typical range s_j of each unknown (SI) for scaling the Jacobian's columns."""
-    out = []
-    for u, xj in zip(unknowns, x):
-        if math.isfinite(u.lower) and math.isfinite(u.upper):
-            out.append(u.upper - u.lower)
-        elif u.prior is not None:
-            out.append(u.prior[1])
-        else:
-            out.append(max(abs(float(xj)), 1.0))
-    return np.asarray(out, dtype=np.float64)
+def scales(lo, hi, prior_sigma, x) -> np.ndarray:
+    """Typical range s_j of each unknown (SI) for scaling the Jacobian's columns: the bound width, else the
+    prior's sigma (NaN where none), else max(|x_j|, 1). Arrays of one shape, elementwise."""
+    width = hi - lo
+    return np.where(np.isfinite(width), width, np.where(np.isfinite(prior_sigma), prior_sigma,
+                                                        np.maximum(np.abs(x), 1.0)))
 
 
 def _rref_basis(N: np.ndarray, tol: float = 1e-9) -> np.ndarray:
@@ -120,25 +116,26 @@ def _rref_basis(N: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return (A / np.max(np.abs(A), axis=1, keepdims=True)).T
 
 
-def describe_direction(unknowns, v_scaled: np.ndarray, scale: np.ndarray, prior_paths: list[str]) -> str:
-    """Words for a null direction v (in scaled units): which unknowns move together, by how much."""
+def describe_direction(paths, v_scaled: np.ndarray, scale: np.ndarray, prior_paths: list[str]) -> str:
+    """Words for a null direction v (in scaled units) of the unknowns at ``paths``: which move together, by how
+    much."""
     d = v_scaled * scale  # SI
     big = np.abs(v_scaled) >= INVOLVED * np.max(np.abs(v_scaled))
-    idx = [j for j in range(len(unknowns)) if big[j]]  # in the user's order; the first is the reference
-    names = [unknowns[j].path for j in idx]
+    idx = [j for j in range(len(paths)) if big[j]]  # in the user's order; the first is the reference
+    names = [paths[j] for j in idx]
     if len(idx) == 1:
         text = (f"{names[0]} is not determined by the evidence: changing it changes none of the evidence "
                 "(to first order)")
     else:
         ref = idx[0]
-        kind = input_kind(unknowns[ref].path)
+        kind = input_kind(paths[ref])
         _, unit_si, step = DISPLAY.get(kind, ("", 1.0, 1.0))
         factor = step * unit_si / abs(d[ref])
         parts = []
         for j in idx:
             amount = d[j] * factor * np.sign(d[ref])
             verb = "raising" if amount > 0 else "lowering"
-            parts.append(f"{verb} {unknowns[j].path} by {fmt(abs(amount), input_kind(unknowns[j].path), 3)}")
+            parts.append(f"{verb} {paths[j]} by {fmt(abs(amount), input_kind(paths[j]), 3)}")
         listing = ", ".join(names[:-1]) + f" and {names[-1]}"
         text = (f"{listing} are not determined separately: {parts[0]} while " + ", ".join(parts[1:])
                 + " changes none of the evidence (to first order); the evidence fixes only a combination of them")
@@ -147,77 +144,84 @@ def describe_direction(unknowns, v_scaled: np.ndarray, scale: np.ndarray, prior_
     return text
 
 
-def analyse(unknowns, x, J, m: int, prior_weight, rtol: float):
-    """Covariance and identifiability at the optimum.
+def one(info: dict, i: int) -> dict:
+    """Row ``i`` of ``analyse_batch``'s dict (arrays are views: editing them edits the batch's)."""
+    return {k: v[i] for k, v in info.items()}
 
-    unknowns: list of Unknown (n); x (n,) SI; J (m + n, n): d(whitened residuals)/dx;
-    m: number of evidence rows; prior_weight (n,): 1/prior sigma or 0; rtol: relative
-    singular-value threshold. Returns dict with cov (n, n) (inf rows/cols for undetermined
-    unknowns), std (n,), corr (n, n) (nan where undefined), singular (singular values of the
-    scaled evidence Jacobian), statements (list of str), undetermined (n,) bool, poorly (n,) bool (a
-    standard error wider than a uniform guess within the bounds), at_bound (list of str).
+
+def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: float) -> dict:
+    """Covariance and identifiability at the optimum of B fits of the same unknowns, in NumPy's batched
+    linear algebra (one decomposition call for all rows, not one per fit).
+
+    paths: the n unknowns' input paths; x (B, n) SI; J (B, m + n, n): d(whitened residuals)/dx; m: number of
+    evidence rows; lo, hi (B, n): the unknowns' bounds (SI, +-inf for none); prior_sigma (B, n) (NaN where
+    none); prior_weight (B, n): 1/prior sigma or 0; rtol: relative singular-value threshold. Returns a dict
+    with cov (B, n, n) (inf rows/cols for undetermined unknowns), std (B, n), corr (B, n, n) (nan where
+    undefined), singular (B, n) (singular values of the scaled evidence Jacobian), undetermined (B, n) bool,
+    poorly (B, n) bool (a standard error wider than a uniform guess within the bounds), and per row lists of
+    str: statements, at_bound.
     """
-    x = np.asarray(x, np.float64)
-    J = np.asarray(J, np.float64)
-    n = len(unknowns)
-    pw = np.asarray(prior_weight, np.float64)
-    s_j = scales(unknowns, x)
-    Js = J[:m] * s_j
-    statements = []
-    if not np.all(np.isfinite(Js)):
-        nan = np.full(n, np.nan)
-        return {"cov": np.full((n, n), np.nan), "std": nan, "corr": np.full((n, n), np.nan), "singular": nan,
-                "statements": ["the model has no finite derivatives at the estimate: no uncertainty can be given"],
-                "undetermined": np.ones(n, bool), "poorly": np.zeros(n, bool), "at_bound": []}
+    x, J, lo, hi, ps, pw = (np.asarray(a, np.float64) for a in (x, J, lo, hi, prior_sigma, prior_weight))
+    B, n = x.shape
+    s_j = scales(lo, hi, ps, x)
+    Js = J[:, :m] * s_j[:, None, :]
+    bad = ~np.all(np.isfinite(Js), axis=(1, 2))
+    Js = np.where(bad[:, None, None], 0.0, Js)  # decomposed as zeros, then reported as NaN
     _, sv, Vt = np.linalg.svd(Js, full_matrices=True)
-    sv_full = np.zeros(n)
-    sv_full[: len(sv)] = sv
-    smax = sv_full.max() if n else 0.0
-    null = sv_full <= rtol * smax if smax > 0 else np.ones(n, bool)
-    P = np.diag((pw * s_j) ** 2)
-    H = Js.T @ Js + P
+    sv_full = np.zeros((B, n))
+    sv_full[:, : sv.shape[1]] = sv
+    smax = sv_full.max(axis=1)
+    null = np.where((smax > 0)[:, None], sv_full <= rtol * smax[:, None], True)
+    p = (pw * s_j) ** 2
+    H = np.swapaxes(Js, 1, 2) @ Js + p[:, :, None] * np.eye(n)
     lam, Q = np.linalg.eigh(H)
-    cut = (rtol * smax) ** 2 if smax > 0 else 0.0
-    lam_max = max(lam.max(), (pw * s_j).max() ** 2 if n else 0.0)
-    cut = max(cut, rtol**2 * lam_max)
-    keep = lam > cut
-    N_total = Q[:, ~keep]
-    undetermined = np.zeros(n, bool)
-    if N_total.size:
-        rows = np.abs(N_total)
-        undetermined = np.max(rows / np.max(rows, axis=0, keepdims=True), axis=1) >= INVOLVED
-    cov_s = (Q[:, keep] / lam[keep]) @ Q[:, keep].T
-    cov = cov_s * np.outer(s_j, s_j)
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    std[undetermined] = np.inf
+    cut = np.where(smax > 0, (rtol * smax) ** 2, 0.0)
+    cut = np.maximum(cut, rtol**2 * np.maximum(lam.max(axis=1), p.max(axis=1)))
+    keep = lam > cut[:, None]
+    rows = np.abs(Q)
+    share = rows / rows.max(axis=1, keepdims=True)  # each eigenvector's components against its largest
+    undetermined = np.where(~keep[:, None, :], share, -np.inf).max(axis=2) >= INVOLVED
+    w = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
+    cov = ((Q * w[:, None, :]) @ np.swapaxes(Q, 1, 2)) * (s_j[:, :, None] * s_j[:, None, :])
+    std = np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0))
+    std = np.where(undetermined, np.inf, std)
     with np.errstate(all="ignore"):
-        corr = cov / np.outer(std, std)
-    corr[undetermined, :] = np.nan
-    corr[:, undetermined] = np.nan
-    np.fill_diagonal(corr, np.where(undetermined, np.nan, 1.0))
-    cov[undetermined, :] = np.inf
-    cov[:, undetermined] = np.inf
+        corr = cov / (std[:, :, None] * std[:, None, :])
+    either = undetermined[:, :, None] | undetermined[:, None, :]
+    corr = np.where(either, np.nan, corr)
+    diag = np.arange(n)
+    corr[:, diag, diag] = np.where(undetermined, np.nan, 1.0)
+    cov = np.where(either, np.inf, cov)
+    width = np.where(np.isfinite(hi - lo), hi - lo, s_j)
+    at_lo = np.isfinite(lo) & (np.abs(x - lo) <= AT_BOUND * width)
+    at_hi = np.isfinite(hi) & (np.abs(x - hi) <= AT_BOUND * width)
+    with np.errstate(invalid="ignore"):
+        poorly = ~undetermined & np.isfinite(lo) & np.isfinite(hi) & (std > (hi - lo) / math.sqrt(12.0))
 
-    if null.any():
-        basis = _rref_basis(Vt.T[:, null])
+    statements, at_bound = [[] for _ in range(B)], [[] for _ in range(B)]
+    kinds = [input_kind(path) for path in paths]
+    for i in np.flatnonzero(null.any(axis=1) & ~bad):
+        basis = _rref_basis(Vt[i].T[:, null[i]])
         for v in basis.T:
             involved = np.abs(v) >= INVOLVED * np.max(np.abs(v))
-            fixed_by_prior = not any(undetermined[involved])
-            priors = [unknowns[j].path for j in np.flatnonzero(involved) if pw[j] > 0] if fixed_by_prior else []
-            statements.append(describe_direction(unknowns, v, s_j, priors))
-    at_bound = []
-    poorly = np.zeros(n, bool)
-    for j, u in enumerate(unknowns):
-        kind = input_kind(u.path)
-        width = u.upper - u.lower if math.isfinite(u.upper - u.lower) else s_j[j]
-        for side, b in (("lower", u.lower), ("upper", u.upper)):
-            if math.isfinite(b) and abs(x[j] - b) <= AT_BOUND * width:
-                at_bound.append(f"{u.path} is at its {side} bound {fmt(b, kind)}: the bound, not the evidence, "
-                                "sets it (its standard error ignores the bound)")
-        if (not undetermined[j] and math.isfinite(u.lower) and math.isfinite(u.upper)
-                and std[j] > (u.upper - u.lower) / math.sqrt(12.0)):
-            poorly[j] = True
-            statements.append(f"{u.path} is poorly determined: its standard error {fmt(std[j], kind)} is wider than "
-                              f"a uniform guess within its bounds ({fmt((u.upper - u.lower) / math.sqrt(12), kind)})")
+            fixed_by_prior = not any(undetermined[i][involved])
+            priors = [paths[j] for j in np.flatnonzero(involved) if pw[i, j] > 0] if fixed_by_prior else []
+            statements[i].append(describe_direction(paths, v, s_j[i], priors))
+    for i in np.flatnonzero((at_lo | at_hi | poorly).any(axis=1) & ~bad):
+        for j, (path, kind) in enumerate(zip(paths, kinds)):
+            for side, b, at in (("lower", lo[i, j], at_lo[i, j]), ("upper", hi[i, j], at_hi[i, j])):
+                if at:
+                    at_bound[i].append(f"{path} is at its {side} bound {fmt(b, kind)}: the bound, not the evidence, "
+                                       "sets it (its standard error ignores the bound)")
+            if poorly[i, j]:
+                statements[i].append(
+                    f"{path} is poorly determined: its standard error {fmt(std[i, j], kind)} is wider than a uniform "
+                    f"guess within its bounds ({fmt((hi[i, j] - lo[i, j]) / math.sqrt(12), kind)})")
+    if bad.any():
+        nan = np.nan
+        cov[bad], std[bad], corr[bad], sv_full[bad] = nan, nan, nan, nan
+        undetermined[bad], poorly[bad] = True, False
+        for i in np.flatnonzero(bad):
+            statements[i] = ["the model has no finite derivatives at the estimate: no uncertainty can be given"]
     return {"cov": cov, "std": std, "corr": corr, "singular": sv_full, "statements": statements,
             "undetermined": undetermined, "poorly": poorly, "at_bound": at_bound}

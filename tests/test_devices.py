@@ -40,7 +40,10 @@ def two_devices():
 def test_two_processes_each_solve_their_share_as_two_devices_do(two_devices, tmp_path):
     """Two processes of one device each (``jax.distributed`` on a free local port), each its share: together
     the values of one process over two devices, where every chunk and every call of the solver is split
-    between them. Each row is computed alone, so neither split changes a value beyond rounding."""
+    between them. Each row is computed alone, so neither split changes a sweep's value beyond rounding. A fit's
+    starts are drawn from its batch's seed, so a split starts it elsewhere, and it stops within the solver's
+    tolerance of the same estimate (a cosine of 1e-8 between the residuals and the Jacobian: about 1e-8 of the
+    speed's standard error of 0.4 mph)."""
     out = two_devices
     assert out["devices"] == ["cpu:0", "cpu:1"] and out["range"] == [0, 1000] and len(out["impulse"]) == 1000
     # the evidence is the shipped case's moved by about a sigma (0.3 mph): estimates near its 20 mph
@@ -59,4 +62,4 @@ def test_two_processes_each_solve_their_share_as_two_devices_do(two_devices, tmp
     speeds = {**parts[0]["speed_mph"], **parts[1]["speed_mph"]}
     assert sorted(parts[0]["speed_mph"]) == ["0", "2", "4", "6"] and sorted(speeds) == sorted(two_devices["speed_mph"])
     for k, v in speeds.items():
-        assert abs(v - two_devices["speed_mph"][k]) <= 1e-9, k
+        assert abs(v - two_devices["speed_mph"][k]) <= 1e-7, k

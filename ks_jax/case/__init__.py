@@ -19,8 +19,8 @@ from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
 from .paths import PathError, automatic_part, canonical_path, check_output_path, get_input, get_output
-from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, set_input
-from .paths import without_road
+from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, path_key
+from .paths import set_input, without_road
 
 __all__ = [
     "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs", "CaseWarning", "ContactInputs",
@@ -28,5 +28,5 @@ __all__ = [
     "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input", "get_output",
     "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases", "on_fixed_object",
     "output_kind",
-    "parse_output_value", "parse_path", "set_input", "to_pytrees", "undefined_kind", "without_road",
+    "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees", "undefined_kind", "without_road",
 ]

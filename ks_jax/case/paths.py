@@ -173,6 +173,17 @@ def on_fixed_object(case: "Case", path) -> str | None:
             "has no inputs to vary and no per-vehicle results (vehicles[0] is the vehicle)")
 
 
+def path_key(case: "Case") -> tuple:
+    """All that ``get_input``, ``without_road``, ``automatic_part`` and ``on_fixed_object`` read of ``case`` to
+    accept or refuse a path: the fixed object's kind, which of the road and its vehicles are missing, and which
+    contact parts are automatic. Cases with one key accept and refuse the same paths, so a batch of cases checks
+    each path once per key."""
+    road = None if case.inputs is None else case.inputs.road
+    return (None if case.fixed is None else case.fixed.kind, road is None,
+            () if road is None else tuple(v is None for v in road.vehicles), bool(case.auto_point),
+            bool(case.auto_normal))
+
+
 def input_ties(case: "Case", paths) -> tuple:
     """((k, path), ...): the inputs that follow ``paths[k]`` when the inputs at ``paths`` are varied (a
     sweep, a fit), as re-solving the case file with the new value would move them (docs/model.md, "Inputs"):

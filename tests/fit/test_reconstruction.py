@@ -65,12 +65,13 @@ def oblique():
 def test_the_default_starts_go_on_until_the_best_fit_is_found_twice(oblique):
     """With one round of 8 starts (``max_starts=8``) the fourth case ends in a local minimum at chi^2 about
     70, reached by several starts: its chi^2 is far above its 99% quantile (13.3 for 10 evidence less 6
-    unknowns), so the default draws 8 more starts, which reach chi^2 0 and the truth (recovered in
-    ``test_recovers_six_unknowns_of_sliding_oblique_cases``). The three others are settled by their first 8."""
+    unknowns), so the default draws rounds of 8 more starts until two of them reach chi^2 0 and the truth
+    (recovered in ``test_recovers_six_unknowns_of_sliding_oblique_cases``). The three others are settled by their
+    first 8."""
     cases, truths, unknowns, evidence, results = oblique
     one_round = fit.reconstruct_batch(cases, unknowns, evidence, seed=5, max_starts=8)
     assert [r.starts for r in one_round] == [8] * 4 and one_round[3].chi2 > 13.3
-    assert [r.starts for r in results] == [8, 8, 8, 16]
+    assert [r.starts for r in results[:3]] == [8, 8, 8] and results[3].starts in (16, 24, 32)
     assert all(r.starts_at_best >= 2 for r in results) and results[3].chi2 < 1e-10
     for a, b in zip(one_round[:3], results[:3]):  # the first round is the same fit
         assert a.estimate == b.estimate

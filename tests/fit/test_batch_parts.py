@@ -1,0 +1,140 @@
+"""The host's part of a batch of fits, in NumPy over all the batch's fits at once: the starts (``fit.starts``), the
+Laplace analysis (``fit.uncertainty.analyse_batch``) and the size of a further round's calls. Each is checked
+against what it must be for every fit of the batch on its own: the Latin hypercube's strata, the closed-form
+covariance (J^T J)^-1, and each fit analysed alone."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fit.reconstruction import MORE_BLOCKS, _more_block
+from fit.starts import START_SPREAD, starts
+from fit.uncertainty import analyse_batch, one
+from ks_jax import backend
+
+PATHS = ["vehicles[0].speed", "vehicles[1].speed", "contact.restitution", "contact.point[0]"]
+NAN, INF = math.nan, math.inf
+
+
+def test_a_batchs_starts_are_each_fits_latin_hypercube_within_its_own_bounds():
+    """Five fits with their own bounds, starts and priors, drawn at once. Where both bounds are given, the
+    first start is the given start or the middle, and the other 15 starts of each fit put one draw in each of
+    15 equal strata of its bounds' inner 96%; where a bound is missing, the draws are reflected into the bound
+    that is given, about the prior's mean or the case's value, and spread by the prior's sigma or by at least
+    ``START_SPREAD`` of the kind."""
+    rng = np.random.default_rng(0)
+    B, S = 5, 16
+    lower = np.array([[0, 0, 0, -2.0]] * B) + rng.uniform(0, 1, (B, 4))
+    upper = lower + rng.uniform(1, 30, (B, 4))
+    lower[:, 1], upper[:, 1] = 5.0, INF  # vehicles[1].speed: a lower bound only
+    start = np.full((B, 4), NAN)
+    start[2, 0] = lower[2, 0] + 0.25 * (upper[2, 0] - lower[2, 0])
+    prior_mean, prior_sigma = np.full((B, 4), NAN), np.full((B, 4), NAN)
+    prior_mean[1, 1], prior_sigma[1, 1] = 20.0, 2.0
+    current = np.full((B, 4), 12.0)
+    x = starts(PATHS, lower, upper, start, prior_mean, prior_sigma, current, S, rng)
+    assert x.shape == (B, S, 4)
+    for i in range(B):
+        for j in (0, 2, 3):
+            lo, hi = lower[i, j], upper[i, j]
+            first = start[i, j] if i == 2 and j == 0 else 0.5 * (lo + hi)
+            assert x[i, 0, j] == pytest.approx(first, rel=1e-15)
+            u = (x[i, 1:, j] - lo) / (hi - lo)
+            assert np.all((u >= 0.02) & (u < 0.98))
+            assert sorted(np.floor((u - 0.02) / 0.96 * (S - 1)).astype(int)) == list(range(S - 1))
+        assert np.all(x[i, 1:, 1] >= 5.0)
+    assert x[1, 0, 1] == 20.0 and x[0, 0, 1] == 12.0  # the prior's mean, else the case's value
+    # spread about the first start: the prior's sigma (2 m/s), else START_SPREAD's 10 m/s (12 m/s is larger)
+    assert np.std(x[1, 1:, 1]) < 4.0 and np.std(x[[0, 2, 3, 4], 1:, 1]) > START_SPREAD["velocity"] / 2
+
+
+def test_a_fit_drawn_alone_draws_the_same_starts_in_a_batch_of_one():
+    """Drawn as a batch of one, a fit's starts are those of the same seed: the batch keeps one fit's draws."""
+    lower, upper = np.array([[0.0, 0.0, 0.0, -1.0]]), np.array([[40.0, 40.0, 0.6, 1.0]])
+    none = np.full((1, 4), NAN)
+    a = starts(PATHS, lower, upper, none, none, none, np.zeros((1, 4)), 8, np.random.default_rng(3))
+    rng = np.random.default_rng(3)
+    for j in range(4):  # the draws of one fit, unknown by unknown: a permutation of the strata, then offsets
+        strata = (rng.permutation(7) + rng.random(7)) / 7
+        np.testing.assert_array_equal(a[0, 1:, j], lower[0, j] + (upper[0, j] - lower[0, j]) * (0.02 + 0.96 * strata))
+
+
+def _jacobians(rng, B, m, n):
+    return rng.normal(size=(B, m + n, n))
+
+
+def test_the_batch_analysis_is_the_closed_form_covariance_and_each_fit_analysed_alone():
+    """Six fits of four unknowns and five pieces of evidence, analysed at once:
+    - fits 0-2, full rank, no priors, within their bounds: the covariance is (J^T J)^-1 in the physical units,
+      fit 2's evidence a million times more precise (what is small for one fit is not small for another);
+    - fit 3: its evidence does not move contact.restitution (a zero column): that unknown is not determined,
+      its standard error inf, its correlations NaN, and a sentence names it;
+    - fit 4: the same zero column, with a prior of sigma 0.05 on it: the prior fixes it (standard error 0.05);
+    - fit 5: a non-finite Jacobian: no uncertainty, said so.
+    Every fit's analysis equals its analysis alone (a batch of one)."""
+    rng = np.random.default_rng(1)
+    B, m, n = 6, 5, 4
+    J = _jacobians(rng, B, m, n) * [1.0, 1.0, 100.0, 10.0]  # per unit of each: restitution's range is 0.6
+    J[:, m:] = 0.0  # no prior rows, except fit 4's below
+    J[2] *= 1e6
+    lower = np.tile([0.0, 0.0, 0.0, -1.0], (B, 1))
+    upper = np.tile([40.0, 40.0, 0.6, 1.0], (B, 1))
+    x = 0.5 * (lower + upper)
+    prior_sigma, pw = np.full((B, n), NAN), np.zeros((B, n))
+    J[3:5, :m, 2] = 0.0
+    prior_sigma[4, 2], pw[4, 2] = 0.05, 1.0 / 0.05
+    J[4, m + 2, 2] = pw[4, 2]
+    J[5, 0, 0] = np.nan
+    info = analyse_batch(PATHS, x, J, m, lower, upper, prior_sigma, pw, 1e-6)
+    for i in range(3):
+        cov = np.linalg.inv(J[i, :m].T @ J[i, :m])
+        np.testing.assert_allclose(info["cov"][i], cov, rtol=1e-9)
+        np.testing.assert_allclose(info["std"][i], np.sqrt(np.diag(cov)), rtol=1e-9)
+        np.testing.assert_allclose(info["corr"][i], cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov))),
+                                   rtol=1e-9, atol=1e-12)
+        assert not info["undetermined"][i].any() and info["statements"][i] == []
+    assert list(info["undetermined"][3]) == [False, False, True, False] and info["std"][3, 2] == INF
+    assert np.isnan(info["corr"][3, 2]).all() and np.isinf(info["cov"][3, :, 2]).all()
+    assert [s for s in info["statements"][3] if s.startswith("contact.restitution is not determined")]
+    assert not info["undetermined"][4].any() and info["std"][4, 2] == pytest.approx(0.05, rel=1e-9)
+    assert any("Only the prior on contact.restitution" in s for s in info["statements"][4])
+    assert np.isnan(info["std"][5]).all() and "no finite derivatives" in info["statements"][5][0]
+    for i in range(B):
+        alone = one(analyse_batch(PATHS, x[i:i + 1], J[i:i + 1], m, lower[i:i + 1], upper[i:i + 1],
+                                  prior_sigma[i:i + 1], pw[i:i + 1], 1e-6), 0)
+        batch = one(info, i)
+        for k in ("cov", "std", "corr", "singular", "undetermined", "poorly"):
+            np.testing.assert_allclose(batch[k], alone[k], rtol=1e-12, atol=1e-15, err_msg=f"fit {i}: {k}")
+        assert batch["statements"] == alone["statements"] and batch["at_bound"] == alone["at_bound"]
+
+
+def test_the_batch_analysis_says_which_fits_sit_on_a_bound_or_are_poorly_determined():
+    """Two fits, each piece of evidence moved by one unknown: fit 0 is poorly determined in contact.point[0]
+    (standard error 1/0.1 = 10 m, wider than a uniform guess within its 2 m of bounds: 2/sqrt(12) = 0.58 m) and
+    sits on its lower speed bound; fit 1 (standard error 0.1 m) is neither."""
+    m, n = 4, 4
+    J = np.zeros((2, m + n, n))
+    J[:, np.arange(4), np.arange(4)] = [[1.0, 1.0, 100.0, 0.1], [1.0, 1.0, 100.0, 10.0]]
+    lower, upper = np.tile([0.0, 0.0, 0.0, -1.0], (2, 1)), np.tile([40.0, 40.0, 0.6, 1.0], (2, 1))
+    x = np.array([[0.0, 20.0, 0.3, 0.0], [10.0, 20.0, 0.3, 0.0]])
+    none = np.full((2, n), NAN)
+    info = analyse_batch(PATHS, x, J, m, lower, upper, none, np.zeros((2, n)), 1e-6)
+    assert list(info["poorly"][0]) == [False, False, False, True] and not info["poorly"][1].any()
+    assert info["std"][0, 3] == pytest.approx(10.0, rel=1e-12) and info["std"][1, 3] == pytest.approx(0.1, rel=1e-12)
+    assert [s for s in info["statements"][0] if s.startswith("contact.point[0] is poorly determined")]
+    assert len(info["at_bound"][0]) == 1 and info["at_bound"][0][0].startswith("vehicles[0].speed is at its lower")
+    assert info["at_bound"][1] == [] and info["statements"][1] == []
+
+
+def test_a_further_round_is_one_call_on_an_accelerator_and_calls_of_64_cases_on_a_cpu():
+    """A round of 228 of 1000 cases x 8 starts: on a CPU, calls of 64 cases (a call's rows run one after
+    another there, and few row counts compile few programs); on an accelerator, one call of 512 cases (its
+    rows run side by side), and a round of 600 one call of all 1000, the first round's program."""
+    with backend.path("cpu"):
+        assert _more_block(1000, 228, 8) == MORE_BLOCKS[-1] * 8 == 64 * 8
+        assert _more_block(1000, 5, 8) == 8 * 8 and _more_block(4, 3, 8) == 4 * 8
+    with backend.path("accelerator"):
+        assert _more_block(1000, 228, 8) == 512 * 8
+        assert _more_block(1000, 600, 8) == 1000 * 8
+        assert _more_block(10**6, 3 * 10**5, 8) == 10**6 * 8
