@@ -1,7 +1,7 @@
 """The default device's figures, one script: kernel, streaming, exchange_batch, a sweep, gradient / forward, fits.
 Not a test.
 
-    .venv/bin/python benchmarks/bench_device.py [--rows N] [--sweep N] [--fits N] [--profile DIR]
+    .venv/bin/python benchmarks/bench_device.py [--rows N] [--sweep N] [--fits N] [--many N] [--profile DIR]
 
 Prints the device, the date and the command, then, each the median of --repeats calls after a first
 (compiling) call:
@@ -17,9 +17,12 @@ Prints the device, the date and the command, then, each the median of --repeats 
   default outputs kept;
 - gradient / forward of a batched loss (both delta-V magnitudes, rows not OK masked) built with
   ``ks_jax.sum_over_rows``;
-- ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases).
+- ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases), and the
+  host's work of that call (its solver's calls replayed from a recording: ``bench_fit.host_seconds``); then a batch
+  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second.
 
-Defaults: 2^22 rows, 10^8 sweep points and 1000 fits on an accelerator; 2^16, 10^6 and 100 on a CPU.
+Defaults: 2^22 rows, 10^8 sweep points, 1000 fits and 10^5 in a batch on an accelerator; 2^16, 10^6, 100 and none
+on a CPU.
 --profile DIR: also writes the compiled programs of the kernel (float32 and float64) and, for the kernel,
 ``exchange_batch`` and the fits, a table of the device's kernels by time (``jax.profiler``) to DIR.
 """
@@ -115,6 +118,8 @@ def main(argv=None):
     ap.add_argument("--rows", type=int, default=1 << 22 if accel else 1 << 16)
     ap.add_argument("--sweep", type=int, default=10 ** 8 if accel else 10 ** 6, help="sweep points")
     ap.add_argument("--fits", type=int, default=1000 if accel else 100, help="reconstructions (x 8 starts)")
+    ap.add_argument("--many", type=int, default=10 ** 5 if accel else 0,
+                    help="a batch of this many reconstructions, the --fits cases repeated (0: none)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--profile", metavar="DIR", help="write compiled programs and kernel tables to DIR")
     ap.add_argument("--only", default="kernel,batch,sweep,grad,fit", help="sections to run, comma-separated")
@@ -217,16 +222,38 @@ def main(argv=None):
         t = time.perf_counter()
         fit.reconstruct_batch(cases, unknowns, evidence, starts=8, smoothing=bench_fit.SMOOTHING)
         first = time.perf_counter() - t
-        t = time.perf_counter()
-        results = fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
-        second = time.perf_counter() - t
+
+        def second_call():
+            return fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
+
+        with bench_fit.recording([]) as calls:
+            t = time.perf_counter()
+            results = second_call()
+            second = time.perf_counter() - t
         s = bench_fit.score(results, truths, chi2)
+        host = bench_fit.host_seconds(calls, second_call)
         row(f"reconstruct_batch, {args.fits} x 8 starts", f"{second:.3f} s",
-            f"first call {first:.1f} s; global {100 * s['global']:.1f}%, coverage {100 * s['coverage']:.1f}%")
+            f"first call {first:.1f} s; global {100 * s['global']:.1f}%, coverage {100 * s['coverage']:.1f}%; "
+            f"host work {host:.3f} s ({1e3 * host / args.fits:.3f} ms per fit, solver's calls replayed)")
         if args.profile:
             kernel_table(lambda: fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=2,
                                                        smoothing=bench_fit.SMOOTHING), f"fits {args.fits} x 8",
                          args.profile)
+        if args.many:
+            k = -(-args.many // args.fits)
+            many = [(c * k)[:args.many] for c in (cases, unknowns, evidence)]
+            fit.reconstruct_batch(*many, starts=8, smoothing=bench_fit.SMOOTHING)
+
+            def many_call():
+                return fit.reconstruct_batch(*many, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
+
+            with bench_fit.recording([]) as calls:
+                t = time.perf_counter()
+                many_call()
+                wall = time.perf_counter() - t
+            host = bench_fit.host_seconds(calls, many_call, repeats=1)
+            row(f"reconstruct_batch, {args.many} x 8 starts (the {args.fits} repeated)", f"{args.many / wall:.3g} /s",
+                f"{wall:.2f} s; host work {host:.2f} s ({1e3 * host / args.many:.3f} ms per fit)")
     print(f"\n{dev.device_kind}, {date}\n| what | figure | note |\n|---|---|---|")
     print("\n".join(table))
 

@@ -192,41 +192,65 @@ class PathChecks:
         return self._seen[key]
 
 
+def _own_limits(field, lower, upper):
+    """The bounds with a missing one (+-inf) taken as the input's own limit, for inputs whose limit a bound may
+    reach (a speed's 0, restitution's -1 and 1); scalars or arrays."""
+    if field not in INPUT_LIMITS or INPUT_LIMITS[field][2]:
+        return lower, upper
+    plo, phi, _ = INPUT_LIMITS[field]
+    return np.where(lower == -math.inf, plo, lower), np.where(upper == math.inf, phi, upper)
+
+
+def _unknown_faults(field, lo, hi, start, has_start, mean, sigma, has_prior):
+    """The rules of ``check_unknown``, in its order, each as a mask of the unknowns that break it (scalars or
+    arrays of one shape; bounds after ``_own_limits``; start, mean and sigma only read where given)."""
+    lo, hi, start, mean, sigma = (np.asarray(a, np.float64) for a in (lo, hi, start, mean, sigma))
+    has_start, has_prior = np.asarray(has_start, bool), np.asarray(has_prior, bool)
+    limits = np.zeros(np.shape(lo), bool)
+    if field in INPUT_LIMITS:
+        plo, phi, strict = INPUT_LIMITS[field]
+        limits = (lo < plo) | (strict & (lo <= plo)) | (hi > phi)
+    with np.errstate(invalid="ignore"):
+        return (("lower", np.isfinite(lo) & (np.abs(lo) > MAX_MAGNITUDE)),
+                ("upper", np.isfinite(hi) & (np.abs(hi) > MAX_MAGNITUDE)),
+                ("order", ~(lo < hi)),
+                ("limits", limits),
+                ("start", has_start & ~((lo <= start) & (start <= hi))),
+                ("prior", has_prior & ~((np.abs(mean) <= MAX_MAGNITUDE) & (MIN_SIGMA <= sigma)
+                                        & (sigma <= MAX_MAGNITUDE))))
+
+
 def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> Unknown:
     """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError). ``checks``: the batch's
     path checks (default: the path checked here)."""
-    name = case.name
-    (checks or PathChecks()).unknown(case, u.path)
-    field = _field(u.path)
-    lo, hi = float(u.lower), float(u.upper)
-    if field in INPUT_LIMITS and not INPUT_LIMITS[field][2]:  # a missing bound: the input's own limit
-        lo = INPUT_LIMITS[field][0] if lo == -math.inf else lo
-        hi = INPUT_LIMITS[field][1] if hi == math.inf else hi
-    for side, b in (("lower", lo), ("upper", hi)):
-        if math.isfinite(b) and abs(b) > MAX_MAGNITUDE:
-            raise CaseError(f"case '{name}': unknowns: {u.path}: {side} bound {_q(b, u.path)}: beyond {MAX_MAGNITUDE:g} "
-                            "(SI), where the fit cannot compute; leave the bound out for none")
-    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
-        raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: the lower "
-                        "bound must be below the upper bound")
-    if field in INPUT_LIMITS:
+    name, path = case.name, u.path
+    (checks or PathChecks()).unknown(case, path)
+    field = _field(path)
+    lo, hi = (float(b) for b in _own_limits(field, float(u.lower), float(u.upper)))
+    start = math.nan if u.start is None else u.start
+    mean, sigma = u.prior if u.prior is not None else (math.nan, math.nan)
+    broken = next((rule for rule, bad in _unknown_faults(field, lo, hi, start, u.start is not None, mean, sigma,
+                                                         u.prior is not None) if bad), None)
+    where = f"case '{name}': unknowns: {path}"
+    if broken in ("lower", "upper"):
+        b = lo if broken == "lower" else hi
+        raise CaseError(f"{where}: {broken} bound {_q(b, path)}: beyond {MAX_MAGNITUDE:g} (SI), where the fit cannot "
+                        "compute; leave the bound out for none")
+    if broken == "order":
+        raise CaseError(f"{where}: bounds [{_q(lo, path)}, {_q(hi, path)}]: the lower bound must be below the upper "
+                        "bound")
+    if broken == "limits":
         plo, phi, strict = INPUT_LIMITS[field]
-        if lo < plo or (strict and lo <= plo) or hi > phi:
-            rule = f"{'>' if strict else '>='} {plo}" + (f" and <= {phi}" if math.isfinite(phi) else "")
-            raise CaseError(f"case '{name}': unknowns: {u.path}: bounds [{_q(lo, u.path)}, {_q(hi, u.path)}]: "
-                            f"{field} must be {rule} (SI), so must its bounds")
-    if u.start is not None and not lo <= u.start <= hi:
-        raise CaseError(f"case '{name}': unknowns: {u.path}: start {_q(u.start, u.path)} is outside the bounds "
-                        f"[{_q(lo, u.path)}, {_q(hi, u.path)}]")
-    if u.prior is not None:
-        mean, sigma = u.prior
-        if not (abs(mean) <= MAX_MAGNITUDE and MIN_SIGMA <= sigma <= MAX_MAGNITUDE):
-            raise CaseError(f"case '{name}': unknowns: {u.path}: prior (mean {_q(mean, u.path)}, "
-                            f"sigma {_q(sigma, u.path)}): "
-                            f"needs a mean within +/-{MAX_MAGNITUDE:g} and a sigma within [{MIN_SIGMA:g}, "
-                            f"{MAX_MAGNITUDE:g}] (SI)")
-    return Unknown(u.path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
-                   None if u.prior is None else (float(u.prior[0]), float(u.prior[1])))
+        rule = f"{'>' if strict else '>='} {plo}" + (f" and <= {phi}" if math.isfinite(phi) else "")
+        raise CaseError(f"{where}: bounds [{_q(lo, path)}, {_q(hi, path)}]: {field} must be {rule} (SI), so must its "
+                        "bounds")
+    if broken == "start":
+        raise CaseError(f"{where}: start {_q(u.start, path)} is outside the bounds [{_q(lo, path)}, {_q(hi, path)}]")
+    if broken == "prior":
+        raise CaseError(f"{where}: prior (mean {_q(mean, path)}, sigma {_q(sigma, path)}): needs a mean within "
+                        f"+/-{MAX_MAGNITUDE:g} and a sigma within [{MIN_SIGMA:g}, {MAX_MAGNITUDE:g}] (SI)")
+    return Unknown(path.replace(" ", ""), lo, hi, None if u.start is None else float(u.start),
+                   None if u.prior is None else (float(mean), float(sigma)))
 
 
 def evidence_kind(case: Case, path: str):
@@ -259,23 +283,35 @@ MAX_MAGNITUDE = 1e12
 MIN_SIGMA = 1e-9
 
 
+def _evidence_faults(value, sigma):
+    """The rules of ``check_evidence`` on its numbers, in its order, each as a mask of the evidence that breaks it
+    (scalars or arrays of one shape)."""
+    value, sigma = np.asarray(value, np.float64), np.asarray(sigma, np.float64)
+    with np.errstate(invalid="ignore"):
+        return (("value", ~np.isfinite(value)),
+                ("magnitude", ~(np.abs(value) <= MAX_MAGNITUDE)),
+                ("sigma", ~(np.isfinite(sigma) & (sigma > 0))),
+                ("sigma range", ~((MIN_SIGMA <= sigma) & (sigma <= MAX_MAGNITUDE))))
+
+
 def check_evidence(case: Case, e: Evidence, checks: PathChecks | None = None) -> Evidence:
     """Refuse evidence whose path, value or sigma break a rule (CaseError). ``checks``: the batch's path checks
     (default: the path checked here)."""
     (checks or PathChecks()).evidence(case, e.path)  # raises on a bad path
-    if not math.isfinite(e.value):
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)} must be finite")
-    if not abs(e.value) <= MAX_MAGNITUDE:
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: value {_q(e.value, e.path)}: beyond {MAX_MAGNITUDE:g} "
-                        "(SI), no measurement of a crash is; the fit cannot compute with it")
-    if not (math.isfinite(e.sigma) and e.sigma > 0):
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {_q(e.sigma, e.path)}: must be positive "
-                        "(an exact measurement is an input, not evidence)")
-    if not MIN_SIGMA <= e.sigma <= MAX_MAGNITUDE:
+    broken = next((rule for rule, bad in _evidence_faults(e.value, e.sigma) if bad), None)
+    where = f"case '{case.name}': evidence: {e.path}"
+    if broken == "value":
+        raise CaseError(f"{where}: value {_q(e.value, e.path)} must be finite")
+    if broken == "magnitude":
+        raise CaseError(f"{where}: value {_q(e.value, e.path)}: beyond {MAX_MAGNITUDE:g} (SI), no measurement of a "
+                        "crash is; the fit cannot compute with it")
+    if broken == "sigma":
+        raise CaseError(f"{where}: sigma = {_q(e.sigma, e.path)}: must be positive (an exact measurement is an input, "
+                        "not evidence)")
+    if broken == "sigma range":
         shown = f"{e.sigma:.3g} (SI)" if e.sigma < MIN_SIGMA else _q(e.sigma, e.path)
-        raise CaseError(f"case '{case.name}': evidence: {e.path}: sigma = {shown}: must be within "
-                        f"[{MIN_SIGMA:g}, {MAX_MAGNITUDE:g}] (SI): a smaller one makes its residual overflow, a larger "
-                        "one says nothing (leave the evidence out)")
+        raise CaseError(f"{where}: sigma = {shown}: must be within [{MIN_SIGMA:g}, {MAX_MAGNITUDE:g}] (SI): a smaller "
+                        "one makes its residual overflow, a larger one says nothing (leave the evidence out)")
     return Evidence(e.path.replace(" ", ""), float(e.value), float(e.sigma))
 
 
@@ -379,6 +415,77 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
         value = _evidence_value(case, path, e["value"], f"evidence: {path}.value")
         sigma = _evidence_value(case, path, e["sigma"], f"evidence: {path}.sigma")
         out.append(check_evidence(case, Evidence(path, value, sigma), checks))
+    return out
+
+
+def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> list:
+    """Each case's (unknowns, evidence, Problem), checked as ``parse_unknowns``, ``parse_evidence`` and
+    ``make_problem`` check them, for all the cases at once where their specs are lists of ``Unknown`` and
+    ``Evidence`` that name the same paths (without spaces) as the first such case's: the paths checked once per
+    kind of case (``PathChecks``), the numbers in NumPy over all the cases (``_unknown_faults``,
+    ``_evidence_faults``). None for every other case, and for one that breaks a rule: check it alone, for its
+    error. An unknown whose missing bound is the input's own limit is given that bound, as ``check_unknown``
+    gives it; the others are the objects given."""
+    out = [None] * len(cases)
+    plain = lambda spec, kind: isinstance(spec, (list, tuple)) and spec and all(type(x) is kind for x in spec)  # noqa: E731
+    ok = [i for i, (c, u, e) in enumerate(zip(cases, unknowns_specs, evidence_specs))
+          if isinstance(c, Case) and c.valid and plain(u, Unknown) and plain(e, Evidence)]
+    if not ok:
+        return out
+    paths = tuple(u.path for u in unknowns_specs[ok[0]])
+    evidence_paths = tuple(e.path for e in evidence_specs[ok[0]])
+    if (len(set(paths)) < len(paths) or any(not isinstance(p, str) or " " in p for p in paths + evidence_paths)):
+        return out
+    ok = [i for i in ok if tuple(u.path for u in unknowns_specs[i]) == paths
+          and tuple(e.path for e in evidence_specs[i]) == evidence_paths]
+    kinds = {}  # path_key -> the evidence's (is_output, period), or None where a path is refused
+    for i in ok:
+        key = path_key(cases[i])
+        if key not in kinds:
+            try:
+                for p in paths:
+                    checks.unknown(cases[i], p)
+                kinds[key] = tuple(checks.evidence(cases[i], p) for p in evidence_paths)
+            except CaseError:
+                kinds[key] = None
+    ok = [i for i in ok if kinds[path_key(cases[i])] is not None]
+    nan = math.nan
+    try:
+        u = np.array([[(x.lower, x.upper, nan if x.start is None else x.start, x.start is not None,
+                        *(x.prior if x.prior is not None else (nan, nan)), x.prior is not None)
+                       for x in unknowns_specs[i]] for i in ok], np.float64).reshape(len(ok), len(paths), 7)
+        e = np.array([[(x.value, x.sigma) for x in evidence_specs[i]] for i in ok],
+                     np.float64).reshape(len(ok), len(evidence_paths), 2)
+    except (TypeError, ValueError):  # not numbers: checked alone
+        return out
+    bad = np.zeros(len(ok), bool)
+    limited = []
+    for j, path in enumerate(paths):
+        field = _field(path)
+        lo, hi = _own_limits(field, u[:, j, 0], u[:, j, 1])
+        limited.append((lo, hi))
+        for _, broken in _unknown_faults(field, lo, hi, u[:, j, 2], u[:, j, 3] > 0, u[:, j, 4], u[:, j, 5],
+                                         u[:, j, 6] > 0):
+            bad |= broken
+    for _, broken in _evidence_faults(e[..., 0], e[..., 1]):
+        bad |= broken.any(axis=1)
+    ties_matter = any(_field(p) in ("yaw", "cg_height") for p in paths)
+    problems = {}
+    for k, i in enumerate(ok):
+        if bad[k]:
+            continue
+        case = cases[i]
+        unknowns = list(unknowns_specs[i])
+        for j, (lo, hi) in enumerate(limited):
+            if lo[k] != u[k, j, 0] or hi[k] != u[k, j, 1]:
+                x = unknowns[j]
+                unknowns[j] = Unknown(x.path, float(lo[k]), float(hi[k]), x.start, x.prior)
+        ties = input_ties(case, list(paths)) if ties_matter else ()
+        key = (path_key(case), ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion)
+        if key not in problems:
+            evidence = tuple((p, *kind) for p, kind in zip(evidence_paths, kinds[key[0]]))
+            problems[key] = Problem(paths, ties, evidence, *key[2:])
+        out[i] = (unknowns, list(evidence_specs[i]), problems[key])
     return out
 
 

@@ -8,7 +8,9 @@ evidence the same way, through the same compiled program (``monte_carlo``).
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import gc
 import math
 from dataclasses import dataclass, field
 
@@ -27,7 +29,7 @@ from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
 from .posterior import sampler
-from .problem import PathChecks, Problem, make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
+from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
 from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
@@ -149,13 +151,14 @@ def _prepare(case: Case, unknowns, evidence, checks: PathChecks | None = None):
 
 def _arrays(case, unknowns, evidence, dtype):
     """One case's ``_batch_arrays``: a dict of (n,) and (m,) arrays and its ``inputs``."""
-    stacked, inputs = _batch_arrays([case], [(unknowns, evidence, None)], dtype)
+    stacked, inputs, _ = _batch_arrays([case], [(unknowns, evidence, None)], dtype)
     return {k: v[0] for k, v in stacked.items()} | {"inputs": inputs[0]}
 
 
 def _batch_arrays(cases, prepared, dtype):
     """The fit's arrays of a batch of cases (``prepared``: each case's unknowns and evidence, the same paths in
-    each), SI, float64: a dict of (B, n) and (B, m) arrays, and the list of the cases' inputs.
+    each), SI, float64: a dict of (B, n) and (B, m) arrays, the list of the cases' inputs and those stacked
+    (``rows.stack``).
 
     In float32 with a scene more than 1 km from the origin, the scene is fitted about its CGs' midpoint
     (``ks_jax.case.scale.scene_origin``): ``inputs``, the bounds (``lo``, ``hi``), prior means (``pm``) and
@@ -171,7 +174,6 @@ def _batch_arrays(cases, prepared, dtype):
     own = np.array([[(u.lower, u.upper, nan if u.start is None else u.start, *(u.prior or (nan, nan))) for u in us]
                     for us, _, _ in prepared], np.float64).reshape(B, n, 5)
     measured = np.array([[(e.value, e.sigma) for e in es] for _, es, _ in prepared], np.float64).reshape(B, m, 2)
-    current = np.array([[float(get_input(c.inputs, p)) for p in paths] for c in cases], np.float64).reshape(B, n)
     x_offset, e_offset, inputs = np.zeros((B, n)), np.zeros((B, m)), []
     for i, case in enumerate(cases):
         origin = scene_origin(case.inputs, dtype=dtype)
@@ -179,13 +181,16 @@ def _batch_arrays(cases, prepared, dtype):
         if origin is not None:
             x_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in paths]
             e_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in evidence_paths]
+    stacked = stack(inputs)
+    unmoved = stacked if all(a is c.inputs for a, c in zip(inputs, cases)) else stack([c.inputs for c in cases])
+    current = np.stack([get_input(unmoved, p) for p in paths], axis=-1).reshape(B, n)
     lower, upper, start, prior_mean, prior_sigma = np.moveaxis(own, 2, 0)
     has_prior = ~np.isnan(prior_sigma)
     return {"values": measured[..., 0] - e_offset, "sigmas": measured[..., 1], "lo": lower - x_offset,
             "hi": upper - x_offset, "pm": np.where(has_prior, prior_mean, 0.0) - x_offset,
             "pw": np.where(has_prior, 1.0 / np.where(has_prior, prior_sigma, 1.0), 0.0), "current": current,
             "x_offset": x_offset, "e_offset": e_offset, "lower": lower, "upper": upper, "start": start,
-            "prior_mean": prior_mean, "prior_sigma": prior_sigma}, inputs
+            "prior_mean": prior_mean, "prior_sigma": prior_sigma}, inputs, stacked
 
 
 @functools.lru_cache(maxsize=64)
@@ -350,6 +355,21 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
         starts_converged=0, starts_at_best=0, iterations=0, singular_values=[],
         covariance=np.full((len(paths), len(paths)), nan), notes=[], evidence_kinds=list(kinds),
     )
+
+
+@contextlib.contextmanager
+def _collector_paused():
+    """Python's cyclic garbage collector paused within the block (as it was, after). Building a large batch's
+    results (dicts and lists of numbers and words, none in a cycle) sets off its full collections, each of which
+    walks every object alive, the caller's cases among them: a third of a 10^4-case batch's host work
+    (docs/performance.md). Nothing made within the block is garbage the collector would find."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
@@ -540,7 +560,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     if len(specs_u) != len(cases) or len(specs_e) != len(cases):
         raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
     checks = PathChecks()
-    prepared = [_prepare(c, u, e, checks) for c, u, e in zip(cases, specs_u, specs_e)]
+    prepared = [p or _prepare(c, u, e, checks)
+                for p, c, u, e in zip(check_batch(cases, specs_u, specs_e, checks), cases, specs_u, specs_e)]
     problem = prepared[0][2]
     for c, (_, _, p) in zip(cases, prepared):
         if p != problem:
@@ -554,8 +575,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                  "give fewer starts (--starts) or fit fewer cases at once")
     check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
                  "give fewer refits")
-    stacked, case_inputs = _batch_arrays(cases, prepared, dtype)
-    inputs = stack(case_inputs)
+    stacked, case_inputs, inputs = _batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
     x0 = first_starts(problem.unknowns, stacked, starts, rng)
     per_case = ("values", "sigmas", "lo", "hi", "pm", "pw")
@@ -600,22 +620,24 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                          len(problem.evidence), *(stacked[k][fitted] for k in ("lower", "upper", "prior_sigma", "pw")),
                          rtol)
     where = dict(zip(fitted.tolist(), range(fitted.size)))
-    results = []
+    def arrays_of(i):
+        return {k: v[i] for k, v in stacked.items()} | {"inputs": case_inputs[i]}
+
+    with _collector_paused():
+        results = [_result(case, u, e, problem, {k: v[i] for k, v in rows.items()} | found.starts_of(i), arrays_of(i),
+                           one(info, where[i])) if i in where else None
+                   for i, (case, (u, e, _)) in enumerate(zip(cases, prepared))]
     for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
-        a = {k: v[i] for k, v in stacked.items()} | {"inputs": case_inputs[i]}
-        if i not in where:  # no start could even be evaluated
-            results.append(_not_fitted(case, u, e, problem, a, x0[i, 0], smoothing, dtype, int(found.count[i])))
+        if results[i] is None:  # no start could even be evaluated
+            results[i] = _not_fitted(case, u, e, problem, arrays_of(i), x0[i, 0], smoothing, dtype, int(found.count[i]))
             continue
-        row = {k: v[i] for k, v in rows.items()}
-        row.update(found.starts_of(i))
-        r = _result(case, u, e, problem, row, a, one(info, where[i]))
+        r, z = results[i], rows["z"][i]
         if posterior:
-            r.posterior = sample_posterior(problem, a, row["z"], draws=int(posterior), chains=int(chains), seed=seed,
-                                           smoothing=smoothing, dtype=dtype, devices=devices, offset=a["x_offset"],
-                                           progress=progress)
+            r.posterior = sample_posterior(problem, arrays_of(i), z, draws=int(posterior), chains=int(chains),
+                                           seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
+                                           offset=stacked["x_offset"][i], progress=progress)
         if monte_carlo:
-            r.monte_carlo = refit_perturbed(problem, solver, max_iter, a, u, row["z"], starts, monte_carlo, rng,
-                                         smoothing, dtype, progress, chunk, block, devices)
+            r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,
+                                            smoothing, dtype, progress, chunk, block, devices)
             r.notes += linearisation_notes(r)
-        results.append(r)
     return results

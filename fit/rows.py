@@ -115,7 +115,9 @@ def count_at_best(cost):
 
 
 def stack(trees):
-    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, np.float64) for x in xs]), *trees)
+    """Trees of the same structure (a batch's CaseInputs) as one tree of float64 NumPy arrays, the trees along a
+    new leading axis."""
+    return jax.tree_util.tree_map(lambda *xs: np.array(xs, np.float64), *trees)
 
 
 # Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, at most. The fit and

@@ -92,15 +92,16 @@ def input_kind(path) -> str:
 
 def get_input(inputs: CaseInputs, path: str):
     """The value of the input ``path`` (section 6: "vehicles[1].speed", "contact.point[0]",
-    "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``), SI (angles in rad); a PathError
-    names a path that is not an input. ``set_input`` is its converse."""
+    "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``, or inputs stacked along leading axes: then
+    one value per row), SI (angles in rad); a PathError names a path that is not an input. ``set_input`` is its
+    converse."""
     group, vi, name, idx = input_leaf(path)
     leaf = getattr(_holder(inputs, group, vi, path), name)
     if not idx:
         return leaf
     if isinstance(leaf, np.ndarray):  # a value on the host: read it there (no device operation per read)
-        return leaf[idx]
-    return jnp.asarray(leaf)[idx]
+        return leaf[(..., *idx)]
+    return jnp.asarray(leaf)[(..., *idx)]
 
 def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable). A

@@ -1,6 +1,7 @@
-"""The host's part of a batch of fits, in NumPy over all the batch's fits at once: the starts (``fit.starts``), the
-Laplace analysis (``fit.uncertainty.analyse_batch``) and the size of a further round's calls. Each is checked
-against what it must be for every fit of the batch on its own: the Latin hypercube's strata, the closed-form
+"""The host's part of a batch of fits, in NumPy over all the batch's fits at once: the checks of the unknowns and
+evidence (``fit.problem.check_batch``), the starts (``fit.starts``), the Laplace analysis
+(``fit.uncertainty.analyse_batch``) and the size of a further round's calls. Each is checked against what it must
+be for every fit of the batch on its own: each case checked alone, the Latin hypercube's strata, the closed-form
 covariance (J^T J)^-1, and each fit analysed alone."""
 
 import math
@@ -8,10 +9,14 @@ import math
 import numpy as np
 import pytest
 
+import fit
+from fit.problem import PathChecks, check_batch, make_problem, parse_evidence, parse_unknowns
 from fit.reconstruction import MORE_BLOCKS, _more_block
 from fit.starts import START_SPREAD, starts
 from fit.uncertainty import analyse_batch, one
 from ks_jax import backend
+from ks_jax.case import CaseError, load_case
+from samples import CASES
 
 PATHS = ["vehicles[0].speed", "vehicles[1].speed", "contact.restitution", "contact.point[0]"]
 NAN, INF = math.nan, math.inf
@@ -138,3 +143,44 @@ def test_a_further_round_is_one_call_on_an_accelerator_and_calls_of_64_cases_on_
         assert _more_block(1000, 228, 8) == 512 * 8
         assert _more_block(1000, 600, 8) == 1000 * 8
         assert _more_block(10**6, 3 * 10**5, 8) == 10**6 * 8
+
+
+def test_a_batchs_checks_accept_and_refuse_each_case_as_its_own_checks_do():
+    """200 cases of the seed chapter's fit with bounds, starts, priors, values and sigmas drawn from the edges of
+    the rules (infinite, NaN, beyond 1e12, a speed's bound below 0, a restitution's above 1, a start outside, a
+    sigma of 0 or 1e-10): ``check_batch`` checks all at once where each case alone is checked by
+    ``parse_unknowns``, ``parse_evidence`` and ``make_problem``. It passes exactly the cases that pass alone, with
+    the same bounds (a missing one taken as the input's own limit) and the same problem; it leaves the others to
+    be checked alone, for their own error."""
+    case = load_case(CASES / "fit_seed_001.json")
+    rng = np.random.default_rng(5)
+    edge = [0.0, -1.0, 0.5, 1.5, 30.0, INF, -INF, NAN, 2e12, -2e12, 1e-10]
+    pick = lambda top: edge[rng.integers(len(edge))] if rng.random() < 0.06 else float(rng.uniform(0, top))  # noqa: E731
+    paths = {"vehicles[1].speed": 30.0, "contact.restitution": 1.0}
+    unknowns, evidence = [], []
+    for _ in range(200):
+        us = []
+        for p, top in paths.items():
+            lo, hi = sorted([pick(top), pick(top)]) if rng.random() < 0.9 else (pick(top), pick(top))
+            start = pick(top) if rng.random() < 0.3 else None
+            prior = (pick(top), pick(top)) if rng.random() < 0.3 else None
+            us.append(fit.Unknown(p, lo, hi, start, prior))
+        unknowns.append(us)
+        evidence.append([fit.Evidence(p, pick(10.0), pick(1.0)) for p in ("vehicles[0].delta_v_magnitude",
+                                                                           "vehicles[1].delta_v_magnitude")])
+    batch = check_batch([case] * 200, unknowns, evidence, PathChecks())
+    passed = 0
+    for us, es, got in zip(unknowns, evidence, batch):
+        try:
+            alone_u, alone_e = parse_unknowns(case, us), parse_evidence(case, es)
+            alone = (alone_u, alone_e, make_problem(case, alone_u, alone_e))
+        except CaseError:
+            assert got is None
+            continue
+        passed += 1
+        assert got is not None
+        assert [(u.path, u.lower, u.upper, u.start, u.prior) for u in got[0]] == \
+            [(u.path, u.lower, u.upper, u.start, u.prior) for u in alone[0]]
+        assert [(e.path, e.value, e.sigma) for e in got[1]] == [(e.path, e.value, e.sigma) for e in alone[1]]
+        assert got[2] == alone[2]
+    assert 10 < passed < 190  # both sides of the rules are drawn
