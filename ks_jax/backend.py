@@ -9,11 +9,14 @@ which of the two it is on (``on_cpu``) and how many rows to take at once (``chun
 
 ``path("accelerator")`` makes a CPU take the accelerator's path (and ``path("cpu")`` the reverse), so that
 the accelerator's logic is exercised and tested where no accelerator is: both paths compute the same values.
+The environment variable ``KS_JAX_PATH`` ("cpu" or "accelerator"), read at the first batch, sets the path for
+the whole process (``KS_JAX_PATH=accelerator`` runs the test suite's batches the accelerator's way on a CPU).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 from typing import NamedTuple
 
 import jax
@@ -29,14 +32,31 @@ WORKING_SET = 4
 MIN_ROWS, MAX_ROWS = 1 << 16, 1 << 23
 FALLBACK_MEMORY = 8 << 30  # bytes assumed free on a device that reports no memory statistics
 
-_forced: str | None = None
+PATHS = ("cpu", "accelerator")
+
+
+def _path_from_environment() -> str | None:
+    """The path ``KS_JAX_PATH`` names, None where it is unset or empty; ValueError for any other value."""
+    kind = os.environ.get("KS_JAX_PATH", "")
+    if kind and kind not in PATHS:
+        raise ValueError(f"KS_JAX_PATH = {kind!r}: must be 'cpu' or 'accelerator' (or unset: the default device's)")
+    return kind or None
+
+
+_forced: str | None = None  # the path of the innermost ``path`` block
+_environment: list = []  # the path ``KS_JAX_PATH`` names, once read
 
 
 def on_cpu() -> bool:
-    """Whether the CPU's path applies: JAX's default backend is a CPU (unless ``path`` says otherwise).
-    Both paths compute the same values; this only chooses how XLA is asked to compute them."""
+    """Whether the CPU's path applies: JAX's default backend is a CPU (unless ``path`` or ``KS_JAX_PATH`` says
+    otherwise; a ValueError names a ``KS_JAX_PATH`` that is neither path). Both paths compute the same values;
+    this only chooses how XLA is asked to compute them."""
     if _forced is not None:
         return _forced == "cpu"
+    if not _environment:
+        _environment.append(_path_from_environment())
+    if _environment[0] is not None:
+        return _environment[0] == "cpu"
     return jax.default_backend() == "cpu"
 
 
@@ -46,7 +66,7 @@ def path(kind: str):
     device. Where that changes the path, JAX's caches of traced programs are cleared on entry and exit,
     since a program traced for one path would otherwise be reused on the other."""
     global _forced
-    if kind not in ("cpu", "accelerator"):
+    if kind not in PATHS:
         raise ValueError(f"path = {kind!r}: must be 'cpu' or 'accelerator'")
     before, was_cpu = _forced, on_cpu()
     _forced = kind

@@ -18,6 +18,7 @@ import warnings
 
 import jax
 
+from .. import backend
 from ..case.errors import CaseError, CaseWarning
 from ..compilation import keep_programs
 from ..units import UnitError
@@ -80,6 +81,11 @@ def main(argv=None) -> int:
     _show_case_warnings()
     _compilation_cache()
     args = build_parser().parse_args(argv)
+    try:
+        backend.on_cpu()  # a KS_JAX_PATH that names no path is refused before any work
+    except ValueError as err:
+        print(f"ks-jax: error: {err}", file=sys.stderr)
+        return 2
     if argv is None and threading.current_thread() is threading.main_thread():
         # the command itself (not a call from Python): a kill unwinds as Ctrl-C does, so that a sweep
         # removes its unfinished file and an earlier --out stays as it was

@@ -11,6 +11,7 @@ import pytest
 
 import ks_jax
 from ks_jax import backend
+from ks_jax.cli import main
 from ks_jax.model import types as t
 from samples import assert_same_leaves, with_bad_rows
 
@@ -114,6 +115,7 @@ def test_exchange_batch_on_the_accelerator_path(kit, random_cases):
     args = kit.inputs(cases)
     reference = kit.batch_exchange(args)
     host = jax.tree_util.tree_map(np.array, args)
+    before = backend.on_cpu()
     with backend.path("accelerator"):
         assert not backend.on_cpu()
         for rows, chunk in ((host, 64), (args, None)):
@@ -125,7 +127,7 @@ def test_exchange_batch_on_the_accelerator_path(kit, random_cases):
             assert_same_leaves(kept, reference)
         with pytest.raises(ValueError, match="out= .* to_host=False"):
             ks_jax.exchange_batch(*args, out=got, to_host=False)
-    assert backend.on_cpu() == (jax.default_backend() == "cpu")
+    assert backend.on_cpu() == before
 
 
 def test_chunk_rows_from_free_memory(monkeypatch):
@@ -144,3 +146,20 @@ def test_chunk_rows_from_free_memory(monkeypatch):
         assert backend.chunk_rows(1000) == backend.MIN_ROWS
         free["bytes"] = 1 << 50
         assert backend.chunk_rows(8) == backend.MAX_ROWS
+
+
+def test_the_path_of_a_process_from_the_environment(monkeypatch, capsys):
+    """``KS_JAX_PATH`` names the path a process takes ("cpu" or "accelerator"; unset or empty: the default
+    device's); any other value is refused, naming the variable, the value and what it must be, by the command
+    line before any work."""
+    for value, path in (("accelerator", "accelerator"), ("cpu", "cpu"), ("", None)):
+        monkeypatch.setenv("KS_JAX_PATH", value)
+        assert backend._path_from_environment() == path
+    monkeypatch.delenv("KS_JAX_PATH")
+    assert backend._path_from_environment() is None
+    monkeypatch.setenv("KS_JAX_PATH", "gpu")
+    with pytest.raises(ValueError, match="KS_JAX_PATH = 'gpu': must be 'cpu' or 'accelerator'"):
+        backend._path_from_environment()
+    monkeypatch.setattr(backend, "_environment", [])  # not yet read: the command line refuses it up front
+    assert main(["demo"]) == 2
+    assert "ks-jax: error: KS_JAX_PATH = 'gpu'" in capsys.readouterr().err
