@@ -202,70 +202,89 @@ def _labels(problem: Problem):
         tuple(not is_out for _, is_out, _ in problem.evidence)
 
 
-def _result(case, unknowns, evidence, problem, row, arrays, info) -> FitResult:
-    """One case's FitResult from its best start (``row``, with ``at_best``: how many starts reached it) and its
-    analysis (``info``: ``uncertainty.one`` of the batch's ``analyse_batch``, edited here where the contact
-    sticks)."""
+def _results(cases, prepared, problem, rows, found, info, fitted, stacked) -> list[FitResult]:
+    """The FitResults of the ``fitted`` cases of a batch (indices; the rows of ``info``, their analysis by
+    ``analyse_batch``, in that order), from each case's best start (``rows``: (B, ...), with ``at_best``, how many
+    starts reached it, and ``stick_threshold``) and its starts (``found``). The analysis is edited here where a
+    fit stalled or its contact sticks; the numbers are converted for all the cases at once, and only the
+    results' dicts and words are made case by case."""
     paths = list(problem.unknowns)
-    m = len(evidence)
-    x = np.asarray(row["x"], np.float64) + arrays["x_offset"]  # in the case's coordinates (_arrays)
     keys, kinds, is_input = _labels(problem)
-    cost_starts = row["cost_starts"]
-    best_cost = float(row["cost"])
-    at_best = int(row["at_best"])
-    notes = []
-    res = np.asarray(row["residuals"][:m], np.float64).tolist()
-    status = status_text(row["status"])
-    stalled = bool(row["stalled"])
-    starts = len(cost_starts)
-    if stalled:
-        reached = starts - int(np.count_nonzero(row["stalled_starts"]))
-        info["statements"] = [
-            f"nothing is determined: the fit ended where the exchange is '{status}' (no impulse), and there no "
-            f"unknown changes any evidence; {reached} of {starts} starts reached an exchange. This says nothing "
-            "about the evidence: give starts or bounds where the vehicles collide (e.g. a speed's lower bound), "
-            "or more starts (--starts)"]
-        info["undetermined"][:] = True
-        info["std"][:] = np.inf
-    worst = [(k, r) for k, r in zip(keys, res) if abs(r) > 3]
-    if worst and not stalled:
-        notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{k} ({r:+.1f} sigma)" for k, r in worst)
-                     + ": " + _misfit_cause(at_best, starts))
-    chi2 = 2.0 * best_cost
-    dof = m + int(np.count_nonzero(arrays["pw"] > 0)) - int(np.count_nonzero(~info["undetermined"]))
-    if not stalled and dof > 0 and chi2 > chi2_quantile(dof, CHI2_Z):
-        notes.append(f"chi^2 = {chi2:.3g} for {dof} degree{'s' * (dof != 1)} of freedom: larger than the sigmas "
-                     f"allow (by chance in under 1% of fits): " + _misfit_cause(at_best, starts))
-    if any(is_input):
-        moved = np.any(np.asarray(row["jacobian"])[:m] != 0, axis=1)
-        notes += [f"evidence {k} is an input that no unknown changes: it only adds a constant to chi^2"
-                  for k, inp, mv in zip(keys, is_input, moved) if inp and not mv]
-    if status != "ok":
-        notes.append(f"the exchange at the estimate has status '{status}'")
-    if "contact.friction" in paths and status == "ok":
+    m = len(keys)
+    F = np.asarray(fitted)
+    status, count, at_best = rows["status"][F], found.count[F], rows["at_best"][F]
+    stalled = rows["stalled"][F].astype(bool)
+    cost = rows["cost"][F].astype(np.float64)
+    texts = {code: status_text(code) for code in set(status.tolist())}
+    for k in np.flatnonzero(stalled):
+        i = F[k]
+        reached = int(count[k]) - int(np.count_nonzero(found.table["stalled"][i] & found.table["present"][i]))
+        info["statements"][k] = [
+            f"nothing is determined: the fit ended where the exchange is '{texts[status[k]]}' (no impulse), and there "
+            f"no unknown changes any evidence; {reached} of {count[k]} starts reached an exchange. This says nothing "
+            "about the evidence: give starts or bounds where the vehicles collide (e.g. a speed's lower bound), or "
+            "more starts (--starts)"]
+        info["undetermined"][k] = True
+        info["std"][k] = np.inf
+    chi2 = 2.0 * cost
+    dof = m + np.count_nonzero(stacked["pw"][F] > 0, axis=1) - np.count_nonzero(~info["undetermined"], axis=1)
+    improbable = ~stalled & (dof > 0) & (chi2 > chi2_quantile(np.maximum(dof, 1), CHI2_Z))
+    res = rows["residuals"][F, :m].astype(np.float64)
+    misfit = ~stalled & (np.abs(res) > 3).any(axis=1)
+    unmoved = ~np.any(rows["jacobian"][F, :m] != 0, axis=2) & np.array(is_input, bool)  # (K, m)
+    if "contact.friction" in paths:  # after chi^2's degrees of freedom: the evidence's, as the fit has them
         j = paths.index("contact.friction")
-        mu, s, threshold = float(row["x"][j]), float(info["std"][j]), float(row.get("stick_threshold", np.nan))
-        if not bool(row["sliding"]):
-            _friction_bounded_below(info, j, float(row["stick_ratio"]), unknowns[j].prior)
-        elif math.isfinite(s) and math.isfinite(threshold) and mu + NEAR_STICK * s >= threshold:
-            _friction_bounded_below(info, j, threshold, unknowns[j].prior, sliding=(mu, s))
-    corr = {p: dict(zip(paths, r)) for p, r in zip(paths, info["corr"].tolist())}
-    return FitResult(
-        case_name=case.name, unknowns=list(unknowns), evidence=list(evidence),
-        estimate=dict(zip(paths, x.tolist())),
-        std=dict(zip(paths, info["std"].tolist())),
-        correlation=corr,
-        fitted=dict(zip(keys, (np.asarray(row["predicted"], np.float64) + arrays["e_offset"]).tolist())),
-        residuals=dict(zip(keys, res)),
-        converged=bool(row["converged"]),
-        unidentified=info["statements"], at_bound=info["at_bound"],
-        not_determined=[p for p, a, b in zip(paths, info["undetermined"], info["poorly"]) if a or b],
-        cost=best_cost, status=status, starts=starts,
-        starts_converged=int(np.count_nonzero(row["converged_starts"])), starts_at_best=at_best,
-        iterations=int(row["iterations"]),
-        singular_values=info["singular"].tolist(), covariance=np.array(info["cov"]), notes=notes,
-        evidence_kinds=list(kinds),
-    )
+        ok = status == OK
+        mu, sd = rows["x"][F, j].astype(np.float64), info["std"][:, j].copy()
+        threshold = rows["stick_threshold"][F]
+        sticks = ok & ~rows["sliding"][F].astype(bool)
+        with np.errstate(invalid="ignore"):
+            near = (ok & ~sticks & np.isfinite(sd) & np.isfinite(threshold) & (mu + NEAR_STICK * sd >= threshold))
+        for k in np.flatnonzero(sticks | near):
+            mine = one(info, k)
+            prior = prepared[F[k]][0][j].prior
+            if sticks[k]:
+                _friction_bounded_below(mine, j, float(rows["stick_ratio"][F[k]]), prior)
+            else:
+                _friction_bounded_below(mine, j, float(threshold[k]), prior, sliding=(float(mu[k]), float(sd[k])))
+            info["statements"][k] = mine["statements"]
+    x = (rows["x"][F].astype(np.float64) + stacked["x_offset"][F]).tolist()
+    predicted = (rows["predicted"][F].astype(np.float64) + stacked["e_offset"][F]).tolist()
+    std, corr, singular = info["std"].tolist(), info["corr"].tolist(), info["singular"].tolist()
+    not_determined = (info["undetermined"] | info["poorly"]).tolist()
+    converged, iterations = rows["converged"][F].tolist(), rows["iterations"][F].tolist()
+    converged_starts = np.count_nonzero(found.table["converged"][F] & found.table["present"][F], axis=1).tolist()
+    res_list = res.tolist()
+    out = []
+    for k, i in enumerate(F.tolist()):
+        unknowns, evidence, _ = prepared[i]
+        starts, best = int(count[k]), int(at_best[k])
+        notes = []
+        if misfit[k]:
+            worst = [(key, r) for key, r in zip(keys, res_list[k]) if abs(r) > 3]
+            notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{key} ({r:+.1f} sigma)"
+                                                                                for key, r in worst)
+                         + ": " + _misfit_cause(best, starts))
+        if improbable[k]:
+            d = int(dof[k])
+            notes.append(f"chi^2 = {chi2[k]:.3g} for {d} degree{'s' * (d != 1)} of freedom: larger than the sigmas "
+                         f"allow (by chance in under 1% of fits): " + _misfit_cause(best, starts))
+        notes += [f"evidence {key} is an input that no unknown changes: it only adds a constant to chi^2"
+                  for key, u in zip(keys, unmoved[k]) if u]
+        text = texts[status[k]]
+        if text != "ok":
+            notes.append(f"the exchange at the estimate has status '{text}'")
+        out.append(FitResult(
+            case_name=cases[i].name, unknowns=list(unknowns), evidence=list(evidence),
+            estimate=dict(zip(paths, x[k])), std=dict(zip(paths, std[k])),
+            correlation={p: dict(zip(paths, r)) for p, r in zip(paths, corr[k])},
+            fitted=dict(zip(keys, predicted[k])), residuals=dict(zip(keys, res_list[k])),
+            converged=bool(converged[k]), unidentified=info["statements"][k], at_bound=info["at_bound"][k],
+            not_determined=[p for p, nd in zip(paths, not_determined[k]) if nd],
+            cost=float(cost[k]), status=text, starts=starts, starts_converged=converged_starts[k],
+            starts_at_best=best, iterations=int(iterations[k]), singular_values=singular[k],
+            covariance=info["cov"][k].copy(), notes=notes, evidence_kinds=list(kinds)))
+    return out
 
 
 _predict = quick_jit(predict, static_argnums=0)  # one row: quick to compile (``compilation.quick_jit``)
@@ -519,12 +538,6 @@ class _Starts:
                     out[k][take] = o[k][at, s[take]]
         return out
 
-    def starts_of(self, i: int) -> dict:
-        """Case ``i``'s starts: their costs, convergence and stalls, in the order taken."""
-        have = self.table["present"][i]
-        return {"cost_starts": self.table["cost"][i][have], "converged_starts": self.table["converged"][i][have],
-                "stalled_starts": self.table["stalled"][i][have]}
-
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
@@ -619,14 +632,14 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     info = analyse_batch(problem.unknowns, rows["x"][fitted] + stacked["x_offset"][fitted], rows["jacobian"][fitted],
                          len(problem.evidence), *(stacked[k][fitted] for k in ("lower", "upper", "prior_sigma", "pw")),
                          rtol)
-    where = dict(zip(fitted.tolist(), range(fitted.size)))
+
     def arrays_of(i):
         return {k: v[i] for k, v in stacked.items()} | {"inputs": case_inputs[i]}
 
+    results = [None] * len(cases)
     with _collector_paused():
-        results = [_result(case, u, e, problem, {k: v[i] for k, v in rows.items()} | found.starts_of(i), arrays_of(i),
-                           one(info, where[i])) if i in where else None
-                   for i, (case, (u, e, _)) in enumerate(zip(cases, prepared))]
+        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, found, info, fitted, stacked)):
+            results[i] = r
     for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
         if results[i] is None:  # no start could even be evaluated
             results[i] = _not_fitted(case, u, e, problem, arrays_of(i), x0[i, 0], smoothing, dtype, int(found.count[i]))
