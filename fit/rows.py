@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.backend import row_placement
+from ks_jax.backend import on_cpu, row_placement
 from ks_jax.compilation import quick_jit
 from ks_jax.model.types import OK
 
@@ -126,10 +126,8 @@ def stack(trees):
 # than the calls themselves. A fit without refits is one call of exactly its rows. On a CPU a call's rows run one
 # after another and calls of a few hundred rows lose little to one call of them all (docs/performance.md); on
 # other devices a call's rows run side by side and its latency counts more, hence a larger block.
-ROWS_PER_CALL = {"cpu": 500}
-
-
-ROWS_PER_CALL_ELSEWHERE = 8000
+ROWS_PER_CALL = 500
+ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 
 
 # On a CPU, calls of at most this many rows compile with XLA's quicker settings (``compilation.quick_jit``): their
@@ -145,8 +143,8 @@ def solver_for(block: int):
 
 def rows_per_call(rows: int) -> int:
     """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
-    ``ROWS_PER_CALL`` of the default backend."""
-    return min(rows, ROWS_PER_CALL.get(jax.default_backend(), ROWS_PER_CALL_ELSEWHERE))
+    ``ROWS_PER_CALL`` on the CPU's path, ``ROWS_PER_CALL_ELSEWHERE`` on an accelerator's (``backend.on_cpu``)."""
+    return min(rows, ROWS_PER_CALL if on_cpu() else ROWS_PER_CALL_ELSEWHERE)
 
 
 def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None,

@@ -230,7 +230,8 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     kw = dict(starts=3, seed=4, monte_carlo=4)
     one_call = fit.reconstruct_batch([case] * 3, **kw)
     assert rc.rows_per_call(4 * 3) == 12
-    monkeypatch.setattr(rc, "ROWS_PER_CALL", {jax.default_backend(): 5})
+    monkeypatch.setattr(rc, "ROWS_PER_CALL", 5)
+    monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 5)
     programs = rc.solver_for(5)._cache_size()
     blocks = fit.reconstruct_batch([case] * 3, **kw)
     assert rc.solver_for(5)._cache_size() == programs + 1
