@@ -20,8 +20,9 @@ two starts reach the best fit, or its chi^2 is improbable, more rounds of starts
 ``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
 
 The package: ``problem`` (unknowns, evidence, the residual vector), ``solvers`` (Levenberg-Marquardt, optax),
-``rows`` (the compiled solver over cases x starts), ``starts``, ``reconstruction`` (``reconstruct`` and what a
-fit says), ``uncertainty``, ``monte_carlo``, ``report`` (the text report), ``synthetic`` (cases with known truth).
+``rows`` (the compiled solver over cases x starts), ``starts``, ``rounds`` (more rounds of starts where a fit
+needs them), ``reconstruction`` (``reconstruct`` and what a fit says), ``uncertainty``, ``monte_carlo``, ``report``
+(the text report), ``synthetic`` (cases with known truth).
 
 Uncertainty (``fit.uncertainty``): standard errors and correlations from the Gauss-Newton
 (Laplace) covariance (J^T W J + prior)^-1 at the optimum, in the physical units (the delta

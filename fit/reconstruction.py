@@ -18,7 +18,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.backend import on_cpu
 from ks_jax.case import Case, CaseError, get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 from ks_jax.compilation import quick_jit
@@ -29,11 +28,13 @@ from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
 from .posterior import sampler
-from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns, predict, to_z
-from .rows import best_start, count_at_best, rows_per_call, run_rows, stack, stick_thresholds
+from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
+from .problem import predict, to_z
+from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
+from .rows import count_at_best, rows_per_call, run_rows, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
-from .uncertainty import AT_BOUND, analyse_batch, default_rtol, one
+from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, one
 
 
 @dataclass
@@ -326,16 +327,6 @@ def _friction_bounded_below(info, j, least, prior=None, sliding=None):
 NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
 
 
-CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quantile is a note
-
-
-def chi2_quantile(dof: int, z: float) -> float:
-    """The chi^2 distribution's quantile at the normal quantile z, by Wilson and Hilferty's cube-root
-    approximation (within 1% of the exact 99% quantile from 1 degree of freedom up: 6.58 for 6.63)."""
-    a = 2.0 / (9.0 * np.asarray(dof, np.float64))
-    return dof * (1.0 - a + z * np.sqrt(a)) ** 3
-
-
 def _misfit_cause(at_best: int, starts: int) -> str:
     """Why a fit leaves evidence unexplained: bad evidence or sigmas, or a local minimum if few starts found it."""
     text = ("the evidence disagrees with itself or with the fixed inputs (the standard errors assume the sigmas "
@@ -424,121 +415,6 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
                              max_starts=max_starts, posterior=posterior, chains=chains)[0]
 
 
-MORE_STARTS = 8  # by default a fit takes up to this many rounds of ``starts`` starts (``_settled``)
-AGREE = 2  # starts that must reach the best fit before a fit takes no more starts
-
-
-def _settled(cost, dof):
-    """Which cases' starts so far (``cost`` (B, S): each start's cost, inf where a case has no such start) found
-    a fit it can keep: the best cost reached by ``AGREE`` starts or more, with a chi^2 within its distribution's
-    99% quantile (``dof`` (B,): the evidence's count plus the priors' less the unknowns' degrees of freedom). A
-    fit that no start can evaluate is settled: more starts would not help it."""
-    finite = np.isfinite(cost)
-    chi2 = 2.0 * np.where(finite, cost, np.inf).min(axis=1)
-    return ~finite.any(axis=1) | ((count_at_best(cost) >= AGREE) & (chi2 <= chi2_quantile(np.maximum(dof, 1), CHI2_Z)))
-
-
-SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction, in parts of the friction needed to stick
-OFF_BOUND = np.linspace(0.1, 0.9, 8)  # the off-bound starts of an unknown pinned at a bound, in parts of its range
-
-
-def _other_side(best, problem, lo, hi, pw, count: int):
-    """Starts from kept fits where the rounds of starts can stop short of the best fit: (cases (K,), x (K,
-    ``count``, n)), for the cases (of B) whose best fit (``best``: its "x" (B, n), "status", "sliding",
-    "stick_ratio" (B,), in the fit's coordinates; ``lo``, ``hi``, ``pw`` (B, n)) is in such a place:
-
-    - The contact sticks (friction an unknown without a prior, needed above its lower bound): the best fit with
-      the friction at ``SLIDE_SIDE`` parts of what it needs. A contact that sticks has one cost for every
-      friction above the one it needs (a flat plateau), so every start that reaches the plateau agrees on its
-      cost; a sliding fit just below the edge, which the evidence may prefer, is reached only from that side.
-    - Unknowns without a prior pinned at a bound: the best fit with each of them in turn at ``OFF_BOUND`` parts
-      of its range. Starts that end against the same bound agree on its cost too, where a fit inside the
-      bounds (a restitution that trades against the speeds) can be better.
-
-    A best fit without an exchange is in neither."""
-    x0 = np.asarray(best["x"], np.float64)
-    ok = np.asarray(best["status"]) == OK
-    free = np.asarray(pw) <= 0
-    x = np.repeat(x0[:, None], count, axis=1)
-    stick = np.zeros(len(x0), bool)
-    if "contact.friction" in problem.unknowns:
-        j = problem.unknowns.index("contact.friction")
-        needed = np.abs(np.asarray(best["stick_ratio"], np.float64))
-        stick = ok & ~np.asarray(best["sliding"], bool) & free[:, j] & (needed > lo[:, j])
-        x[stick, :, j] = lo[stick, j, None] + np.resize(SLIDE_SIDE, count) * (needed - lo[:, j])[stick, None]
-    width = hi - lo
-    with np.errstate(invalid="ignore"):  # inf - inf where a bound is missing: not pinned
-        pinned = free & np.isfinite(width) & (width > 0) & (np.minimum(x0 - lo, hi - x0) <= AT_BOUND * width)
-    pinned_cases = ok & ~stick & pinned.any(axis=1)
-    for i in np.flatnonzero(pinned_cases):
-        js = np.flatnonzero(pinned[i])
-        for k in range(count):
-            j = js[k % len(js)]
-            x[i, k, j] = lo[i, j] + OFF_BOUND[(k // len(js)) % len(OFF_BOUND)] * width[i, j]
-    cases = np.flatnonzero(stick | pinned_cases)
-    return cases, x[cases]
-
-
-MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts on a CPU: a few row counts, a program each
-# elsewhere: powers of 8 up to any batch, so that a round of any size is one call
-MORE_BLOCKS_ELSEWHERE = tuple(8**k for k in range(1, 9))
-
-
-def _more_block(cases: int, todo: int, starts: int) -> int:
-    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
-    counts (``MORE_BLOCKS`` cases on the CPU's path, ``MORE_BLOCKS_ELSEWHERE`` on an accelerator's; at most
-    ``cases``) that holds them all, else the largest. A call's vmapped solver runs every row until its slowest
-    converges, so a round of a few cases of a large batch is not padded to hundreds of rows; fixed counts keep
-    the compiled programs to a few, and a round of nearly all the cases runs in the program of the first round.
-    On a CPU the rows of a call run one after another, so that calls of 64 cases cost what one call of them all
-    does; an accelerator runs a call's rows side by side, and a round of thousands of cases in calls of 64 would
-    wait on every call in turn."""
-    ladder = MORE_BLOCKS if on_cpu() else MORE_BLOCKS_ELSEWHERE
-    sizes = sorted({min(c, cases) for c in ladder})
-    return next((c for c in sizes if c >= todo), sizes[-1]) * starts
-
-
-class _Starts:
-    """Every start a batch's cases have taken, round by round: per start, the few numbers the rounds decide on
-    (``table``: cost (inf where a case has no such start), converged, stalled, status, sliding, stick_ratio,
-    ``present``; (B, S) with S growing by a round's starts), and each round's solver outputs for the cases it
-    fitted, from which ``best`` gathers the best start's whole row."""
-
-    SMALL = {"cost": np.inf, "converged": False, "stalled": False, "status": -1, "sliding": False,
-             "stick_ratio": np.nan}
-
-    def __init__(self, out):
-        B, S = out["cost"].shape
-        self.per_round = S
-        self.count = np.full(B, S)
-        self.table = {k: np.asarray(out[k]) for k in self.SMALL} | {"present": np.ones((B, S), bool)}
-        self.rounds = [(np.arange(B), out)]
-
-    def add(self, cases, out):
-        """A round's outputs (``run_rows``'s, (T, S, ...)) for ``cases`` (T,)."""
-        B = len(self.count)
-        for k, fill in (self.SMALL | {"present": False}).items():
-            column = np.full((B, self.per_round), fill, dtype=self.table[k].dtype)
-            column[cases] = True if k == "present" else out[k]
-            self.table[k] = np.concatenate([self.table[k], column], axis=1)
-        self.count[cases] += self.per_round
-        self.rounds.append((cases, out))
-
-    def best(self, cases, keys=None) -> dict:
-        """The best start's outputs (``keys``, default all) of ``cases`` (K,): arrays (K, ...)."""
-        b = best_start(self.table["cost"][cases], self.table["converged"][cases])
-        r, s = np.divmod(b, self.per_round)
-        keys = self.rounds[0][1].keys() if keys is None else keys
-        out = {k: np.empty((len(cases), *v.shape[2:]), v.dtype) for k, v in self.rounds[0][1].items() if k in keys}
-        for n, (members, o) in enumerate(self.rounds):
-            take = np.flatnonzero(r == n)
-            if take.size:
-                at = np.searchsorted(members, cases[take])  # a round's cases are in increasing order
-                for k in out:
-                    out[k][take] = o[k][at, s[take]]
-        return out
-
-
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
@@ -597,19 +473,19 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
     first = run_rows(problem, solver, max_iter, inputs, *(stacked[k] for k in per_case),
                      to_z(x0, stacked["lo"][:, None], stacked["hi"][:, None]), smoothing, dtype, starts, block, devices)
-    found = _Starts(first)
+    found = Starts(first)
     limit = MORE_STARTS * starts if max_starts is None else max(int(max_starts), starts)
     dof = len(problem.evidence) + np.sum(stacked["pw"] > 0, axis=1) - len(problem.unknowns)
     probed = np.zeros(len(cases), bool)
     while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
         room = found.count + starts <= limit
-        todo = np.flatnonzero(room & ~_settled(found.table["cost"], dof))
+        todo = np.flatnonzero(room & ~settled(found.table["cost"], dof))
         if todo.size:
             x_more = first_starts(problem.unknowns, {k: v[todo] for k, v in stacked.items()}, starts + 1, rng)[:, 1:]
-        else:  # settled: once per case, starts where the rounds can stop short (``_other_side``)
+        else:  # settled: once per case, starts where the rounds can stop short (``rounds.other_side``)
             ask = np.flatnonzero(room & ~probed & np.isfinite(found.table["cost"]).any(axis=1))
             best = found.best(ask, ("x", "status", "sliding", "stick_ratio"))
-            sides, x_more = _other_side(best, problem, *(stacked[k][ask] for k in ("lo", "hi", "pw")), starts)
+            sides, x_more = other_side(best, problem, *(stacked[k][ask] for k in ("lo", "hi", "pw")), starts)
             todo = ask[sides]
             if not todo.size:
                 break
@@ -617,7 +493,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         z_more = to_z(x_more, stacked["lo"][todo, None], stacked["hi"][todo, None])
         found.add(todo, run_rows(problem, solver, max_iter, jax.tree_util.tree_map(lambda v: v[todo], inputs),
                                  *(stacked[k][todo] for k in per_case), z_more, smoothing, dtype, starts,
-                                 block or _more_block(len(cases), todo.size, starts), devices))
+                                 block or more_block(len(cases), todo.size, starts), devices))
     everyone = np.arange(len(cases))
     rows = found.best(everyone)
     rows["at_best"] = count_at_best(found.table["cost"])

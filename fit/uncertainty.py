@@ -60,6 +60,16 @@ SI_NAME = {"velocity": "m/s", "length": "m", "angle": "rad", "angular_velocity":
            "energy": "J", "force": "N"}
 
 
+CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quantile is a note
+
+
+def chi2_quantile(dof: int, z: float) -> float:
+    """The chi^2 distribution's quantile at the normal quantile z, by Wilson and Hilferty's cube-root
+    approximation (within 1% of the exact 99% quantile from 1 degree of freedom up: 6.58 for 6.63)."""
+    a = 2.0 / (9.0 * np.asarray(dof, np.float64))
+    return dof * (1.0 - a + z * np.sqrt(a)) ** 3
+
+
 def default_rtol(dtype) -> float:
     return 1e-6 if np.finfo(dtype).eps < 1e-10 else 1e-3
 
