@@ -439,8 +439,9 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
     ok = [i for i in ok if tuple(u.path for u in unknowns_specs[i]) == paths
           and tuple(e.path for e in evidence_specs[i]) == evidence_paths]
     kinds = {}  # path_key -> the evidence's (is_output, period), or None where a path is refused
+    keys = {i: path_key(cases[i]) for i in ok}
     for i in ok:
-        key = path_key(cases[i])
+        key = keys[i]
         if key not in kinds:
             try:
                 for p in paths:
@@ -448,7 +449,7 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
                 kinds[key] = tuple(checks.evidence(cases[i], p) for p in evidence_paths)
             except CaseError:
                 kinds[key] = None
-    ok = [i for i in ok if kinds[path_key(cases[i])] is not None]
+    ok = [i for i in ok if kinds[keys[i]] is not None]
     nan = math.nan
     try:
         u = np.array([[(x.lower, x.upper, nan if x.start is None else x.start, x.start is not None,
@@ -481,7 +482,7 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
                 x = unknowns[j]
                 unknowns[j] = Unknown(x.path, float(lo[k]), float(hi[k]), x.start, x.prior)
         ties = input_ties(case, list(paths)) if ties_matter else ()
-        key = (path_key(case), ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion)
+        key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion)
         if key not in problems:
             evidence = tuple((p, *kind) for p, kind in zip(evidence_paths, kinds[key[0]]))
             problems[key] = Problem(paths, ties, evidence, *key[2:])
