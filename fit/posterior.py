@@ -13,9 +13,11 @@ step size and diagonal mass matrix. NumPyro's NUTS would need the density rewrit
 
 Each chain starts at the fit's estimate, moved by a small random step (a tenth of a unit in z) so that the
 chains' agreement (R-hat) means something. Reported per unknown (SI): mean, std, the 2.5, 16, 50, 84 and 97.5%
-quantiles, the rank-normalized split R-hat and the effective sample size (BlackJAX's diagnostics), and the
-divergent transitions of all chains; a warning where R-hat exceeds 1.01, the effective sample size is below
-100 per chain, or any transition diverged.
+quantiles, Gelman and Rubin's potential scale reduction (R-hat, over whole chains) and the effective sample size
+(BlackJAX's diagnostics), and the divergent transitions of all chains; a warning where R-hat exceeds 1.01, the
+effective sample size is below 100 per chain, or any transition diverged. R-hat compares chains, so with one chain
+it is undefined (NaN; null in JSON) and a warning says why; the effective sample size is computed for one chain
+as for several.
 """
 
 from __future__ import annotations
@@ -290,20 +292,32 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
                      [float(s) for s in np.asarray(step_size)])
 
 
+RHAT_UNDEFINED = ("R-hat is undefined: R-hat needs two or more chains, and with one the draws cannot show whether "
+                  "chains agree (a mode the chain never reached goes unseen); run two chains or more")
+RHAT_ONE_DRAW = "R-hat is undefined: R-hat needs two or more draws per chain"
+ESS_UNDEFINED = "the effective sample size is undefined: it needs two or more draws per chain"
+
+
 @jax.jit
 def _diagnostics(x):
-    """BlackJAX's rank-normalized split R-hat and effective sample size of every unknown of draws x (chains,
-    draws, n), as one compiled program: run op by op they compile many small programs of their own."""
+    """BlackJAX's potential scale reduction (R-hat) and effective sample size of every unknown of draws x (chains,
+    draws, n), each (n,), as one compiled program: run op by op they compile many small programs of their own.
+    BlackJAX squeezes away every axis of length 1, an unknown's too: shaped back here. R-hat needs two chains and
+    two draws, the effective sample size two draws (BlackJAX asserts otherwise): NaN where not defined."""
     diagnostics = importlib.import_module("blackjax.diagnostics")
-    return diagnostics.potential_scale_reduction(x), diagnostics.effective_sample_size(x)
+    chains, draws, n = x.shape
+    nan = jnp.full((n,), jnp.nan, x.dtype)
+    rhat = jnp.reshape(diagnostics.potential_scale_reduction(x), (n,)) if chains > 1 and draws > 1 else nan
+    ess = jnp.reshape(diagnostics.effective_sample_size(x), (n,)) if draws > 1 else nan
+    return rhat, ess
 
 
 def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> Posterior:
     """The ``Posterior`` of draws ``x`` (chains, draws, n), SI: moments, quantiles, R-hat and effective sample
-    size per unknown, and the warnings they call for."""
+    size per unknown (NaN where undefined: R-hat with one chain or one draw, the effective sample size with one
+    draw, each with a warning that says why), and the warnings they call for."""
     chains, draws, _ = x.shape
     rhat, ess = (np.asarray(a, np.float64) for a in _diagnostics(jnp.asarray(x, jnp.float64)))
-    rhat = rhat if chains > 1 else np.full(len(paths), np.nan)
     flat = x.reshape(chains * draws, -1)
     q = {k: np.percentile(flat, v, axis=0) for k, v in QUANTILES.items()}
     summary = {p: {"mean": float(flat[:, j].mean()), "std": float(flat[:, j].std(ddof=1)) if len(flat) > 1 else 0.0,
@@ -318,6 +332,12 @@ def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> 
     if few:
         warnings.append(f"effective sample size below {ESS_PER_CHAIN} per chain: {', '.join(few)}: the 2.5% and "
                         "97.5% quantiles are rough; draw more")
+    if chains < 2:
+        warnings.append(RHAT_UNDEFINED)
+    elif draws < 2:
+        warnings.append(RHAT_ONE_DRAW)
+    if draws < 2:
+        warnings.append(ESS_UNDEFINED)
     if divergences:
         warnings.append(f"{divergences} divergent transition{'s' * (divergences != 1)} of {chains * draws}: the "
                         "sampler could not follow the density everywhere (a sharp stick/slide edge, or a bound); "

@@ -35,13 +35,14 @@ def text_report(result) -> str:
             lines.append(f"  {u.path:<{width}} " + " / ".join(fmt(v, kind) for v in p))
     if result.posterior is not None:
         post = result.posterior
-        lines += ["", f"Posterior (NUTS, {post.chains} chains x {post.draws} draws after {post.warmup} adaptation "
-                      f"steps; {post.divergences} divergent): mean +/- std; 2.5% / 50% / 97.5%; R-hat, ESS"]
+        lines += ["", f"Posterior (NUTS, {_count(post.chains, 'chain')} x {_count(post.draws, 'draw')} after "
+                      f"{_count(post.warmup, 'adaptation step')}; {post.divergences} divergent): mean +/- std; "
+                      "2.5% / 50% / 97.5%; R-hat, ESS"]
         for u in result.unknowns:
             kind, s = input_kind(u.path), post.summary[u.path]
             lines.append(f"  {u.path:<{width}} {fmt(s['mean'], kind)} +/- {fmt(s['std'], kind)}; "
                          + " / ".join(fmt(s[q], kind) for q in ("q025", "q50", "q975"))
-                         + f"; R-hat {s['rhat']:.3f}, ESS {s['ess']:.0f}")
+                         + f"; R-hat {_diagnostic(s['rhat'], '.3f')}, ESS {_diagnostic(s['ess'], '.0f')}")
         lines += [f"  warning: {w}" for w in post.warnings]
     lines += ["", "Evidence (fitted vs measured, residual in sigmas):"]
     ew = max(len(k) for k in result.residuals) + 2
@@ -59,3 +60,14 @@ def text_report(result) -> str:
                   f"{result.starts_converged} of {result.starts} starts converged, {result.starts_at_best} reached "
                   f"the best fit); exchange status at the estimate: {result.status}"]
     return "\n".join(lines)
+
+
+def _diagnostic(value: float, spec: str) -> str:
+    """A posterior's R-hat or effective sample size, or "undefined" where it is not (R-hat of one chain; NaN
+    inside, null in JSON): the warnings below the rows say why."""
+    return format(value, spec) if math.isfinite(value) else "undefined"
+
+
+def _count(k: int, noun: str) -> str:
+    """'1 chain', '4 chains'."""
+    return f"{k} {noun}{'s' * (k != 1)}"
