@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import io
 import math
 import tempfile
@@ -16,7 +15,7 @@ from ..batch import CHUNK_ROWS
 from ..case.errors import CaseError
 from ..files import check_output_file
 from ..model.types import STATUS_TEXT
-from .columns import axes_in_units, check_units, columns, invalid_rows, missing_flags, outputs_in_units, status_texts
+from .columns import axes_in_units, check_units, columns, invalid_rows, outputs_in_units, status_texts
 from .result import SweepResult
 
 
@@ -24,12 +23,95 @@ CSV_HINT_POINTS = 100_000  # from this many points, ``ks-jax sweep`` without pya
 
 
 def _arrow_csv():
-    """pyarrow's csv module, or None without pyarrow (``ResultWriter`` then writes with ``csv``)."""
+    """pyarrow's csv module, or None without pyarrow (``ResultWriter`` then formats the text itself,
+    ``csv_texts``)."""
     try:
         import pyarrow.csv
     except ImportError:
         return None
     return pyarrow.csv
+
+
+# Numbers in a .csv are written in plain notation for decimal exponents PLAIN_LOW .. PLAIN_HIGH - 1 (1e-6 to
+# below 1e10), otherwise in exponent form: as pyarrow writes them, so that a file is the same either way
+PLAIN_LOW, PLAIN_HIGH = -6, 10
+
+
+def _number_text(shortest: str) -> str:
+    """A number's text in a .csv from its shortest round-trip text as Python or NumPy writes it ("180.0",
+    "1e-05", "1.5e+16"): the same digits, in the notation of ``PLAIN_LOW`` / ``PLAIN_HIGH``, no trailing
+    ".0", the exponent without padding ("180", "0.00001", "1.5e+16", "1e-7")."""
+    if shortest in ("nan", "inf", "-inf"):
+        return shortest
+    sign, text = ("-", shortest[1:]) if shortest.startswith("-") else ("", shortest)
+    mantissa, _, exponent = text.partition("e")
+    whole, _, fraction = mantissa.partition(".")
+    digits = whole + fraction
+    k = int(exponent or 0) + len(whole) - 1  # the decimal exponent of the first digit
+    significant = digits.lstrip("0")
+    k -= len(digits) - len(significant)
+    significant = significant.rstrip("0")
+    if not significant:
+        return sign + "0"
+    if PLAIN_LOW <= k < PLAIN_HIGH:
+        if k >= 0:
+            whole, fraction = significant[:k + 1].ljust(k + 1, "0"), significant[k + 1:]
+        else:
+            whole, fraction = "0", "0" * (-k - 1) + significant
+        return sign + whole + ("." + fraction if fraction else "")
+    rest = "." + significant[1:] if len(significant) > 1 else ""
+    return f"{sign}{significant[0]}{rest}e{'+' if k >= 0 else '-'}{abs(k)}"
+
+
+def number_texts(values) -> list:
+    """The texts of a column of numbers in a .csv (``_number_text``): floats as the shortest text that reads
+    back as the same value of their type (float32 as float32), integers as they are. Most values take
+    Python's own shortest text with a trailing ".0" cut; only those Python writes in another notation (below
+    1e-4 or from 1e10) are rewritten one by one."""
+    values = np.asarray(values)
+    if values.dtype.kind != "f":
+        return [str(v) for v in values.tolist()]
+    # NumPy's text of a float32 is its shortest float32 text; Python's of a float64 its shortest
+    shortest = list(map(float.__repr__, values.tolist())) if values.dtype == np.float64 else values.astype(str).tolist()
+    texts = [t[:-2] if t[-2:] == ".0" else t for t in shortest]
+    with np.errstate(invalid="ignore", over="ignore"):
+        size = np.abs(values.astype(np.float64))
+        other = (size >= 10.0 ** PLAIN_HIGH) | ((size < 1e-4) & (size != 0))
+    if values.dtype != np.float64:  # NumPy writes a float32 in exponent form from 1e16, and below 1e-4
+        other |= np.array(["e" in t for t in shortest], dtype=bool)
+    for i in np.flatnonzero(other).tolist():
+        texts[i] = _number_text(shortest[i])
+    return texts
+
+
+def csv_field(text: str) -> str:
+    """A text as one field of a .csv: quoted (its quotes doubled) where RFC 4180 needs it (a comma, a
+    quote, a line break), else as it is."""
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def csv_header(names) -> str:
+    """The header line of a .csv: the column names, quoted only where they must be (``csv_field``)."""
+    return ",".join(csv_field(str(n)) for n in names) + "\n"
+
+
+def csv_texts(values, invalid=None) -> list:
+    """The fields of one column of a .csv, as pyarrow's writer (quoting where needed) writes them: numbers by
+    ``number_texts``, booleans ``true`` / ``false`` (an empty field on the ``invalid`` rows: a flag of an
+    invalid row has no value), texts always quoted; a column of texts already made (object) as it is."""
+    values = np.asarray(values)
+    if values.dtype == bool:
+        texts = np.where(values, "true", "false").astype(object)
+        if invalid is not None and invalid.any():
+            texts[invalid] = ""
+        return texts.tolist()
+    if values.dtype.kind in "fiu":
+        return number_texts(values)
+    if values.dtype.kind == "U":
+        return ['"' + t.replace('"', '""') + '"' for t in values.tolist()]
+    return values.tolist()
 
 
 def _arrow_table(cols):
@@ -48,12 +130,13 @@ class ResultWriter:
     on an error). Memory stays at a few chunks whatever the number of points (``ks-jax sweep``).
 
     .csv: one row per point: the swept inputs, the outputs, ``status``, ``status_text``; an invalid
-    row's numbers are NaN and its flags (``contact.sliding``) empty (null in .parquet). Where
-    pyarrow is installed its CSV writer formats the numbers (shortest text that reads back as the same
-    float, as Python's, but 1.0 is written "1" and 1e-05 "0.00001"; float32 results as float32, so
-    "0.1" where the csv module writes 0.10000000149011612), writes booleans true / false and
-    quotes every text; without pyarrow the ``csv`` module writes it (1.0, 1e-05, True / False, texts
-    quoted only where they must be), several times slower: Python's float formatting is the cost.
+    row's numbers are NaN and its flags (``contact.sliding``) empty (null in .parquet). One format
+    whether pyarrow writes it (where it is installed: several times faster) or the ``csv`` module's
+    path (``csv_texts``), byte for byte: the header unquoted (quoted only where RFC 4180 needs it),
+    each number as the shortest text that reads back as the same float (a float32 result as the
+    shortest float32 text), in plain notation from 1e-6 to below 1e10 without a trailing ".0"
+    (``1``, ``180``, ``0.00001``) and otherwise as ``1e-7``, ``1.5e+10``; ``nan``, ``inf``;
+    booleans ``true`` / ``false``; the status text always quoted; lines ended by "\n".
     .parquet: the same columns (pyarrow), in row groups of about 2^18 points.
     .npz: one array per output in the result's shape, ``axis:<path>`` for the axes, the status codes
     and texts (a bool array has no empty value: an invalid row's flag is False there, read its
@@ -92,12 +175,12 @@ class ResultWriter:
         self._file = self._parquet = self._tmpdir = None
         self._arrays, self._pending, self._written, self._npy_layout = {}, [], 0, {}
         self._arrow_csv = _arrow_csv() if self.kind == ".csv" else None
-        # the swept values as the columns show them: in a .csv of a grid written by the csv module,
-        # each value's text (what it writes for the Python float), formatted once instead of once per row
+        # the swept values as the columns show them: in a .csv of a grid written without pyarrow, each
+        # value's text, formatted once instead of once per row
         self._column_axes = self.axes
         if self.kind == ".csv" and self._arrow_csv is None and mode != "zip":
-            self._column_axes = {p: np.array([str(x) for x in np.asarray(v).tolist()], dtype=object)
-                                 for p, v in self.axes.items()}
+            self._column_axes = {p: np.array(number_texts(v), dtype=object) for p, v in self.axes.items()}
+        self._sink = None  # the open .csv file under pyarrow's writer
         self.seconds = self.chunk_seconds = 0.0  # spent writing: in all, and inside ``chunk``
 
     @property
@@ -140,17 +223,31 @@ class ResultWriter:
 
     def _csv_chunk(self, cols):
         if self._file is None:
-            self._file = self._partial.open("w", newline="")
-            self._csv = csv.writer(self._file)
-            self._csv.writerow(list(cols))
-        texts = (c.tolist() for c in missing_flags(cols).values())  # a flag of an invalid row: ""
-        self._csv.writerows(zip(*texts))
+            self._file = self._partial.open("w", newline="", encoding="utf-8")
+            self._file.write(csv_header(cols))
+        invalid = invalid_rows(cols["status"])
+        cols["status_text"] = cols["status_text"].astype(str)  # a text column: quoted
+        texts = [csv_texts(v, invalid) for v in cols.values()]
+        self._file.write("".join(line + "\n" for line in map(",".join, zip(*texts))))
 
     def _arrow_csv_chunk(self, table):
         if self._file is None:
-            options = self._arrow_csv.WriteOptions(quoting_style="needed")
-            self._file = self._arrow_csv.CSVWriter(str(self._partial), table.schema, write_options=options)
+            self._sink = self._partial.open("wb")
+            self._sink.write(csv_header(table.column_names).encode())
+            options = self._arrow_csv.WriteOptions(include_header=False, quoting_style="needed")
+            self._file = self._arrow_csv.CSVWriter(self._sink, table.schema, write_options=options)
         self._file.write_table(table)
+
+    def _close_csv(self):
+        """Close the .csv being written (pyarrow's writer, then the file under it)."""
+        try:
+            if self._file is not None:
+                self._file.close()
+        finally:
+            self._file = None
+            if self._sink is not None:
+                self._sink.close()
+                self._sink = None
 
     def _flush_parquet(self):
         import pyarrow as pa
@@ -187,8 +284,7 @@ class ResultWriter:
             if self.kind == ".csv":
                 if self._file is None:
                     return None, 0
-                self._file.close()
-                self._file = None
+                self._close_csv()
                 with self._partial.open("rb") as f:
                     rows = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 24), b"")) - 1
             elif self.kind == ".parquet":
@@ -223,7 +319,7 @@ class ResultWriter:
             if self.points == 0:
                 raise CaseError(f"{self.out}: the sweep has no points to write")
             if self.kind == ".csv":
-                self._file.close()
+                self._close_csv()
             elif self.kind == ".parquet":
                 self._flush_parquet()
                 self._parquet.close()
@@ -260,9 +356,7 @@ class ResultWriter:
 
     def abort(self):
         """Close what is open and delete the unfinished file (``out`` itself is left as it was)."""
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        self._close_csv()
         if self._parquet is not None:
             self._parquet.close()
             self._parquet = None

@@ -61,16 +61,15 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     assert_no_flag_on_invalid_rows(a, kept)
 
 
-def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
-    """A .csv is written by pyarrow where it is installed, else by the csv module: the two files
-    differ in text (1 against 1.0, true against True, quoting) but read back to the sweep's values,
-    bit for bit, NaN of invalid rows included, in a grid and in zipped samples; float32 results read
-    back as float32 (pyarrow writes their shortest text, 0.1 for float32(0.1), the csv module the
-    float64 value's)."""
+def test_csv_is_the_same_file_with_or_without_pyarrow(tmp_path, monkeypatch):
+    """A .csv is written by pyarrow where it is installed, else by ks-jax's own formatting: the two files are
+    the same bytes, in a grid, in zipped samples with invalid rows, in float32, in US units, and in a grid
+    whose values and results span the notations (plain from 1e-6 to below 1e10, exponents outside); they
+    read back to the sweep's values, bit for bit, NaN of invalid rows included (float32 as float32)."""
     pytest.importorskip("pyarrow")
     import ks_jax.sweeps.files as sweeps_module
 
-    outs = ["contact.impulse_magnitude", "contact.sliding", "vehicles[0].pdof"]
+    outs = ["contact.impulse_magnitude", "contact.sliding", "vehicles[0].pdof", "contact.impulse_tangential"]
     case = ks_jax.load_case(SEED0)
     rng = np.random.default_rng(3)
     grid = sweep(case, {"contact.normal": np.linspace(0, 1.2, 9), "contact.friction": np.linspace(0.1, 0.6, 7)},
@@ -78,28 +77,54 @@ def test_csv_reads_back_the_same_with_or_without_pyarrow(tmp_path, monkeypatch):
     zipped = sweep(case, {"vehicles[1].speed": rng.uniform(1, 40, 50), "contact.restitution": rng.uniform(0, 1.3, 50)},
                    outputs=outs, mode="zip")
     narrow = sweep(case, {"vehicles[1].speed": np.linspace(2, 30, 11)}, outputs=outs, output_dtype=np.float32)
+    # masses from 1e-3 to 1e12 kg: impulses and inputs on both sides of 1e-6 and 1e10, and 180.0 exactly
+    wide = sweep(case, {"vehicles[0].mass": np.concatenate([10.0 ** np.arange(-3, 13), [180.0, 2.5e-5]])},
+                 outputs=outs)
     assert grid["contact.sliding"].any() and not grid["contact.sliding"].all()
     assert np.isnan(zipped["contact.impulse_magnitude"]).any()  # restitution > 1: invalid rows
     assert narrow["contact.impulse_magnitude"].dtype == np.float32
-    for name, result in (("grid", grid), ("zip", zipped), ("float32", narrow)):
-        write_results(result, tmp_path / f"{name}_arrow.csv")
+    for name, result, units in (("grid", grid, "si"), ("zip", zipped, "si"), ("float32", narrow, "si"),
+                                ("us", grid, "us"), ("wide", wide, "si")):
+        write_results(result, tmp_path / f"{name}_arrow.csv", units=units)
         with monkeypatch.context() as m:
             m.setattr(sweeps_module, "_arrow_csv", lambda: None)
-            write_results(result, tmp_path / f"{name}_csv.csv")
-        a, b = read_table(tmp_path / f"{name}_arrow.csv"), read_table(tmp_path / f"{name}_csv.csv")
-        assert (tmp_path / f"{name}_arrow.csv").read_text() != (tmp_path / f"{name}_csv.csv").read_text()
-        assert list(a) == list(b) == [*result.inputs(), *outs, "status", "status_text"]
+            write_results(result, tmp_path / f"{name}_csv.csv", units=units)
+        text = (tmp_path / f"{name}_arrow.csv").read_bytes()
+        assert text == (tmp_path / f"{name}_csv.csv").read_bytes(), name
+        assert b"\r" not in text and text.endswith(b"\n")
+        if units != "si":
+            continue
+        a = read_table(tmp_path / f"{name}_arrow.csv")
+        assert list(a) == [*result.inputs(), *outs, "status", "status_text"]
+        assert text.split(b"\n", 1)[0] == ",".join(a).encode()  # the header unquoted
         if name == "zip":  # with invalid rows
             assert_no_flag_on_invalid_rows(a, result)
-            assert_no_flag_on_invalid_rows(b, result)
         for p in outs:  # as the sweep stored them (float32 read as float32; None, a missing flag: False)
-            a[p], b[p] = (x[p].astype(result[p].dtype) for x in (a, b))
-        for k in a:
-            np.testing.assert_array_equal(a[k], b[k], err_msg=f"{name}: {k}")
-        for p in outs:
+            a[p] = a[p].astype(result[p].dtype)
             np.testing.assert_array_equal(a[p], np.ravel(result[p]), err_msg=f"{name}: {p}")
         for p, v in result.inputs().items():
             np.testing.assert_array_equal(a[p], np.ravel(v), err_msg=f"{name}: {p}")
+    # the notation, against texts written out by hand for each rule
+    column = (tmp_path / "wide_csv.csv").read_text().splitlines()
+    masses = [line.split(",")[0] for line in column[1:]]
+    assert masses == ["0.001", "0.01", "0.1", "1", "10", "100", "1000", "10000", "100000", "1000000", "10000000",
+                      "100000000", "1000000000", "1e+10", "1e+11", "1e+12", "180", "0.000025"]
+
+
+@pytest.mark.parametrize("value, text", [
+    (180.0, "180"), (0.1, "0.1"), (-0.0, "-0"), (1e-5, "0.00001"), (1.5e-6, "0.0000015"), (1e-7, "1e-7"),
+    (9.5e-7, "9.5e-7"), (123456789.5, "123456789.5"), (9999999999.0, "9999999999"), (1e10, "1e+10"),
+    (1.25e16, "1.25e+16"), (5e-324, "5e-324"), (float("nan"), "nan"), (-float("inf"), "-inf")])
+def test_csv_numbers_are_the_shortest_text_in_one_notation(value, text):
+    """Each number is the shortest text that reads back as it, plain from 1e-6 to below 1e10 (no trailing
+    ".0"), in exponent form outside (the exponent unpadded); float32 by its own shortest text."""
+    from ks_jax.sweeps.files import number_texts
+
+    assert number_texts(np.array([value])) == [text]
+    if np.isfinite(value):
+        assert float(text) == value
+    assert number_texts(np.array([0.1, 1e-5, 3e9, 2.5e10], np.float32)) == ["0.1", "0.00001", "3000000000", "2.5e+10"]
+    assert number_texts(np.array([3, -7], np.int32)) == ["3", "-7"]
 
 
 def test_files_in_us_units(tmp_path, capsys):
