@@ -48,6 +48,11 @@ IMPULSE_LENGTH = 0.4  # the longest impulse arrow, in units of the larger vehicl
 VELOCITY_LENGTH = 0.5  # the longest velocity arrow, likewise
 ROUND_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # of a scale, times a power of ten
 PATH_OUTLINES = 8  # outlines drawn on the way from the exchange to rest, between the two drawn solid
+LEGEND_SIZE = 6.5  # points, the legend's font
+TITLE_SIZE = 9.0  # points, the title's font
+TWO_COLUMNS = 420.0  # points: an axes at least this wide has its legend in two columns
+PANEL_WIDTH = 8.5  # inches, one panel of ``save_top_view``
+PLOT_HEIGHT = 7.2  # inches of a panel above its legend: the axes, its labels and a two-line title
 
 
 def round_scale(x):
@@ -61,6 +66,54 @@ def round_scale(x):
 def scale_text(x):
     """A scale from ``round_scale`` as written in the legend, with every digit it has."""
     return f"{x:,.0f}" if x >= 10 else f"{x:.6g}"
+
+
+def text_width(text, size):
+    """The width in points of one line of ``text`` at font ``size`` (points) in matplotlib's default font,
+    as drawn (its glyphs measured, not its characters counted)."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import text_to_path
+
+    return text_to_path.get_text_width_height_descent(text, FontProperties(size=size), ismath=False)[0]
+
+
+def wrap_to_width(text, width, size, indent="  "):
+    """``text`` broken between words into lines no wider than ``width`` points at font ``size``: a legend
+    entry or a title with a vehicle's or a case's full name stays inside the axes' width instead of running
+    off the figure. Line breaks already in ``text`` are kept, a name stays with its value ("t_i = 0.158"),
+    and a continued line starts with ``indent`` (a legend entry's continuation then reads as part of it);
+    a single word wider than ``width`` keeps a line of its own (it is not cut)."""
+    lines = []
+    for paragraph in text.split("\n"):
+        line = ""
+        for word in paragraph.replace(" = ", "\0=\0").split(" "):
+            word = word.replace("\0", " ")
+            longer = f"{line} {word}" if line else word
+            if line and text_width(longer, size) > width:
+                lines.append(line)
+                line = indent + word
+            else:
+                line = longer
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def _legend(ax, offset):
+    """The legend below the axes, ``offset`` points under its bottom (below the x label), centred on it,
+    in two columns on an axes at least ``TWO_COLUMNS`` points wide (one on a narrower one), each entry
+    wrapped to its column's width: however long the vehicles' names, the legend is no wider than the axes."""
+    from matplotlib.transforms import offset_copy
+
+    handles, labels = ax.get_legend_handles_labels()
+    fig = ax.figure
+    width = ax.get_position().width * fig.get_figwidth() * 72.0  # points
+    ncol = 2 if width >= TWO_COLUMNS else 1
+    # matplotlib's legend: a handle 2.0 and a gap 0.8 font sizes per entry, 2.0 between columns, 0.4 each side
+    column = (width - LEGEND_SIZE * (0.8 + 2.8 * ncol + 2.0 * (ncol - 1))) / ncol
+    labels = [wrap_to_width(label, 0.97 * column, LEGEND_SIZE) for label in labels]
+    below = offset_copy(ax.transAxes, fig=fig, y=-offset, units="points")
+    return ax.legend(handles, labels, fontsize=LEGEND_SIZE, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                     bbox_transform=below, ncol=ncol, frameon=False)
 
 
 def _box(length, width, cg_to_front, xy, yaw):
@@ -141,7 +194,6 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     of those, drawn about the marks. Other paths are ignored. Returns the axes."""
     import matplotlib.pyplot as plt
     from matplotlib.patches import Polygon, Wedge
-    from matplotlib.transforms import offset_copy
 
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 7))
@@ -151,7 +203,9 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     friction = ""
     if solved and solution.status != "no_contact" and bool(impulse_exchanged(res)):
         friction = ", sliding (|T| = mu N)" if bool(res.contact.sliding) else ", sticking (inside the cone)"
-    ax.set_title(f"{case.name}\nstatus: {solution.status}{friction}", fontsize=9)
+    width = ax.get_position().width * ax.figure.get_figwidth() * 72.0  # points
+    ax.set_title(wrap_to_width(f"{case.name}\nstatus: {solution.status}{friction}", width, TITLE_SIZE, indent=""),
+                 fontsize=TITLE_SIZE)
     if not solved:
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
         return ax
@@ -262,9 +316,7 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     sec = ax.secondary_yaxis("right", functions=(lambda m: m / U.FT, lambda f: f * U.FT))
     sec.set_ylabel("y (ft)", fontsize=8)
     # below the x label whatever the axes' height: a fixed offset in points, not in axes fractions
-    below = offset_copy(ax.transAxes, fig=ax.figure, y=-34, units="points")
-    ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(0.0, 0.0), bbox_transform=below, ncol=2,
-              frameon=False)
+    _legend(ax, 34)
     return ax
 
 
@@ -354,10 +406,13 @@ def _draw_fixed(ax, obj, name, box, near, extent):
     ax.update_datalim(np.asarray(box if obj.kind == "barrier" else [near - extent, near + extent], float))
 
 
-def save_top_view(solutions, path, evidence=None, sigma=None):
-    """Write the top views of one ``Solution`` or a list of them (one panel each) to ``path``
-    (PNG, PDF, SVG: by the file name). ``evidence`` and ``sigma`` as for ``top_view``: one mapping for every
-    panel, or a list of them (or None), one per solution. Returns the path."""
+def top_view_figure(solutions, evidence=None, sigma=None):
+    """A figure of the top views of one ``Solution`` or a list of them (one panel each, two per row), every
+    title and legend inside it: each panel is ``PANEL_WIDTH`` inches wide, and each row as tall as its
+    plots (``PLOT_HEIGHT``) and its tallest legend and title need, however long the case's and the
+    vehicles' names (``top_view`` wraps them to the axes' width). ``evidence`` and ``sigma`` as for
+    ``top_view``: one mapping for every panel, or a list of them (or None), one per solution."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure  # no pyplot: works without a display, leaves no state
 
     if not isinstance(solutions, (list, tuple)):
@@ -370,12 +425,30 @@ def save_top_view(solutions, path, evidence=None, sigma=None):
                          "mappings: give one mapping for all, or one per solution")
     cols = min(n, 2)
     rows = math.ceil(n / cols)
-    fig = Figure(figsize=(8.5 * cols, 9.0 * rows))
+    fig = Figure(figsize=(PANEL_WIDTH * cols, 9.0 * rows))
+    FigureCanvasAgg(fig)  # a renderer, to measure the legends
     axes = fig.subplots(rows, cols, squeeze=False)
     for ax, sol, marks, sigmas in zip(axes.flat, solutions, evidence, sigma):
         top_view(sol, ax, evidence=marks, sigma=sigmas)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
+    renderer = fig.canvas.get_renderer()
+
+    def extra(ax):  # inches a panel needs beyond PLOT_HEIGHT: its legend, and its title's lines past two
+        legend = ax.get_legend()
+        below = legend.get_window_extent(renderer).height if legend is not None else 0.0
+        title = ax.title.get_window_extent(renderer).height
+        return (below + max(0.0, title - 2.4 * TITLE_SIZE * fig.dpi / 72.0)) / fig.dpi
+
+    heights = [PLOT_HEIGHT + max(extra(ax) for ax in row if ax.get_visible()) for row in axes]
+    axes[0, 0].get_subplotspec().get_gridspec().set_height_ratios(heights)
+    fig.set_figheight(sum(heights))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    return fig
+
+
+def save_top_view(solutions, path, evidence=None, sigma=None):
+    """Write ``top_view_figure`` of one ``Solution`` or a list of them (one panel each) to ``path``
+    (PNG, PDF, SVG: by the file name). ``evidence`` and ``sigma`` as for ``top_view``. Returns the path."""
+    top_view_figure(solutions, evidence, sigma).savefig(path, dpi=110)
     return path

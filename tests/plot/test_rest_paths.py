@@ -1,6 +1,7 @@
 """The top view of a case with a road: each vehicle's path from the exchange to rest, its outline at rest and
 the measured rest positions are drawn where the results, a hand calculation and the given evidence put them."""
 
+import dataclasses
 import math
 import types
 from importlib import resources
@@ -173,3 +174,49 @@ def test_fit_plot_solves_the_case_at_the_estimate(drawn):
     assert float(ks_jax.get_input(case.inputs, "vehicles[1].course")) == pytest.approx(math.radians(80.0))
     assert float(ks_jax.get_input(case.inputs, "vehicles[1].speed")) == float(sol.case.inputs.vehicles[1].speed)
     assert "estimate" in case.name
+
+
+# names of the length reconstructionists write: a case named after its source and what happened, vehicles by
+# model year, make, model, trim and colour
+LONG_CASE = ("Reading Kudlich-Slibar Impulse Data (Virtual CRASH manual), intersection of Main Street and "
+             "5th Avenue: a 2019 Ford F-150 into the right side of a 2015 Honda Accord, both spun out to rest")
+LONG_NAMES = ("2015 Honda Accord EX-L V6 sedan (silver)", "2019 Ford F-150 XLT SuperCrew 4x4 (red)")
+
+
+def inside(outer, inner, slack=0.5):
+    """``inner`` (a Bbox, pixels) lies within ``outer``, to ``slack`` pixels (rounding)."""
+    return (outer.x0 - slack <= inner.x0 and inner.x1 <= outer.x1 + slack
+            and outer.y0 - slack <= inner.y0 and inner.y1 <= outer.y1 + slack)
+
+
+@pytest.mark.parametrize("panels", [1, 3])
+def test_long_names_keep_the_legend_and_the_title_inside_the_figure(drawn, panels):
+    """With a long case name and vehicle names of 40 characters, every entry of the legend (the paths to rest
+    with their "outlines every ... s", the outlines at rest with their "turned ... deg") and the whole title are
+    in the figure ``ks-jax solve --plot`` writes, one panel or several: wrapped, none cut at its edge."""
+    sol = drawn[0]
+    case = dataclasses.replace(sol.case, name=LONG_CASE, vehicle_names=LONG_NAMES)
+    fig = plot.top_view_figure([dataclasses.replace(sol, case=case)] * panels, evidence=MEASURED, sigma=SIGMA)
+    renderer = fig.canvas.get_renderer()
+    fig.canvas.draw()
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == panels
+    for legend in legends:
+        assert inside(fig.bbox, legend.get_window_extent(renderer))
+        labels = [t.get_text().replace("\n  ", " ") for t in legend.get_texts()]
+        for i, name in enumerate(LONG_NAMES):  # every entry whole, once the line breaks are read back as spaces
+            rest = sol.result.rest[i]
+            assert any(s.startswith(f"{name}: CG path to rest") and s.endswith(
+                f"outlines every {float(rest.time_to_rest) / 9:.2f} s") for s in labels), labels
+            assert any(s.startswith(f"{name} at rest") and s.endswith(
+                f"(turned {float(rest.rotation_to_rest):+.1f} deg)") for s in labels), labels
+        assert any("\n" in t.get_text() for t in legend.get_texts())  # the long ones were wrapped
+    titles = [ax.title for ax in fig.axes if ax.title.get_text()]
+    assert len(titles) == panels and all(t.get_text().replace("\n", " ").startswith(LONG_CASE) for t in titles)
+    # everything drawn (tick labels within the limits, axis labels of both units, titles, legends): each axes'
+    # tight box, and the secondary axes' (feet) inside theirs
+    boxes = [a.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible() for a in [ax, *ax.child_axes]]
+    assert len(boxes) == 3 * panels
+    for box in boxes:
+        assert inside(fig.bbox, box)
+    assert not [t for t in fig.texts if t.get_visible() and not inside(fig.bbox, t.get_window_extent(renderer))]

@@ -231,3 +231,26 @@ def test_sticking_contact_is_marked_and_the_arrows_are_to_scale():
     assert not any("sliding" in s for s in labels + [ax.get_title()])
     assert not cone_edges(ax)
     check_arrow_scales(sol, ax)
+
+
+def test_wrapped_lines_fit_the_width_as_drawn():
+    """``wrap_to_width`` breaks between words only, keeps a name with its value, and every line, drawn by
+    matplotlib's Agg renderer (not the font measure it wraps by), is no wider than asked."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from ks_jax.plot.top_view import wrap_to_width
+
+    text = ("2015 Honda Accord EX-L V6 sedan (silver) at first contact, t_i = 0.1580 s; "
+            "2019 Ford F-150 XLT SuperCrew 4x4 (red): CG path to rest, 17.80 m (58.4 ft) in 3.57 s")
+    fig = Figure(dpi=72)  # 1 pixel = 1 point
+    FigureCanvasAgg(fig)
+    for width in (120.0, 200.0, 330.0):
+        wrapped = wrap_to_width(text, width, 6.5)
+        lines = wrapped.split("\n")
+        assert len(lines) >= 2 and all(line.startswith("  ") for line in lines[1:])
+        assert " ".join(line.strip() for line in lines) == text
+        assert not any(line.rstrip().endswith(("t_i", "=")) for line in lines)
+        for line in lines:
+            drawn = fig.text(0, 0, line, fontsize=6.5).get_window_extent(fig.canvas.get_renderer())
+            assert drawn.width <= width + 0.5, (line, drawn.width)
+    assert wrap_to_width("a\nb", 100.0, 6.5) == "a\nb"
