@@ -4,12 +4,14 @@ values of a case file beside ks-jax's. (The JSON of ``ks-jax solve --json`` is `
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import NamedTuple
 
 import numpy as np
 
 from . import units as U
 from .case import CIRCULAR_OUTPUTS, at_rest_after, defined_output, impulse_exchanged, parse_output_value, parse_path
+from .case.errors import visible
 from .case.fixed import describe
 from .model.first_contact import HORIZON
 
@@ -42,32 +44,56 @@ def _quantity(label, x, si_unit, us_scale, us_unit):
     return _row(label, f"{_fmt(x)} {si_unit}", f"{_fmt(x / us_scale)} {us_unit}")
 
 
-LABEL_WIDTH, SI_WIDTH = 34, 26  # the least widths of the label and SI columns: an ordinary panel's
+LABEL_WIDTH, SI_WIDTH = 34, 26  # the label column's width and the SI column's least width: an ordinary panel's
 GAP = 2  # the least number of spaces between two columns
+WRAP_WIDTH = 100  # notes are wrapped to lines of at most this many characters
 
 
 class _Row(NamedTuple):
-    """One row of the panel: a label, its SI text and its US text ("" where the row has none). The
-    columns are laid out once the whole panel is known (``_layout``), so that wide numbers widen them."""
+    """One row of the panel: a label, its SI text and its US text ("" where the row has none), and a
+    remark on it (``note``, "" for none) wrapped under it. The columns are laid out once the whole panel
+    is known (``_layout``), so that wide numbers widen them."""
     label: str
     si: str
     us: str = ""
+    note: str = ""
 
 
-def _row(label, si, us=""):
-    return _Row(label, si, us)
+def _row(label, si, us="", note=""):
+    return _Row(label, si, us, note)
+
+
+def _wrapped(text, first="  ", then="    "):
+    """``text`` wrapped to ``WRAP_WIDTH`` characters, its first line indented by ``first``, the rest by ``then``."""
+    return "\n".join(textwrap.wrap(text, WRAP_WIDTH, initial_indent=first, subsequent_indent=then,
+                                   break_on_hyphens=False))
 
 
 def _layout(lines):
-    """The panel's text from its lines (text as it is, ``_Row``s in columns). Each column is as wide as
-    its widest entry plus ``GAP`` spaces, and at least as wide as an ordinary panel's, so that the US
-    column starts at one offset in every row and never touches the SI text, whatever the numbers. An SI
-    text with no US text beside it (a sentence) may run past its column and widens nothing."""
+    """The panel's text from its lines (text as it is, ``_Row``s in columns). The label column is
+    ``LABEL_WIDTH`` wide: a longer label is wrapped within it, its first line beside the values and the
+    rest under it, and a row's note is wrapped under the row, so that neither pushes the columns out. The
+    SI column is as wide as its widest entry plus ``GAP`` spaces, and at least ``SI_WIDTH``, so that the
+    US column starts at one offset in every row and never touches the SI text, whatever the numbers. An
+    SI text with no US text beside it (a sentence) may run past its column and widens nothing."""
     rows = [r for r in lines if isinstance(r, _Row)]
-    label_width = max([LABEL_WIDTH] + [len(r.label) + GAP for r in rows])
     si_width = max([SI_WIDTH] + [len(r.si) + GAP for r in rows if r.us])
-    return "\n".join(f"  {r.label:<{label_width}}{r.si:<{si_width}}{r.us}".rstrip() if isinstance(r, _Row) else r
-                     for r in lines)
+    out = []
+    for r in lines:
+        if not isinstance(r, _Row):
+            out.append(r)
+            continue
+        label, more = r.label, []
+        if len(label) > LABEL_WIDTH - GAP:
+            indent = len(label) - len(label.lstrip())
+            label, *more = textwrap.wrap(label, LABEL_WIDTH - GAP, subsequent_indent=" " * (indent + 2),
+                                         break_on_hyphens=False)
+        out.append(f"  {label:<{LABEL_WIDTH}}{r.si:<{si_width}}{r.us}".rstrip())
+        out += [f"  {line}" for line in more]
+        if r.note:
+            indent = " " * (4 + len(r.label) - len(r.label.lstrip()))
+            out.append(_wrapped(r.note, indent, indent))
+    return "\n".join(out)
 
 
 def _timing_rows(sol):
@@ -83,7 +109,7 @@ def _timing_rows(sol):
 
 def text_report(sol, reference: bool = True) -> str:
     """The auto-ees panel of one solved case, SI beside US units."""
-    lines = [f"Case: {sol.case.name}"]
+    lines = [f"Case: {visible(sol.case.name)}"]
     if sol.result is None or sol.status.startswith("invalid"):
         lines.append(f"  status: {sol.status}")
         return "\n".join(lines)
@@ -95,14 +121,15 @@ def text_report(sol, reference: bool = True) -> str:
     else:
         lines += _contact_rows(sol, c)
     lines += _vehicle_rows(sol, v1, v2)
-    lines += [f"\n  note: {note}." for note in sol.notes()]
+    notes = [f"{visible(note)}." for note in sol.notes()]
     if sol.status == "no_contact":
-        lines.append(f"\n  note: the footprints do not touch within {HORIZON:g} s of free motion from the case state "
+        notes.append(f"the footprints do not touch within {HORIZON:g} s of free motion from the case state "
                      "(the search horizon): no exchange.")
     elif not np.isfinite(v1.ees) and c.energy_loss < 0:
-        lines.append("\n  note: EES is undefined: the energy loss is negative.")
+        notes.append("EES is undefined: the energy loss is negative.")
     elif not np.isfinite(v1.ees):  # model.results.ees_pair: crushes of rounding size count as 0
-        lines.append("\n  note: EES is undefined: the centroid lies inside neither box (both crushes are 0).")
+        notes.append("EES is undefined: the centroid lies inside neither box (both crushes are 0).")
+    lines += ["\n" + _wrapped(f"note: {note}", "  ", "        ") for note in notes]
     ref = sol.case.raw.get("reference") if reference else None
     if ref:
         lines += ["", reference_table(sol, ref)]
@@ -133,12 +160,12 @@ def _vehicle_rows(sol, v1, v2):
     lines = []
     for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
         if k == 1 and sol.case.fixed is not None:  # the object has no per-vehicle results
-            lines += ["", f"  fixed object: {name}", f"  {describe(sol.case.fixed)}",
+            lines += ["", f"  fixed object: {visible(name)}", f"  {describe(sol.case.fixed)}",
                       "  (infinite mass, at rest: vehicle 1 takes all of the energy loss, EES = sqrt(2 E / m))"]
             continue
         lines += [
             "",
-            f"  vehicle {k + 1} = vehicles[{k}]: {name}",  # as the output paths (sweeps, fits, --json) name it
+            f"  vehicle {k + 1} = vehicles[{k}]: {visible(name)}",  # as the output paths (sweeps, fits, --json) name it
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
@@ -160,9 +187,10 @@ def _vehicle_rows(sol, v1, v2):
 def _rest_rows(r, motion):
     """A vehicle's motion to rest (``model.motion.RestResult``): where and when it stops."""
     x, y = (float(p) for p in r.rest_position)
-    where = "at rest" if bool(r.at_rest) else f"still moving at the time limit ({motion.time_limit:g} s): where it is then"
+    moving = "" if bool(r.at_rest) else f"still moving at the time limit ({motion.time_limit:g} s): where it is then"
     return [
-        _row(f"rest position (x, y): {where}", f"{_fmt(x)} {_fmt(y)} m", f"{_fmt(x / U.FT)} {_fmt(y / U.FT)} ft"),
+        _row(f"rest position (x, y){'' if moving else ': at rest'}", f"{_fmt(x)} {_fmt(y)} m",
+             f"{_fmt(x / U.FT)} {_fmt(y / U.FT)} ft", note=moving),
         _row("rest yaw (turned to rest)", f"{angle_text(r.rest_yaw)} deg ({_fmt(r.rotation_to_rest, 1)} deg)"),
         _row("time to rest", f"{_fmt(r.time_to_rest)} s"),
         _row("distance to rest (CG path)", f"{_fmt(r.distance_to_rest)} m", f"{_fmt(r.distance_to_rest / U.FT)} ft"),

@@ -162,15 +162,62 @@ def test_units_that_look_wrong_get_a_suggestion():
         U.parse_quantity("90°", "angle")
 
 
-def test_a_name_with_terminal_escapes_prints_them_escaped(tmp_path, capsys):
-    d = tomllib.loads(SEED1.read_text())
-    d["name"] = "Kia\x1b]0;retitled\x07\x1b[2J K5\nforged line"
-    path = written(tmp_path, "escape.json", d)
-    case = ks_jax.load_case(path)
-    assert case.name.isprintable() and "\\x1b]0;retitled\\x07" in case.name and "\\n" in case.name
+NAMES = ["Crash \u202eevil\u202c", "Kia\x1b]0;retitled\x07\x1b[2J K5\nforged line", "nul\x00byte\r", "tab\there \ud800"]
+# the same names as a terminal shows them, written out by hand: each character that is not printable as its escape
+SHOWN = ["Crash \\u202eevil\\u202c", "Kia\\x1b]0;retitled\\x07\\x1b[2J K5\\nforged line", "nul\\x00byte\\r",
+         "tab\\there \\ud800"]
+
+
+def _terminal_safe(text):
+    """Nothing a terminal acts on: every character printable, or a line break."""
+    return all(c.isprintable() or c == "\n" for c in text)
+
+
+def test_names_are_kept_exactly_and_shown_escaped(tmp_path, capsys):
+    """A name with a bidirectional override, terminal escapes, a line break, NUL or a lone surrogate: the case
+    keeps it exactly, ``solve --json`` carries it exactly (case and vehicle names, and a bad case's), and the
+    panel and stderr show it escaped, with no character a terminal would act on."""
+    cases = []
+    for k, name in enumerate(NAMES):
+        d = tomllib.loads(SEED1.read_text())
+        d["name"] = name
+        d["vehicles"][1]["name"] = name + " 2"
+        cases.append(d)
+    bad = copy.deepcopy(cases[0])
+    bad["name"], bad["contact"]["restitution"] = NAMES[1], 5
+    path = tmp_path / "names.json"
+    path.write_bytes(json.dumps({"cases": cases + [bad]}).encode())  # ensure_ascii: the file holds \u escapes
+    loaded = load_cases(path)
+    assert [c.name for c in loaded] == NAMES + [NAMES[1]]
+    assert [c.vehicle_names[1] for c in loaded[:-1]] == [n + " 2" for n in NAMES]
+    code, out, err = run_cli(capsys, "solve", str(path), "--json")
+    assert code == 1
+    res = json.loads(out)["cases"]
+    assert [r["name"] for r in res] == NAMES + [NAMES[1]]
+    assert [r["vehicles"][1]["name"] for r in res[:-1]] == [n + " 2" for n in NAMES]
+    assert res[-1]["contact"]["status"].startswith("invalid: ")
+    assert _terminal_safe(out) and _terminal_safe(err)
+    assert f"case '{SHOWN[1]}' not solved" in err and f"case '{SHOWN[1]}': contact.restitution = 5" in err
     code, out, err = run_cli(capsys, "solve", str(path))
-    assert code == 0 and "\x1b" not in out + err and "\x07" not in out + err
-    assert "Case: Kia\\x1b]0;retitled" in out
+    assert code == 1 and _terminal_safe(out) and _terminal_safe(err)
+    for shown in SHOWN:
+        assert f"Case: {shown}\n" in out and f"vehicles[1]: {shown} 2\n" in out
+    # one case alone, refused: the error on stderr names it escaped
+    alone = tmp_path / "alone.json"
+    alone.write_text(json.dumps(bad))
+    code, out, err = run_cli(capsys, "solve", str(alone))
+    assert code == 2 and out == "" and _terminal_safe(err) and f"case '{SHOWN[1]}': contact.restitution" in err
+
+
+def test_a_fit_carries_names_exactly_in_json_and_escaped_in_text(tmp_path, capsys):
+    d = json.loads(FIT_CASE.read_text())
+    d["name"] = NAMES[0] + NAMES[1]
+    path = written(tmp_path, "named.json", d)
+    code, out, err = run_cli(capsys, "fit", str(path), "--json", "--starts", "1", "--max-starts", "1")
+    assert code in (0, 1) and _terminal_safe(err)
+    assert json.loads(out)["cases"][0]["name"] == NAMES[0] + NAMES[1]
+    code, out, err = run_cli(capsys, "fit", str(path), "--starts", "1", "--max-starts", "1")
+    assert _terminal_safe(out) and _terminal_safe(err) and f"Reconstruction: {SHOWN[0]}{SHOWN[1]}\n" in out
 
 
 @pytest.mark.parametrize("where, value, message", [

@@ -120,3 +120,27 @@ def test_reference_table_columns_stay_apart(tmp_path):
     assert all(len(r) == 4 for r in rows)
     starts = {line.index(r[2]) for line, r in zip(table[1:], rows)}
     assert len(starts) == 1  # the ks-jax column is aligned
+
+
+def test_long_notes_are_wrapped_and_the_label_column_keeps_its_width(tmp_path):
+    """A vehicle still moving at the time limit: the remark on its rest position goes under the row, the notes
+    are wrapped to lines of at most 100 characters, the columns stay where an ordinary panel has them (US
+    text at offset 62), and the wrapped notes say, word for word, what ``Solution.notes`` says."""
+    from samples import CASES
+
+    case = json.loads((CASES / "rest_seed_000.json").read_text())
+    case["road"]["time_limit"] = "0.5 s"
+    sol = solved(tmp_path, case)
+    notes = sol.notes()
+    assert len(notes) == 2 and all(len(n) > 150 for n in notes)  # both vehicles still move: long sentences
+    panel = text_report(sol)
+    lines = panel.splitlines()
+    assert max(len(line) for line in lines) <= 100
+    assert {offset for entries in two_column_rows(panel).values() for _, _, offset in entries} == {62}
+    rows = [k for k, line in enumerate(lines) if line.startswith("  rest position (x, y)")]
+    assert len(rows) == 2
+    for k in rows:
+        assert re.fullmatch(r"  rest position \(x, y\) {14}\S.*", lines[k])  # the values at the label's width
+        assert lines[k + 1] == "    still moving at the time limit (0.5 s): where it is then"
+    paragraphs = [" ".join(p.split()) for p in panel.split("\n\n") if p.lstrip().startswith("note: ")]
+    assert paragraphs == [f"note: {n}." for n in notes]

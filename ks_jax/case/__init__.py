@@ -9,10 +9,10 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 - ``paths``: getting and setting one number by its path ("vehicles[1].speed");
 - ``outputs``: results the model leaves undefined in some rows, and why;
 - ``scale``: scenes far from the origin in float32, and inputs far out of scale;
-- ``errors``: ``CaseError`` and ``CaseWarning``.
+- ``errors``: ``CaseError`` and ``CaseWarning``, and ``visible``: a name from a file as a terminal may show it.
 """
 
-from .errors import CaseError, CaseWarning
+from .errors import CaseError, CaseWarning, visible, visible_lines
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, Motion, RoadInputs, VehicleInputs, as_arrays
 from .inputs import to_pytrees
 from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
@@ -28,5 +28,6 @@ __all__ = [
     "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input", "get_output",
     "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases", "on_fixed_object",
     "output_kind",
-    "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees", "undefined_kind", "without_road",
+    "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees", "undefined_kind", "visible",
+    "visible_lines", "without_road",
 ]

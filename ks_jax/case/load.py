@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import units as U
-from .errors import CaseError, CaseWarning
+from .errors import CaseError, CaseWarning, visible
 from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
@@ -28,7 +28,8 @@ from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, ROAD_FIELDS, TEXT
 
 
 def _where(case_name, path):
-    return f"case '{case_name}': {path}"
+    """Where a message points: the case (its name as the terminal shows it, ``visible``) and the field."""
+    return f"case '{visible(case_name)}': {path}"
 
 def _number(value, kind, path, case_name):
     if isinstance(value, LongInteger):
@@ -199,19 +200,19 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     """Read one case (a dict as in a JSON/TOML file). Raises CaseError."""
     if not isinstance(d, dict):
         raise CaseError(f"case '{default_name}': a case must be an object/table, got {type(d).__name__}")
-    name = visible(str(d.get("name", default_name)))
+    name = str(d.get("name", default_name))  # exactly as given: JSON carries it so, the terminal escapes it
     _check_keys(d, CASE_FIELDS, "", name)
     vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
     if vehicles is None:
-        raise CaseError(f"case '{name}': vehicles: missing field")
+        raise CaseError(f"{_where(name, 'vehicles')}: missing field")
     wanted = 1 if "fixed" in d else 2
     if not isinstance(vehicles, list) or len(vehicles) != wanted:
         n = len(vehicles) if isinstance(vehicles, list) else vehicles
         rule = ("a case with a fixed object needs exactly one vehicle (the object takes the second's place)"
                 if wanted == 1 else "a case needs exactly two vehicles, or one and a fixed object (\"fixed\")")
-        raise CaseError(f"case '{name}': vehicles = {n!r} vehicles: {rule}")
+        raise CaseError(f"{_where(name, 'vehicles')} = {_shown(n)} vehicles: {rule}")
     if "contact" not in d:
-        raise CaseError(f"case '{name}': contact: missing field")
+        raise CaseError(f"{_where(name, 'contact')}: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
     fixed = _fixed_object(d["fixed"], name) if "fixed" in d else None
     if fixed is not None:
@@ -221,9 +222,9 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
         _check_reference(d["reference"], name)
     road, motion = _road(d, veh, name)
     inputs = CaseInputs(veh, contact, road)
-    names = tuple(visible(str(v.get("name", f"vehicle {i + 1}"))) for i, v in enumerate(vehicles))
+    names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
     if fixed is not None:
-        names = (names[0], visible(str(d["fixed"].get("name", fixed.kind))))
+        names = (names[0], str(d["fixed"].get("name", fixed.kind)))
     return Case(name, inputs, auto_point, auto_normal, names, None, d, source, fixed, motion)
 
 
@@ -385,14 +386,6 @@ class LongInteger(str):
     kept as its text so that its case, not the file, is refused (``units.parse_quantity`` names it)."""
 
 
-def visible(text: str) -> str:
-    """``text`` with its control characters written as escapes (``\\x1b``, ``\\n``): a name from a file reaches
-    the terminal, where an escape sequence could retitle or clear it, and a line break would forge lines."""
-    if text.isprintable():
-        return text
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
 def _json_integer(text):
     return LongInteger(text) if len(text) > MAX_INTEGER_DIGITS else int(text)
 
@@ -463,7 +456,7 @@ def cases_from_data(data, source=None) -> list[Case]:
             try:
                 out.append(case_from_dict(d, f"case {i + 1}", source))
             except CaseError as err:
-                out.append(Case(visible(str(default)), None, error=str(err), raw=d if isinstance(d, dict) else {},
+                out.append(Case(str(default), None, error=str(err), raw=d if isinstance(d, dict) else {},
                                 source=source))
         return out
     return [case_from_dict(data, Path(source).stem if source else "case", source)]

@@ -19,7 +19,7 @@ import warnings
 import jax
 
 from .. import backend
-from ..case.errors import CaseError, CaseWarning
+from ..case.errors import CaseError, CaseWarning, visible
 from ..compilation import keep_programs
 from ..units import UnitError
 from . import fit, signals, solve, sweep
@@ -66,7 +66,7 @@ def _show_case_warnings():
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, CaseWarning):
-            print(f"ks-jax: warning: {message}", file=sys.stderr)
+            print(f"ks-jax: warning: {visible(message)}", file=sys.stderr)
         else:
             default_show(message, category, filename, lineno, file, line)
 
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
     try:
         return args.run(args)
     except (CaseError, UnitError, FileNotFoundError, IsADirectoryError) as err:
-        print(f"ks-jax: error: {err}", file=sys.stderr)
+        print(f"ks-jax: error: {visible(err)}", file=sys.stderr)  # it may quote a name or a value from a file
         return 2
     except KeyboardInterrupt:
         print("ks-jax: interrupted", file=sys.stderr)
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         return 0
     except OSError as err:  # a file that could not be read or written after its checks (a full disk, say)
         where = f"{err.filename}: " if getattr(err, "filename", None) else ""
-        print(f"ks-jax: error: {where}{err.strerror or err}", file=sys.stderr)
+        print(f"ks-jax: error: {visible(where)}{visible(err.strerror or err)}", file=sys.stderr)
         return 2
 
 

@@ -1,7 +1,9 @@
 """``ks-jax fit FILE``: the case's ``unknowns`` reconstructed from its ``evidence`` (docs/fit.md).
 
-The text report is ``fit.report.text_report``; ``--json`` prints ``FitResult.to_dict`` (SI values, null for
-"not determined"), and with several cases in the file ``{"cases": [...]}``. Monte Carlo shows a progress
+The text report is ``fit.report.text_report``; ``--json`` prints ``{"cases": [...]}``, as ``ks-jax solve --json``
+does, one entry per case of the file (one case or several): ``FitResult.to_dict`` (SI values, null for "not
+determined"), or ``{"name", "status"}`` for a case that was not fitted. Names are written exactly as the file
+gives them in JSON, and escaped (``case.visible``) where they reach the terminal. Monte Carlo shows a progress
 bar on stderr. ``--plot FILE`` draws the top view of each fitted case solved at its estimate (the case's
 inputs with the unknowns set to it), with the measured rest positions among its evidence marked and their
 sigmas drawn about them: the picture to set beside a scene diagram.
@@ -23,7 +25,7 @@ from fit.report import text_report
 from fit.uncertainty import DISPLAY
 
 from ..case import input_kind, input_ties, load_cases
-from ..case.errors import CaseError
+from ..case.errors import CaseError, visible, visible_lines
 from ..plot import check_picture_path, save_corner, save_top_view
 from ..solve import solve
 from .options import seed_option, smoothing_option
@@ -85,7 +87,7 @@ def run(args) -> int:
                 raise CaseError(case.error)
             for key in ("unknowns", "evidence"):
                 if key not in case.raw:
-                    raise CaseError(f"case '{case.name}': {key}: missing field (ks-jax fit needs 'unknowns' and "
+                    raise CaseError(f"case '{visible(case.name)}': {key}: missing field (ks-jax fit needs 'unknowns' and "
                                     "'evidence', docs/fit.md)")
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
                                        smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0 or args.posterior > 0,
@@ -98,20 +100,21 @@ def run(args) -> int:
     if args.json:
         dicts = [{"name": c.name, "status": failed[k]} if r is None else r.to_dict()
                  for k, (c, r) in enumerate(zip(cases, results))]
-        print(json.dumps(dicts[0] if len(dicts) == 1 else {"cases": dicts}, indent=1))
+        print(json.dumps({"cases": dicts}, indent=1))
     else:
-        print("\n\n".join(f"Reconstruction: {c.name}\n  not fitted: {failed[k]}" if r is None else text_report(r)
+        print("\n\n".join(f"Reconstruction: {visible(c.name)}\n  not fitted: {visible(failed[k])}" if r is None
+                           else visible_lines(text_report(dataclasses.replace(r, case_name=visible(r.case_name))))
                            for k, (c, r) in enumerate(zip(cases, results))))
     failed.update((k, r.status) for k, r in enumerate(results) if r is not None and r.status.startswith("invalid"))
     for k, message in sorted(failed.items()):
-        print(f"ks-jax: case '{cases[k].name}' not fitted: {message}", file=sys.stderr)
+        print(f"ks-jax: case '{visible(cases[k].name)}' not fitted: {visible(message)}", file=sys.stderr)
     # a fit that ended without converging, or where the vehicles exchange no impulse, is no answer either: a
     # script reading the exit status must be able to tell
     unfinished = {k: r for k, r in enumerate(results) if r is not None and k not in failed
                   and not (r.converged and r.status == "ok")}
     for k, r in sorted(unfinished.items()):
         why = "did not converge" if not r.converged else f"ended where the exchange is '{r.status}'"
-        print(f"ks-jax: case '{cases[k].name}': the fit {why} (see its notes); its estimate is not an answer",
+        print(f"ks-jax: case '{visible(cases[k].name)}': the fit {why} (see its notes); its estimate is not an answer",
               file=sys.stderr)
     if args.plot:
         drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if r is not None and k not in failed]

@@ -8,7 +8,7 @@ import sys
 from importlib import resources
 
 from ..case import load_case, load_cases
-from ..case.errors import CaseError
+from ..case.errors import CaseError, visible
 from ..plot import check_picture_path, save_top_view
 from ..report import text_report
 from ..solve import solve
@@ -48,7 +48,7 @@ def run_solve(args) -> int:
         print(json.dumps({"cases": [s.to_dict() for s in solutions]}, indent=1))
         for s in solutions:  # the panel prints them; beside JSON they are said on stderr too
             for note in s.notes():
-                print(f"ks-jax: case '{s.case.name}': {note}", file=sys.stderr)
+                print(f"ks-jax: case '{visible(s.case.name)}': {visible(note)}", file=sys.stderr)
     else:
         print("\n\n".join(text_report(s) for s in solutions))
     if args.plot:
@@ -56,7 +56,7 @@ def run_solve(args) -> int:
         print(f"\ntop view written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
     bad = [s for s in solutions if s.status.startswith("invalid")]
     for s in bad:
-        print(f"ks-jax: case '{s.case.name}' not solved: {s.status}", file=sys.stderr)
+        print(f"ks-jax: case '{visible(s.case.name)}' not solved: {visible(s.status)}", file=sys.stderr)
     return 1 if bad else 0
 
 

@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..case import canonical_path, input_kind, input_leaf, load_cases
-from ..case.errors import CaseError
+from ..case.errors import CaseError, visible
 from ..plot import check_picture_path, save_sweep_view
 from ..sweeps import ResultWriter, SweepSample, sweep
 from ..sweeps.columns import typed_back
@@ -217,7 +217,7 @@ def run(args) -> int:
         writer.abort()
         raise
     result = replace(result, seconds=max(result.seconds - writer.chunk_seconds, 0.0))  # solving alone
-    print(f"ks-jax sweep: {case.name}")
+    print(f"ks-jax sweep: {visible(case.name)}")
     print(f"  {result.summary()}")
     if args.samples is not None:
         print(f"  random values: {args.samples} per path, seed {args.seed}")

@@ -127,3 +127,25 @@ def test_ees_note_names_zero_crushes_when_they_are_rounding(tmp_path, capsys):
     assert r["contact"]["energy_loss"] > 0 and all(v["ees"] is None and v["crush"] < 1e-9 for v in r["vehicles"])
     code, out, _ = run_cli(capsys, "solve", str(path))
     assert "both crushes are 0" in out and "negative" not in out
+
+
+def test_every_command_writes_json_as_cases(tmp_path, capsys):
+    """``solve --json`` and ``fit --json`` write one shape, ``{"cases": [...]}``, for a file of one case as
+    for a file of several; each fit entry is its ``FitResult.to_dict``, a case that was not fitted
+    ``{"name", "status"}``."""
+    fit_case = Path(ks_jax.__file__).parent / "cases" / "fit_seed_001.json"
+    quick = ("--starts", "1", "--max-starts", "1")
+    code, out, _ = run_cli(capsys, "fit", str(fit_case), "--json", *quick)
+    d = json.loads(out)
+    assert list(d) == ["cases"] and len(d["cases"]) == 1
+    assert {"name", "estimate", "std", "residuals", "converged", "status"} <= set(d["cases"][0])
+    code, out, _ = run_cli(capsys, "solve", str(fit_case), "--json")
+    assert list(json.loads(out)) == ["cases"] and len(json.loads(out)["cases"]) == 1
+    bad = json.loads(fit_case.read_text())
+    bad["name"], bad["contact"]["restitution"] = "bad one", 3
+    two = tmp_path / "two.json"
+    two.write_text(json.dumps({"cases": [json.loads(fit_case.read_text()), bad]}))
+    code, out, err = run_cli(capsys, "fit", str(two), "--json", *quick)
+    cases = json.loads(out)["cases"]
+    assert code == 1 and len(cases) == 2 and cases[0]["estimate"] == d["cases"][0]["estimate"]
+    assert cases[1] == {"name": "bad one", "status": cases[1]["status"]} and "restitution" in cases[1]["status"]
