@@ -30,8 +30,9 @@ def add_arguments(parser):
     parser.add_argument("--over", action="append", required=True, metavar="PATH=START:STOP:N",
                         help="an input path and its values: START:STOP:N (N evenly spaced values), "
                              "V1,V2,..., or random values uniform:LO:HI or normal:MEAN:SD (with --samples); "
-                             "bare numbers are SI except angles (deg) and rates (deg/s); "
-                             "unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
+                             "bare numbers are SI except angles (deg) and rates (deg/s), whatever --units says "
+                             "(with --units us a bare number of a kind whose unit differs, a speed or a length, is "
+                             "refused: give its unit); unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
     parser.add_argument("--output", action="append", metavar="PATH",
                         help="a result's path, e.g. 'vehicles[0].delta_v_magnitude' (repeat; default: the main results)")
     parser.add_argument("--mode", choices=("grid", "zip"), default=None,
@@ -69,11 +70,13 @@ class Draws(NamedTuple):
         return rng.normal(self.a, self.b, n)
 
 
-def parse_over(text):
+def parse_over(text, units="si"):
     """'PATH=START:STOP:N' or 'PATH=V1,V2,...' -> (path, SI values); 'PATH=uniform:LO:HI' or
     'PATH=normal:MEAN:SD' -> (path, ``Draws``), drawn by ``draw_over``. A grid typed in plain SI numbers
     has its values within 2 ulp of a 15-digit decimal made that decimal (linspace's rounding undone: 0.05,
-    not 0.049999999999999996)."""
+    not 0.049999999999999996). ``units``: the file's units (``--units``), which set what is written only:
+    a bare number is SI as in case files, and with "us" one whose kind has another unit in US units (a
+    speed, a length, a mass) is refused (``check_bare``)."""
     if "=" not in text:
         raise CaseError(f"--over {text!r}: expected PATH=START:STOP:N, PATH=V1,V2,..., PATH=uniform:LO:HI "
                         "or PATH=normal:MEAN:SD")
@@ -89,6 +92,7 @@ def parse_over(text):
 
     parts = spec.split(":")
     law = parts[0].strip().lower()
+    check_bare(path, spec, kind, units)
     if law in ("uniform", "normal"):
         names = ("LO", "HI") if law == "uniform" else ("MEAN", "SD")
         if len(parts) != 3:
@@ -128,6 +132,42 @@ def parse_over(text):
                 raise CaseError(f"--over {path}: {text!r} must be a finite number")
         return path, np.array([value for _, value in values])
     raise CaseError(f"--over {path}={spec}: expected START:STOP:N, V1,V2,..., uniform:LO:HI or normal:MEAN:SD")
+
+
+def _values(spec):
+    """The value texts of an --over spec (START and STOP, LO and HI, MEAN and SD, or V1, V2, ...) and how to
+    put them back: (texts, join), join(new texts) giving the spec with each replaced."""
+    parts = spec.split(":")
+    if parts[0].strip().lower() in ("uniform", "normal"):
+        return parts[1:], lambda new: ":".join([parts[0], *new])
+    if len(parts) == 3:
+        return parts[:2], lambda new: ":".join([*new, parts[2]])
+    if len(parts) == 1:
+        values = spec.split(",")
+        return values, ",".join
+    return [], None
+
+
+def check_bare(path, spec, kind, units):
+    """With ``--units us``, a bare number (other than 0) of a kind whose unit is another in US units than in
+    SI (a speed: mph against m/s) is refused, naming both ways to write it: ``--units`` sets the units of the
+    file written, not of the values typed, and a bare 20 for a speed is 20 m/s (45 mph). A dimensionless
+    value (restitution, friction), a time (s) and an angle or a rate (deg, deg/s in both) need no unit."""
+    if units != "us":
+        return
+    si, us = U.SI_DISPLAY[kind][1], U.US_DISPLAY[kind][1]
+    if si == us:
+        return
+    texts, join = _values(spec)
+    bare = [t for t in texts if U.typed_unit(t) is None and _plain(t) is not None and math.isfinite(_plain(t))
+            and _plain(t) != 0.0]  # 0 is 0 in any unit; a non-finite value is refused as such
+    if not bare:
+        return
+    typed = lambda unit: join([t if U.typed_unit(t) or _plain(t) is None else f"{t.strip()}{unit.replace(' ', '*')}"  # noqa: E731
+                               for t in texts])
+    raise CaseError(f"--over {path}={spec}: bare numbers are SI ({si}) but --units us was given (it sets the units "
+                    f"of the file written, not of the values typed): write {typed(us)}, or give SI values with "
+                    f"units ({typed(si)})")
 
 
 def typed_units(texts):
@@ -189,7 +229,7 @@ def run(args) -> int:
         case = cases[args.case]
     if not case.valid:
         raise CaseError(case.error)
-    over, mode = draw_over([parse_over(t) for t in args.over], args.mode, args.samples, args.seed)
+    over, mode = draw_over([parse_over(t, args.units) for t in args.over], args.mode, args.samples, args.seed)
     shape = result_shape({p: len(v) for p, v in over.items()}, mode)  # sweep's rule, checked before a file exists
     sample = _plot_sample(args.plot, over, mode, shape)  # checked before anything is solved
     writer = ResultWriter(args.out, over, mode, shape, units=args.units)  # chunk by chunk: memory stays bounded

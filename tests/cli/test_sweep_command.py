@@ -312,3 +312,39 @@ def test_cli_over_refuses_a_dropped_stop_and_non_finite_values():
     for spec in ("contact.restitution=0.1,nan", "contact.restitution=inf,0.2"):
         with pytest.raises(CaseError, match="must be a finite number"):
             parse_over(spec)
+
+
+def test_bare_numbers_with_units_us_are_refused_where_the_units_differ(tmp_path, capsys):
+    """``--units us`` sets the file's units, not the typed values': a bare speed, length, mass or inertia is
+    refused with both ways to write it, before any file exists; values with units, 0, and the kinds whose
+    bare unit is the same in both systems (restitution, friction, times in s, angles in deg, rates in
+    deg/s) are read as in SI, against the exact unit definitions."""
+    mph, ft, lb = 0.44704, 0.3048, 0.45359237
+    for spec, fix in (("vehicles[1].speed=20:40:5", "write 20mph:40mph:5, or give SI values with units "
+                                                     "(20m/s:40m/s:5)"),
+                      ("vehicles[0].cg_height=0.5,0.6", "write 0.5ft,0.6ft, or give SI values with units (0.5m,0.6m)"),
+                      ("vehicles[0].mass=normal:1500:30", "write normal:1500lb:30lb"),
+                      ("vehicles[1].speed=0:40:3", "write 0mph:40mph:3")):
+        with pytest.raises(CaseError, match="bare numbers are SI .* but --units us was given") as err:
+            parse_over(spec, "us")
+        assert fix in str(err.value)
+        assert parse_over(spec, "si")[0] == spec.split("=")[0]  # in SI the same text is read
+    out = tmp_path / "us.csv"
+    code = main(["sweep", str(SEED1), "--over", "vehicles[1].speed=20:40:5", "--units", "us", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "ks-jax: error: --over vehicles[1].speed=20:40:5: bare numbers are SI (m/s)" in err
+    assert "write 20mph:40mph:5" in err and not out.exists()
+    np.testing.assert_allclose(parse_over("vehicles[1].speed=20mph:40mph:5", "us")[1], np.linspace(20, 40, 5) * mph,
+                               rtol=1e-15)
+    np.testing.assert_allclose(parse_over("vehicles[1].speed=0:40mph:3", "us")[1], [0, 20 * mph, 40 * mph], rtol=1e-15)
+    np.testing.assert_allclose(parse_over("vehicles[0].mass=3000lb,1400kg", "us")[1], [3000 * lb, 1400], rtol=1e-15)
+    np.testing.assert_allclose(parse_over("vehicles[0].cg_height=1ft:2ft:2", "us")[1], [ft, 2 * ft], rtol=1e-15)
+    for spec, values in (("contact.restitution=0:0.3:4", [0, 0.1, 0.2, 0.3]), ("contact.friction=0.4,0.6", [0.4, 0.6]),
+                         ("contact.penetration_time=0.02,0.05", [0.02, 0.05]),
+                         ("vehicles[0].yaw=0:90:3", np.radians([0, 45, 90])),
+                         ("vehicles[0].yaw_rate=uniform:10:20", None)):
+        path, got = parse_over(spec, "us")
+        if values is None:
+            assert (got.a, got.b) == (np.radians(10), np.radians(20))
+        else:
+            np.testing.assert_allclose(got, values, rtol=1e-15, atol=1e-17)
