@@ -1,12 +1,12 @@
 """Pictures (the ``plot`` extra, matplotlib): the top view of a solved contact (``top_view``; a whole figure of
-them, ``top_view_figure``) and a sweep's results over its inputs (``sweep_view``)."""
+them, ``top_view_figure``) and a sweep's results over its inputs (``sweep_view``; a figure of several, ``sweep_figure``)."""
 
 from pathlib import Path
 
 from ..case.errors import CaseError
 from ..files import check_output_file
 from .corner import corner, save_corner
-from .sweep_view import save_sweep_view, sweep_view
+from .sweep_view import save_sweep_view, sweep_figure, sweep_view
 from .top_view import save_top_view, top_view, top_view_figure
 
 PICTURE_TYPES = (".png", ".pdf", ".svg")
@@ -25,5 +25,5 @@ def check_picture_path(path, option="--plot"):
     check_output_file(path, option)
 
 
-__all__ = ["PICTURE_TYPES", "check_picture_path", "corner", "save_corner", "save_sweep_view", "save_top_view", "sweep_view", "top_view",
-           "top_view_figure"]
+__all__ = ["PICTURE_TYPES", "check_picture_path", "corner", "save_corner", "save_sweep_view", "save_top_view", "sweep_figure",
+           "sweep_view", "top_view", "top_view_figure"]

@@ -1,5 +1,6 @@
 """Pictures of a sweep's results over its inputs: a line over one input, a map over two, histograms of
-samples (drawn from a thinned view of a large sweep), in the units the user chose."""
+samples (drawn from a thinned view of a large sweep), every output in the one unit system the user chose; a
+figure of several outputs says those that do not change over the sweep in one line instead of a panel each."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ from ..case.errors import CaseError
 from ..model.types import STATUS_TEXT, status_text
 from ..report import angle_text
 from ..sweeps import check_kept
+from .text import wrap_to_width
+
+CONSTANT_SIZE = 10.0  # points: the line above a figure's panels that says the outputs constant over the sweep
 
 
 def _bracket(label):
@@ -36,18 +40,46 @@ def named(path, names=()):
 
 
 def display_units(result, units="si", typed=None):
-    """{path: (SI value of one display unit, label)} for every swept input and output of ``result``: each
-    in the unit ``typed`` gives for it (``{input path: unit}``, the units of the values the user typed,
-    e.g. ``--over vehicles[1].speed=10km/h:80km/h:8``), an output in the unit typed for an input of its kind
-    (speeds given in km/h: speeds after and delta-V in km/h too), anything else in the ``units`` system."""
+    """{path: (SI value of one display unit, label)} for every swept input and output of ``result``: a swept
+    input in the unit ``typed`` gives for it (``{input path: unit}``, the units of the values the user typed,
+    e.g. ``--over vehicles[1].speed=10km/h:80km/h:8``: its axis reads as typed), every output and every other
+    input in the ``units`` system, so that the outputs of one figure are in one system (with ``--units si``
+    the delta-V in m/s beside the impulse in N s and the energy in J, whatever unit the speed was typed in)."""
     typed = {p: u for p, u in (typed or {}).items() if u}
-    by_kind = {input_kind(p): u for p, u in typed.items()}
     shown = {p: U.display_unit(input_kind(p), units, typed.get(p)) for p in result.axes}
     for p in result.outputs:
         if p != "status" and result.outputs[p].dtype != bool:
-            kind = output_kind(p)
-            shown[p] = U.display_unit(kind, units, by_kind.get(kind))
+            shown[p] = U.display_unit(output_kind(p), units)
     return shown
+
+
+def constant_text(result, output, shown_in):
+    """``output``'s one value as a figure says it ("180 deg", "false (stick)") where it is the same, to
+    rounding, at every point of ``result`` that has a result (in the units of ``shown_in``, as
+    ``display_units`` gives them; a direction on the circle, 359.99... and 0.00... being one value), else
+    None: also where no point has one. ``"status"`` is never constant here (it is drawn when it is all
+    there is)."""
+    if output == "status":
+        return None
+    values, status = np.asarray(result[output]), np.asarray(result["status"])
+    if values.dtype == bool:
+        flags = values[status == 0]  # a flag means nothing without an exchange
+        if not flags.size or flags.min() != flags.max():
+            return None
+        flag = bool(flags[0])
+        return f"{str(flag).lower()} ({('stick', 'slide')[flag]})" if output.endswith("sliding") else str(flag).lower()
+    scale, unit = shown_in[output]
+    finite = values[np.isfinite(values)] / scale
+    if not finite.size:
+        return None
+    circular = parse_path(output)[2] in CIRCULAR_OUTPUTS
+    if circular:
+        finite = circular_view(np.ma.masked_array(finite))[0].compressed()
+    if np.ptp(finite) > 1e-9 * max(1.0, float(np.max(np.abs(finite)))):
+        return None
+    level = float(f"{float(np.median(finite)):.6g}")  # rounded first: -1e-13 deg reads 0, not 360
+    level = (level % 360.0 if circular else level) + 0.0  # + 0.0: no "-0"
+    return " ".join(filter(None, (f"{level:.6g}", unit)))
 
 
 def circular_view(degrees):
@@ -81,8 +113,9 @@ def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=No
       lines (``contours``); points without a result are grey;
     - zip samples (e.g. Monte Carlo draws): a histogram with the median and the 5th and 95th percentiles.
     Units (``display_units``): the ``units`` system ("si": m/s, m, N s, J, kg; "us": mph, ft, lbf s, ft lbf,
-    lb; directions in degrees and rates in deg/s in both), except where ``typed`` ({input path: unit}, e.g.
-    {"vehicles[1].speed": "km/h"}) gives the unit the user typed. Paths about a vehicle carry its name
+    lb; directions in degrees and rates in deg/s in both), except a swept input's axis where ``typed``
+    ({input path: unit}, e.g. {"vehicles[1].speed": "km/h"}) gives the unit the user typed; the output is
+    always in the ``units`` system. Paths about a vehicle carry its name
     (``vehicles[1].speed (Kia K5)``). Directions (PDOF, course, azimuth) are drawn about their circular mean
     (``circular_view``). ``contact.sliding`` is drawn as stick / slide and ``"status"`` by its status texts.
     A sweep with more values per axis than ``sweeps.PLOT_LIMITS`` is drawn from every k-th value
@@ -210,23 +243,45 @@ def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=No
     return ax
 
 
-def save_sweep_view(result, path, outputs=None, units="si", typed=None):
-    """Write ``sweep_view`` of each of ``outputs`` (default: the sweep's outputs) side by side, three
-    per row, to ``path`` (PNG, PDF, SVG: by the file name), in ``units`` and the ``typed`` units (as
-    ``sweep_view``). Returns the path."""
+def sweep_figure(result, outputs=None, units="si", typed=None):
+    """A figure of ``sweep_view`` of each of ``outputs`` (default: the sweep's outputs) side by side, three
+    per row, in ``units`` and the ``typed`` units (as ``sweep_view``; every output in the one system
+    ``units``). An output that is the same at every point with a result (``constant_text``: an inline
+    impact's PDOF of 180 deg, a contact that sticks everywhere) gets no panel: one line above the panels
+    says each with its value ("constant over the sweep: vehicles[0].pdof (Lucid Air) = 180 deg, ..."; "over
+    the points drawn" where ``result`` holds a thinned sweep's points only). Where every output is constant,
+    each has its panel, which says its value. Returns the figure (matplotlib's ``Figure``)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     outputs = list(outputs or result.output_paths or [p for p in result.outputs if p != "status"] or ["status"])
+    check_kept(result)
+    shown_in = display_units(result, units, typed)
+    constant = {p: constant_text(result, p, shown_in) for p in outputs if p in result.outputs}
+    drawn = [p for p in outputs if constant.get(p) is None] or outputs
+    said = [f"{named(p, getattr(result, 'names', ()))} = {constant[p]}" for p in outputs if p not in drawn]
+    over = "the points drawn" if any(k > 1 for k in result.strides) else "the sweep"
     if not result.strides:
         result = result.thinned()  # once for every panel
-    cols = min(len(outputs), 3)
-    rows = math.ceil(len(outputs) / cols)
+    cols = min(len(drawn), 3)
+    rows = math.ceil(len(drawn) / cols)
     fig = Figure(figsize=(6.2 * cols, 4.6 * rows))
+    FigureCanvasAgg(fig)
     axes = fig.subplots(rows, cols, squeeze=False)
-    for ax, output in zip(axes.flat, outputs):
+    for ax, output in zip(axes.flat, drawn):
         sweep_view(result, output, ax, units=units, typed=typed)
-    for ax in list(axes.flat)[len(outputs):]:
+    for ax in list(axes.flat)[len(drawn):]:
         ax.set_visible(False)
+    if said:
+        line = f"constant over {over}: {', '.join(said)}"
+        fig.suptitle(wrap_to_width(line, 0.96 * 72.0 * fig.get_figwidth(), CONSTANT_SIZE, indent=""),
+                     fontsize=CONSTANT_SIZE)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    return fig
+
+
+def save_sweep_view(result, path, outputs=None, units="si", typed=None):
+    """Write ``sweep_figure`` of ``outputs`` (default: the sweep's outputs) to ``path`` (PNG, PDF, SVG: by the
+    file name), in ``units`` and the ``typed`` units (as ``sweep_view``). Returns the path."""
+    sweep_figure(result, outputs, units=units, typed=typed).savefig(path, dpi=110)
     return path

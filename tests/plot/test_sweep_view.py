@@ -252,18 +252,21 @@ def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(ca
 
 
 def test_drawn_in_the_units_asked_for_and_those_typed(case):
-    """SI by default; an input typed in km/h is drawn in km/h, and outputs of its kind too (speeds after,
-    delta-V); others in the system asked for. The values are the sweep's divided by the unit's size,
-    written out here: 1 km/h = 1/3.6 m/s, 1 ft lbf = 0.3048 x 4.4482216152605 J."""
+    """SI by default; an input typed in km/h is drawn along its axis in km/h, and every output in the system
+    asked for (delta-V in m/s with SI, mph with US, whatever unit the speed was typed in). The values are the
+    sweep's divided by the unit's size, written out here: 1 km/h = 1/3.6 m/s, 1 ft lbf = 0.3048 x
+    4.4482216152605 J."""
     speed = np.array([20.0, 40.0, 60.0]) / 3.6
     r = sweep(case, {"vehicles[1].speed": speed}, outputs=[DV1, "contact.energy_loss"])
     si = draw(r, units="si")
     assert si.get_xlabel() == "vehicles[1].speed (Kia K5) [m/s]" and si.get_ylabel() == f"{DV1} (Lucid Air) [m/s]"
     np.testing.assert_allclose(si.get_lines()[0].get_ydata(), r[DV1], rtol=1e-12)
-    kmh = draw(r, units="si", typed={"vehicles[1].speed": "km/h"})
-    assert kmh.get_xlabel() == "vehicles[1].speed (Kia K5) [km/h]" and kmh.get_ylabel() == f"{DV1} (Lucid Air) [km/h]"
-    np.testing.assert_allclose(kmh.get_lines()[0].get_xdata(), [20.0, 40.0, 60.0], rtol=1e-12)
-    np.testing.assert_allclose(kmh.get_lines()[0].get_ydata(), r[DV1] * 3.6, rtol=1e-12)
+    for units, scale, unit in (("si", 1.0, "m/s"), ("us", MPH, "mph")):
+        kmh = draw(r, units=units, typed={"vehicles[1].speed": "km/h"})
+        assert kmh.get_xlabel() == "vehicles[1].speed (Kia K5) [km/h]"
+        assert kmh.get_ylabel() == f"{DV1} (Lucid Air) [{unit}]"
+        np.testing.assert_allclose(kmh.get_lines()[0].get_xdata(), [20.0, 40.0, 60.0], rtol=1e-12)
+        np.testing.assert_allclose(kmh.get_lines()[0].get_ydata(), r[DV1] / scale, rtol=1e-12)
     for units, scale, unit in (("si", 1.0, "J"), ("us", 0.3048 * 4.4482216152605, "ft lbf")):
         ax = draw(r, "contact.energy_loss", units=units, typed={"vehicles[1].speed": "km/h"})
         assert ax.get_ylabel() == f"contact.energy_loss [{unit}]"
@@ -272,20 +275,21 @@ def test_drawn_in_the_units_asked_for_and_those_typed(case):
 
 def test_cli_draws_in_the_units_typed_with_the_vehicles_names(tmp_path, capsys):
     """``ks-jax sweep --over vehicles[1].speed=10km/h:80km/h:8 --plot``: the picture's text (an SVG with its
-    text kept as text) has the speeds in km/h with the Kia's name, and no mph anywhere; ``--units us``
-    draws the energy in ft lbf."""
+    text kept as text) has the swept speed in km/h with the Kia's name, and its outputs in the system of
+    ``--units`` only: the speed after in m/s and the energy in J (no mph anywhere), or in mph and ft lbf."""
     import matplotlib
 
     out = tmp_path / "k.csv"
     with matplotlib.rc_context({"svg.fonttype": "none"}):
-        for units, energy in (("si", "contact.energy_loss [J]"), ("us", "contact.energy_loss [ft lbf]")):
+        for units, speed, energy, other in (("si", "m/s", "J", "mph"), ("us", "mph", "ft lbf", "m/s")):
             svg = tmp_path / f"k_{units}.svg"
             assert main(["sweep", str(SEED1), "--over", "vehicles[1].speed=10km/h:80km/h:8", "--units", units,
                          "--output", "vehicles[1].speed_after", "--output", "contact.energy_loss",
                          "--out", str(out), "--plot", str(svg), "--no-progress"]) == 0
             text = svg.read_text()
-            assert "vehicles[1].speed (Kia K5) [km/h]" in text and "vehicles[1].speed_after (Kia K5) [km/h]" in text
-            assert energy in text and "mph" not in text
+            assert "vehicles[1].speed (Kia K5) [km/h]" in text
+            assert f"vehicles[1].speed_after (Kia K5) [{speed}]" in text and f"contact.energy_loss [{energy}]" in text
+            assert other not in text and text.count("km/h") == 2  # the two panels' speed axes
     capsys.readouterr()
 
 
@@ -313,3 +317,43 @@ def test_a_sweeps_rate_counts_solving_and_its_compile_is_said_apart(case, monkey
     assert r.compile_seconds >= 0.4 > r.seconds
     assert f"compiled first in {r.compile_seconds:.3g} s" in r.summary()
     assert f"({r.points / r.seconds:.3g} points/s)" in r.summary()
+
+
+def panels(fig):
+    """The figure's panels (the axes with a title; not the colour bars), by the output each draws."""
+    return {ax.get_title().split("\n")[0]: ax for ax in fig.axes if ax.get_visible() and ax.get_title()}
+
+
+@pytest.mark.parametrize("units, typed, unit", [
+    ("si", {"vehicles[1].speed": "mph"}, {"velocity": "m/s", "impulse": "N s", "energy": "J", "speed": "mph"}),
+    ("us", None, {"velocity": "mph", "impulse": "lbf s", "energy": "ft lbf", "speed": "mph"}),
+    ("us", {"vehicles[1].speed": "km/h"}, {"velocity": "mph", "impulse": "lbf s", "energy": "ft lbf", "speed": "km/h"}),
+])
+def test_a_figure_leaves_out_what_is_constant_and_keeps_one_unit_system(case, units, typed, unit):
+    """``ks-jax sweep --plot`` of the rear impact over the Kia's speed and the restitution: the Lucid is struck
+    from behind (PDOF 180 deg) and the Kia from the front (0 deg) at every point, and an inline contact sticks
+    (no tangential impulse): these get no panel but one line that says them; the panels left are every output
+    that changes, each in the one system asked for (only the swept speed's axis in the unit it was typed in)."""
+    outputs = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", DV1,
+               "vehicles[1].delta_v_magnitude", "vehicles[0].pdof", "vehicles[1].pdof"]
+    r = sweep(case, {"vehicles[1].speed": np.linspace(10, 60, 6) * MPH, "contact.restitution": [0.0, 0.1, 0.3]},
+              outputs=outputs)
+    fig = plot.sweep_figure(r, units=units, typed=typed)
+    drawn = panels(fig)
+    assert drawn.keys() == {f"contact.impulse_magnitude [{unit['impulse']}]", f"contact.energy_loss [{unit['energy']}]",
+                            f"{DV1} (Lucid Air) [{unit['velocity']}]",
+                            f"vehicles[1].delta_v_magnitude (Kia K5) [{unit['velocity']}]"}
+    assert fig.get_suptitle() == ("constant over the sweep: contact.sliding = false (stick), "
+                                  "vehicles[0].pdof (Lucid Air) = 180 deg, vehicles[1].pdof (Kia K5) = 0 deg")
+    for ax in drawn.values():
+        assert ax.get_xlabel() == f"vehicles[1].speed (Kia K5) [{unit['speed']}]"
+    bars = [ax.get_ylabel() for ax in fig.axes if not ax.get_title() and ax.get_ylabel()]  # the colour bars
+    assert sorted(bars) == sorted(title for title in drawn)
+    # what is drawn is in those units: the Lucid's delta-V over the unit's size written out here
+    size = {"m/s": 1.0, "mph": MPH}[unit["velocity"]]
+    np.testing.assert_allclose(mesh_of(drawn[f"{DV1} (Lucid Air) [{unit['velocity']}]"]).get_array(), r[DV1] / size,
+                               rtol=1e-12)
+    # only constant outputs: each keeps its panel, which says its value, and no line above them
+    only = plot.sweep_figure(r, outputs=["vehicles[0].pdof", "contact.sliding"], units=units)
+    assert len(panels(only)) == 2 and not only.get_suptitle()
+    assert "180 deg everywhere" in panels(only)["vehicles[0].pdof (Lucid Air) [deg]"].get_title()

@@ -238,7 +238,7 @@ def test_wrapped_lines_fit_the_width_as_drawn():
     matplotlib's Agg renderer (not the font measure it wraps by), is no wider than asked."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from ks_jax.plot.top_view import wrap_to_width
+    from ks_jax.plot.text import wrap_to_width
 
     text = ("2015 Honda Accord EX-L V6 sedan (silver) at first contact, t_i = 0.1580 s; "
             "2019 Ford F-150 XLT SuperCrew 4x4 (red): CG path to rest, 17.80 m (58.4 ft) in 3.57 s")
