@@ -63,7 +63,7 @@ def _inertia(value, path, case_name):
     for i, x in enumerate(moments):
         if x <= 0:
             raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: principal moments of inertia must be positive")
-        _at_least(x, MIN_INERTIA, value[i], f"{path}[{i}]", case_name, "kg m^2")
+        _at_least(x, MIN_INERTIA, value[i], f"{path}[{i}]", case_name, "kg m^2", "inertia")
     return np.diag(moments)
 
 
@@ -73,9 +73,10 @@ MIN_MASS = 1e-3  # kg
 MIN_INERTIA = 1e-3  # kg m^2
 
 
-def _at_least(x, least, raw, path, case_name, unit):
+def _at_least(x, least, raw, path, case_name, unit, kind=None):
     if x < least:
-        raise CaseError(f"{_where(case_name, path)} = {_shown(raw)}: must be at least {least:g} {unit}; the exchange "
+        shown = _given(raw, x, kind) if kind else _shown(raw)
+        raise CaseError(f"{_where(case_name, path)} = {shown}: must be at least {least:g} {unit}; the exchange "
                         "divides by it")
 
 def _check_keys(d, allowed, path, case_name):
@@ -106,7 +107,7 @@ def _vehicle_inputs(d, i, case_name):
     if "mass" in d:
         mass = num("mass")
         _positive(mass, d["mass"], f"{path}.mass", case_name, "mass must be positive")
-        _at_least(mass, MIN_MASS, d["mass"], f"{path}.mass", case_name, "kg")
+        _at_least(mass, MIN_MASS, d["mass"], f"{path}.mass", case_name, "kg", "mass")
     elif "weight" in d:
         mass = num("weight") / U.G0
         _positive(mass, d["weight"], f"{path}.weight", case_name, "weight must be positive")
@@ -120,12 +121,10 @@ def _vehicle_inputs(d, i, case_name):
         dims[k] = num(k)
     for k in ("length", "width", "height"):
         _positive(dims[k], d[k], f"{path}.{k}", case_name, f"{k} must be positive")
-    if not 0 <= dims["cg_to_front"] <= dims["length"]:
-        raise CaseError(f"{_where(case_name, path + '.cg_to_front')} = {d['cg_to_front']!r}: "
-                        f"must be between 0 and the length ({dims['length']:.4g} m)")
-    if not 0 <= dims["cg_height"] <= dims["height"]:
-        raise CaseError(f"{_where(case_name, path + '.cg_height')} = {d['cg_height']!r}: "
-                        f"must be between 0 and the height ({dims['height']:.4g} m)")
+    for k, whole in (("cg_to_front", "length"), ("cg_height", "height")):
+        if not 0 <= dims[k] <= dims[whole]:
+            raise CaseError(f"{_where(case_name, f'{path}.{k}')} = {_given(d[k], dims[k], 'length')}: must be "
+                            f"between 0 and {_limit('the ' + whole, d[whole], dims[whole], 'length')}")
     pos = _vector(_require(d, "position", path, case_name), "length", f"{path}.position", case_name, (2, 3))
     if len(pos) == 2:
         pos.append(dims["cg_height"])
@@ -258,12 +257,12 @@ def _road(d, vehicles, case_name):
                         f"road without friction nothing stops) and at most {MAX_ROAD_FRICTION:g} (no tyre grips more)")
     dt = num("time_step") if "time_step" in road else MOTION_STEP
     if not 0 < dt <= 0.05:
-        raise CaseError(f"{_where(case_name, 'road.time_step')} = {_shown(road['time_step'])}: must be in "
-                        "(0, 0.05] s")
+        raise CaseError(f"{_where(case_name, 'road.time_step')} = {_given(road['time_step'], dt, 'time')}: must be "
+                        "in (0, 0.05] s")
     limit = num("time_limit") if "time_limit" in road else MOTION_LIMIT
     if not 0 < limit <= 600:
-        raise CaseError(f"{_where(case_name, 'road.time_limit')} = {_shown(road['time_limit'])}: must be in "
-                        "(0, 600] s")
+        raise CaseError(f"{_where(case_name, 'road.time_limit')} = {_given(road['time_limit'], limit, 'time')}: must "
+                        "be in (0, 600] s")
     if limit / dt > MAX_STEPS:
         raise CaseError(f"{_where(case_name, 'road')}: time_limit / time_step = {limit / dt:.4g} steps, more than "
                         f"{MAX_STEPS}: lengthen the step or shorten the limit")
@@ -280,30 +279,35 @@ def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
     num = lambda k: _number(d[k], VEHICLE_FIELDS[k][0], f"{path}.{k}", case_name)  # noqa: E731
     length, width = float(v.length), float(v.width)
     wheelbase = num("wheelbase") if "wheelbase" in d else WHEELBASE_SHARE * length
+    raw = {k: d.get(k) for k in ("length", "width", "cg_to_front", "wheelbase")}  # as typed, for the messages
     if not 0 < wheelbase <= length:
-        raise CaseError(f"{_where(case_name, path + '.wheelbase')} = {_shown(d['wheelbase'])}: must be positive and "
-                        f"at most the length ({length:.4g} m)")
+        raise CaseError(f"{_where(case_name, path + '.wheelbase')} = {_given(d['wheelbase'], wheelbase, 'length')}: "
+                        f"must be positive and at most {_limit('the length', raw['length'], length, 'length')}")
     track = num("track") if "track" in d else TRACK_SHARE * width
     if not 0 < track <= width:
-        raise CaseError(f"{_where(case_name, path + '.track')} = {_shown(d['track'])}: must be positive and at most "
-                        f"the width ({width:.4g} m)")
+        raise CaseError(f"{_where(case_name, path + '.track')} = {_given(d['track'], track, 'length')}: must be "
+                        f"positive and at most {_limit('the width', raw['width'], width, 'length')}")
     a = num("cg_to_front_axle") if "cg_to_front_axle" in d else float(v.cg_to_front) - 0.5 * (length - wheelbase)
     where = path + ".cg_to_front_axle"
-    shown = _shown(d["cg_to_front_axle"]) if "cg_to_front_axle" in d else f"{a:.4g} m (from its defaults)"
+    shown = (_given(d["cg_to_front_axle"], a, "length") if "cg_to_front_axle" in d
+             else f"{a:.4g} m (from its defaults)")
     if not 0 < a < wheelbase:
         raise CaseError(f"{_where(case_name, where)} = {shown}: the CG must lie between the axles: "
-                        f"0 < cg_to_front_axle < wheelbase ({wheelbase:.4g} m)")
+                        f"0 < cg_to_front_axle < {_limit('wheelbase', raw['wheelbase'], wheelbase, 'length')}")
     if a > float(v.cg_to_front) + 1e-9 or wheelbase - a > length - float(v.cg_to_front) + 1e-9:
+        rear_typed = raw["length"] if _typed_scale(raw["length"], "length") else raw["cg_to_front"]
+        behind = _both(rear_typed, length - float(v.cg_to_front), "length").replace(", ", " (", 1)
+        behind += ")" if "(" in behind else ""
         raise CaseError(f"{_where(case_name, where)} = {shown}: the axles must lie within the vehicle's length "
-                        f"(front axle at most cg_to_front = {float(v.cg_to_front):.4g} m ahead of the CG, rear axle "
-                        f"at most {length - float(v.cg_to_front):.4g} m behind it)")
+                        f"(front axle at most {_limit('cg_to_front', raw['cg_to_front'], float(v.cg_to_front), 'length')}"
+                        f" ahead of the CG, rear axle at most {behind} behind it)")
     after = d.get("after", {})
     _check_keys(after, set(AFTER_FIELDS) | TEXT_FIELDS, path + ".after", case_name)
     brake = _wheels(after.get("wheels", "free"), f"{path}.after.wheels", case_name)
     steer = _number(after["steer"], "angle", f"{path}.after.steer", case_name) if "steer" in after else 0.0
     if abs(steer) > math.radians(MAX_STEER):
-        raise CaseError(f"{_where(case_name, path + '.after.steer')} = {_shown(after['steer'])}: must be within "
-                        f"+-{MAX_STEER:g} deg")
+        raise CaseError(f"{_where(case_name, path + '.after.steer')} = {_given(after['steer'], steer, 'angle')}: must "
+                        f"be within +-{MAX_STEER:g} deg")
     f = (_number(after["rolling_resistance"], "dimensionless", f"{path}.after.rolling_resistance", case_name)
          if "rolling_resistance" in after else ROLLING_RESISTANCE)
     if not 0 <= f < friction:
@@ -440,6 +444,40 @@ def _shown(value, most: int = 80) -> str:
     digits or a long list would bury the message)."""
     text = repr(value)
     return text if len(text) <= most else f"{text[:most - 20]}... ({len(text)} characters)"
+
+def _typed_scale(raw, kind):
+    """(SI value of one unit, the unit) of a quantity typed with a unit ("15.95 ft" -> (0.3048, "ft")), or
+    None for a bare number, or a unit the same as the SI one shown (``units.SI_DISPLAY``)."""
+    unit = U.typed_unit(raw)
+    if unit is None or unit == U.SI_DISPLAY[kind][1]:
+        return None
+    try:
+        return U.parse_quantity(f"1 {unit}", kind), unit
+    except U.UnitError:
+        return None
+
+
+def _given(raw, x, kind) -> str:
+    """A value as a message shows it: as typed, and where typed in a unit, in SI too ("'20 ft' (6.096 m)"),
+    so that it can be set beside a limit given in SI."""
+    scale, label = U.SI_DISPLAY[kind]
+    return _shown(raw) + (f" ({x / scale:.4g} {label})".rstrip() if _typed_scale(raw, kind) else "")
+
+
+def _both(raw, x, kind) -> str:
+    """``x`` (SI) in the unit ``raw`` was typed in and in SI ("15.95 ft, 4.862 m"), or in SI alone where
+    ``raw`` was a bare number ("4.862 m")."""
+    scale, label = U.SI_DISPLAY[kind]
+    typed = _typed_scale(raw, kind) if raw is not None else None
+    as_typed = f"{x / typed[0]:.4g} {typed[1]}, " if typed else ""
+    return f"{as_typed}{x / scale:.4g} {label}"
+
+
+def _limit(what, raw, x, kind) -> str:
+    """A limit that another input sets, named, in the unit that input was typed in and in SI: "the length
+    (15.95 ft, 4.862 m)"; "the length (4.862 m)" where it was a bare number."""
+    return f"{what} ({_both(raw, x, kind)})"
+
 
 def cases_from_data(data, source=None) -> list[Case]:
     """All cases of a loaded file. A file with one case raises CaseError on a bad case; in a

@@ -192,3 +192,35 @@ def test_undefined_outputs_are_masked_alike_on_numpy_and_on_jax_results():
         undefined.append({p for p in paths if np.isnan(np.asarray(defined_output(result, p), float)).any()})
     assert not undefined[0]
     assert {"vehicles[0].pdof", "vehicles[1].course_after", "contact.impulse_azimuth"} <= undefined[1]
+
+
+@pytest.mark.parametrize("field, value, message", [
+    # the values by hand from 1 ft = 0.3048 m and 1 lb = 0.45359237 kg: 20 ft = 6.096 m, 15 ft = 4.572 m,
+    # 5 ft = 1.524 m, 4.5 ft = 1.3716 m, 16 ft = 4.8768 m, 6 ft = 1.8288 m, 1e-9 lb = 4.536e-10 kg
+    ("cg_to_front", "20 ft", "vehicles[0].cg_to_front = '20 ft' (6.096 m): must be between 0 and the length "
+                             "(15 ft, 4.572 m)"),
+    ("cg_to_front", 20, "vehicles[0].cg_to_front = 20: must be between 0 and the length (15 ft, 4.572 m)"),
+    ("cg_height", "5 ft", "vehicles[0].cg_height = '5 ft' (1.524 m): must be between 0 and the height "
+                          "(4.5 ft, 1.372 m)"),
+    ("wheelbase", "16 ft", "vehicles[0].wheelbase = '16 ft' (4.877 m): must be positive and at most the length "
+                           "(15 ft, 4.572 m)"),
+    ("track", "7 ft", "vehicles[0].track = '7 ft' (2.134 m): must be positive and at most the width (6 ft, 1.829 m)"),
+    ("mass", "1e-9 lb", "vehicles[0].mass = '1e-9 lb' (4.536e-10 kg): must be at least 0.001 kg"),
+])
+def test_range_errors_give_the_value_as_typed_and_in_si(field, value, message):
+    """A value typed in US units that breaks a rule set by another input is shown as typed and in SI, and the
+    limit in the unit its own input was typed in and in SI, so that the two can be compared at a glance."""
+    d = copy.deepcopy(US_CASE)
+    if field in ("wheelbase", "track"):
+        d["road"] = {"friction": 0.7}
+    if field == "mass":
+        d["vehicles"][0].pop("weight")
+    d["vehicles"][0][field] = value
+    with pytest.raises(CaseError) as err:
+        case_from_dict(d)
+    assert str(err.value).startswith(f"case 'units check': {message}"), str(err.value)
+    si = copy.deepcopy(d)  # the same case with the length in bare metres: its limit in SI alone
+    si["vehicles"][0]["length"] = 15 * 0.3048
+    if field == "cg_to_front":
+        with pytest.raises(CaseError, match=r"must be between 0 and the length \(4\.572 m\)$"):
+            case_from_dict(si)
