@@ -337,3 +337,49 @@ def test_every_field_of_a_case_with_any_hostile_value_is_read_or_refused():
                         fit.problem.parse_evidence(case, d["evidence"])
                     except CaseError:
                         pass
+
+
+def test_hostile_files_and_arguments_give_one_clear_error(tmp_path, capsys):
+    """Files and arguments that are not a case or a sweep (empty, whitespace, a list, no vehicles, NaN and
+    1e400 literals, a lone surrogate in a name, a value or an --over spec): every command says what and
+    where on one line, exit status 2, and no traceback."""
+    base = seed0()
+    files = {
+        "empty.json": ("", "the file is empty"), "blank.toml": ("  \n", "the file is empty"),
+        "list.json": ("[]", "a case must be an object/table, got list"),
+        "none.json": (json.dumps({**base, "vehicles": []}), "vehicles: 0 given; a case needs exactly two vehicles"),
+        "word.json": (json.dumps({**base, "vehicles": "two"}), "vehicles = 'two': not a list"),
+        "nan.json": (json.dumps(base).replace('"yaw": 0', '"yaw": NaN', 1), "vehicles[0].yaw = nan: must be a finite"),
+        "big.json": (json.dumps(base).replace('"yaw": 0', '"yaw": 1e400', 1), "vehicles[0].yaw = inf: must be a finite"),
+        "lone.json": ('{"name": "\\udcff", "vehicles": 3}', "case '\\udcff': vehicles = 3: not a list"),
+    }
+    for name, (text, message) in files.items():
+        path = written(tmp_path, name, text)
+        for argv in (["solve", str(path)], ["solve", str(path), "--json"], ["fit", str(path)],
+                     ["sweep", str(path), "--over", "contact.restitution=0:0.1:2", "--out", str(tmp_path / "o.csv")]):
+            code, out, err = run_cli(capsys, *argv)
+            assert code == 2 and out == "" and "Traceback" not in err, (argv, err)
+            assert err.startswith("ks-jax: error: ") and message in err and err.count("\n") == 1, (argv, err)
+    for over, message in (("vehicles[1].speed=\udcff", "'\\udcff' is not a '<number> <unit>' quantity"),
+                          ("vehicles[1].speed=0:1e400:3", "STOP = '1e400' must be a finite number"),
+                          ("contact.restitution=0:1:1e30", "N = '1e30' must be a whole number")):
+        code, out, err = run_cli(capsys, "sweep", str(SEED1), "--over", over, "--out", str(tmp_path / "o.csv"))
+        assert code == 2 and out == "" and message in err and "Traceback" not in err, err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_terminal_that_cannot_show_a_name_gets_its_escapes(tmp_path, capsys, monkeypatch):
+    """On a terminal whose encoding is ASCII (LANG=C) a name such as 'Café' is written with its escape, not
+    stopped by an encoding error."""
+    import io
+    import sys
+
+    d = seed0()
+    d["name"] = "Caf\u00e9 \u4e2d"
+    path = written(tmp_path, "cafe.json", d)
+    stdout = io.TextIOWrapper(io.BytesIO(), encoding="ascii")
+    monkeypatch.setattr(sys, "stdout", stdout)
+    code = ks_jax.cli.main(["solve", str(path)])
+    stdout.flush()
+    text = stdout.buffer.getvalue().decode("ascii")
+    assert code == 0 and text.startswith("Case: Caf\\xe9 \\u4e2d\n")

@@ -206,10 +206,10 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
         raise CaseError(f"{_where(name, 'vehicles')}: missing field")
     wanted = 1 if "fixed" in d else 2
     if not isinstance(vehicles, list) or len(vehicles) != wanted:
-        n = len(vehicles) if isinstance(vehicles, list) else vehicles
+        given = f": {len(vehicles)} given" if isinstance(vehicles, list) else f" = {_shown(vehicles)}: not a list"
         rule = ("a case with a fixed object needs exactly one vehicle (the object takes the second's place)"
                 if wanted == 1 else "a case needs exactly two vehicles, or one and a fixed object (\"fixed\")")
-        raise CaseError(f"{_where(name, 'vehicles')} = {_shown(n)} vehicles: {rule}")
+        raise CaseError(f"{_where(name, 'vehicles')}{given}; {rule}")
     if "contact" not in d:
         raise CaseError(f"{_where(name, 'contact')}: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
@@ -409,6 +409,9 @@ def _read(path: Path):
         raise CaseError(f"{path}: not a UTF-8 text file (byte {err.start}: {err.reason}); case files are JSON "
                         "or TOML text") from None
     kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
+    if not text.strip():
+        raise CaseError(f"{path}: the file is empty; a case file holds one case, or several under \"cases\", as "
+                        f"{kind} (docs/model.md, \"Case files\")")
     try:
         data = tomllib.loads(text) if kind == "TOML" else json.loads(text, parse_int=_json_integer)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:

@@ -76,8 +76,21 @@ def _show_case_warnings():
     warnings.simplefilter("always", CaseWarning)
 
 
+def _escape_what_the_terminal_cannot_show():
+    """On a terminal whose encoding cannot write every character (LANG=C: ASCII), a name such as 'Café' is
+    written with its escapes ('Caf\\xe9') rather than stopping the command with an encoding error."""
+    for stream in (sys.stdout, sys.stderr):
+        encoding = (getattr(stream, "encoding", None) or "").lower().replace("-", "").replace("_", "")
+        if encoding not in ("utf8", "utf8sig") and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a stream that cannot be reconfigured: left as it is
+                pass
+
+
 def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
+    _escape_what_the_terminal_cannot_show()
     _show_case_warnings()
     _compilation_cache()
     args = build_parser().parse_args(argv)
