@@ -50,10 +50,10 @@ def reading():
         ("md", """
 # Reading Kudlich-Slibar impulse data
 
-The two Virtual CRASH manual chapters on KS impulse data stage an inline rear impact and read the
-auto-ees panel: impulse, deformation energy, delta-V, crush and EES. Here both are solved with ks-jax from
+The two Virtual CRASH manual chapters on KS impulse data, "Reading Collision Data" and "Reading
+Kudlich-Slibar Impulse Data", each stage an inline rear impact and read the auto-ees panel: impulse, deformation energy, delta-V, crush and EES. Here both are solved with ks-jax from
 the case files shipped in the package, and the impulse, energy, delta-V and EES are rebuilt by hand beside the
-manual's, step by step. (The crushes are not a check: the chapter-000 case's dimensions were chosen so that
+manual's, step by step. (The crushes are not a check: the "Reading Collision Data" case's dimensions were chosen so that
 the box-to-centroid distances are the manual's deformations, and the hand EES below uses those crushes.)
 """),
         ("code", """
@@ -72,7 +72,7 @@ lucid_case = ks_jax.load_case(cases / "seed_001_lucid_kia.toml")
 sol0, sol1 = ks_jax.solve([saturn_case, lucid_case])
 """),
         ("md", """
-## Chapter 000: Pontiac Grand Prix into a Saturn L300
+## Reading Collision Data: Pontiac Grand Prix into a Saturn L300
 
 Saturn (vehicle 1) 3183.475 lbf at 5 mph; Pontiac (vehicle 2) 3496.531 lbf at 21 mph; restitution 0.1;
 centroid at CG height on the line of the CGs, so no rotation and the collision is one-dimensional:
@@ -113,7 +113,7 @@ assert abs(float(sol0.result.contact.impulse_magnitude) - 5946.847) < 1e-3
         ("md", "The auto-ees style panel, with the manual's panel values at the bottom:"),
         ("code", "print(text_report(sol0))"),
         ("md", """
-## Chapter 001: Kia K5 into a Lucid Air
+## Reading Kudlich-Slibar Impulse Data: Kia K5 into a Lucid Air
 
 Lucid (vehicle 1) 155.75 slug at 5 mph; Kia (vehicle 2) 100.38 slug at 20 mph; restitution 0.1.
 The closing speed is exactly 22 ft/s (15 mph) and the reduced mass 61.04 slug to four digits, so the impulse
@@ -176,8 +176,8 @@ A reconstruction rarely has one set of inputs: speeds, restitution, friction and
 only within ranges. `ks_jax.sweep` solves one case at every point of a grid of some of its inputs in one
 compiled, vectorised call and hands back only the results asked for. This notebook shows
 
-1. delta-V and deformation energy over the bullet vehicle's speed and the restitution (seed chapter 001,
-   Kia K5 into the rear of a Lucid Air), as maps;
+1. delta-V and deformation energy over the bullet vehicle's speed and the restitution (the Virtual CRASH
+   manual's "Reading Kudlich-Slibar Impulse Data": Kia K5 into the rear of a Lucid Air), as maps;
 2. where an oblique contact sticks and where it slides, over friction and the position of the impulse centroid;
 3. a million-point sweep, timed.
 
@@ -336,7 +336,7 @@ Reading the maps:
         ("md", """
 ## 3. A million points, timed
 
-The same seed case over a 1000 x 1000 grid of Kia speed and restitution: 10^6 exchanges. Compilation happens
+The same rear impact over a 1000 x 1000 grid of Kia speed and restitution: 10^6 exchanges. Compilation happens
 once per combination of swept paths, outputs, grid shape and chunk size, so the warm-up solves only the first
 65536 points (four chunks of 16384) of the same grid; the timed call then runs without compiling.
 """),
