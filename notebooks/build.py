@@ -21,10 +21,12 @@ from nbclient.exceptions import CellExecutionError, CellTimeoutError, DeadKernel
 HERE = Path(__file__).parent
 NOTEBOOKS = {}
 
-# The kernel's options: figures inline as PNG at 80 dpi (at matplotlib's 100 the colour maps of notebook 02
-# take 140-165 KB each; 80 keeps them legible at about three quarters of that), and only its errors on the
-# log (its start-up warning about unencrypted local TCP is noise in the command's progress).
-KERNEL_ARGUMENTS = ["--InlineBackend.rc={'figure.dpi': 80}", "--log-level=ERROR"]
+# The kernel's options: figures inline as PNG at 110 dpi, so that legends and tick labels (8-9 pt) read at
+# 12-14 pixels, and only its errors on the log (its start-up warning about unencrypted local TCP is noise in
+# the command's progress). A notebook's column is about 1000-1400 pixels wide and shows a wider image scaled
+# down, text and all: figures are at most 13 inches wide (11-12 for most), and the colour maps' PNGs stay
+# under tests/test_notebooks.py's limit (notebook 02's three maps, the largest, about 140 KB).
+KERNEL_ARGUMENTS = ["--InlineBackend.rc={'figure.dpi': 110}", "--log-level=ERROR"]
 CELL_TIMEOUT = 600  # seconds
 
 
@@ -157,7 +159,7 @@ friction cone and the velocities before and after.
 import matplotlib.pyplot as plt
 from ks_jax.plot import top_view
 
-fig, axes = plt.subplots(1, 2, figsize=(13, 6))
+fig, axes = plt.subplots(1, 2, figsize=(11, 6.5))
 top_view(sol0, ax=axes[0])
 top_view(sol1, ax=axes[1])
 fig.tight_layout()
@@ -220,11 +222,11 @@ X, Y = np.meshgrid(kia_speed / U.MPH, restitution, indexing="ij")   # result axe
 panels = [("vehicles[0].delta_v_magnitude", U.MPH, "delta-V Lucid Air (vehicle 1) [mph]"),
           ("vehicles[1].delta_v_magnitude", U.MPH, "delta-V Kia K5 (vehicle 2) [mph]"),
           ("contact.energy_loss", 1000 * U.FT_LBF, "deformation energy [1000 ft lbf]")]
-fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), sharey=True)
+fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharey=True)
 for ax, (path, unit, label) in zip(axes, panels):
     Z = r[path] / unit
     mesh = ax.pcolormesh(X, Y, Z, shading="auto", cmap="viridis")
-    cs = ax.contour(X, Y, Z, levels=8, colors="white", linewidths=0.6)
+    cs = ax.contour(X, Y, Z, levels=6, colors="white", linewidths=0.6)
     ax.clabel(cs, fontsize=7, fmt="%.0f")
     fig.colorbar(mesh, ax=ax, label=label)
     ax.plot(20, 0.1, "r*", ms=12, label="manual: 20 mph, eps = 0.1")
@@ -234,7 +236,7 @@ axes[0].set_ylabel("restitution eps [-]")
 # the line of (speed, restitution) pairs that give the manual's 6.47 mph delta-V of the Lucid
 axes[0].contour(X, Y, r["vehicles[0].delta_v_magnitude"] / U.MPH, levels=[6.47], colors="red", linewidths=1.5)
 axes[0].plot([], [], "r-", label="delta-V Lucid = 6.47 mph (manual)")
-axes[0].legend(loc="upper right", fontsize=8)
+axes[0].legend(loc="upper right", fontsize=9)
 fig.tight_layout()
 """),
         ("md", """
@@ -291,7 +293,7 @@ print(s.status_counts, f"sliding at {s['contact.sliding'].mean():.0%} of the poi
 """),
         ("code", """
 F, O = np.meshgrid(friction, offset / U.FT, indexing="ij")      # result axes: (friction, offset)
-fig, axes = plt.subplots(1, 2, figsize=(14, 4.8), sharey=True)
+fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
 
 ax = axes[0]
 mesh = ax.pcolormesh(O, F, s["contact.sliding"].astype(float), shading="auto",
@@ -304,7 +306,7 @@ ax.set_ylim(0, 1)
 ax.set_xlabel("impulse centroid along the sedan's side, x from its CG [ft]")
 ax.set_ylabel("friction limit mu [-]")
 ax.set_title("contact.sliding")
-ax.legend(loc="upper center", fontsize=8)
+ax.legend(loc="upper center", fontsize=9)
 
 ax = axes[1]
 Z = s["vehicles[0].delta_v_magnitude"] / U.MPH
@@ -371,7 +373,7 @@ From the shell, `ks-jax sweep ... --plot grid.png` draws the same pictures besid
         ("code", """
 from ks_jax import plot
 
-fig, axes = plt.subplots(1, 2, figsize=(13, 4.6))
+fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
 for ax, path in zip(axes, outs):
     plot.sweep_view(rb, path, ax, units="us")
 fig.tight_layout()
@@ -531,9 +533,9 @@ centroid in the wrong place, a wrong mass).
 """),
         ("code", """
 keys = list(fr.residuals)
-fig, ax = plt.subplots(figsize=(8, 3.8))
+fig, ax = plt.subplots(figsize=(7, 3.4))
 ax.barh(range(len(keys)), [fr.residuals[k] for k in keys], color="tab:blue")
-ax.set_yticks(range(len(keys)), keys, fontsize=8)
+ax.set_yticks(range(len(keys)), keys, fontsize=9)
 ax.invert_yaxis()
 for x in (-2, -1, 1, 2):
     ax.axvline(x, color="grey", ls=":" if abs(x) == 1 else "--", lw=1)
@@ -559,7 +561,7 @@ Laplace standard error about the estimate; the dashed line is the truth.
 mc = fr.monte_carlo
 xs = mc["x"][mc["converged"]]          # (refits, unknowns), SI, columns in the order of the unknowns
 print(f"{mc['samples']} refits, {mc['converged_fraction']:.0%} converged")
-fig, axes = plt.subplots(1, len(names), figsize=(18, 3.6))
+fig, axes = plt.subplots(1, len(names), figsize=(13, 3.2))
 for k, (ax, p) in enumerate(zip(axes, names)):
     unit, uname = show[p]
     x = xs[:, k] / unit
@@ -573,7 +575,7 @@ for k, (ax, p) in enumerate(zip(axes, names)):
     ax.set_xlabel(f"{p} [{uname or '-'}]")
     ax.set_title(f"MC std {x.std():.3g}, Laplace {sd:.3g}", fontsize=9)
 axes[0].set_ylabel("refits [count]")
-axes[0].legend(fontsize=7, loc="upper left")
+axes[0].legend(fontsize=8.5, loc="upper left")
 fig.tight_layout()
 """),
         ("md", """
@@ -605,7 +607,7 @@ sw = sweep(case, over={"vehicles[1].speed": speeds, "contact.restitution": eps},
            outputs=["vehicles[0].delta_v_body[1]"])
 S, E = np.meshgrid(speeds / U.MPH, eps, indexing="ij")
 Z = sw["vehicles[0].delta_v_body[1]"] / U.MPH
-fig, ax = plt.subplots(figsize=(7.5, 4.6))
+fig, ax = plt.subplots(figsize=(7, 4.2))
 mesh = ax.pcolormesh(S, E, Z, shading="auto", cmap="viridis")
 fig.colorbar(mesh, ax=ax, label="sedan lateral delta-V [mph]")
 ax.contour(S, E, Z, levels=[evidence[1].value / U.MPH], colors="red", linewidths=2)
@@ -704,7 +706,7 @@ normal_azimuth = np.where(exchange, np.degrees(np.arctan2(r["contact.normal[1]"]
 crush_sum = r["vehicles[0].crush"] + r["vehicles[1].crush"]
 ees_ok = crush_sum > 1e-3                      # EES splits the energy by crush: meaningless without crush
 
-fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
+fig, axes = plt.subplots(2, 2, figsize=(10.5, 6.8), sharex=True)
 ax = axes[0, 0]
 ax.plot(ms, r["contact.point[0]"] / U.FT, label="centroid x")
 ax.plot(ms, r["contact.point[1]"] / U.FT, label="centroid y")
@@ -716,14 +718,14 @@ ax.set_ylim(-4, 9)
 ax2.set_ylim(20, 100)
 h1, l1 = ax.get_legend_handles_labels()
 h2, l2 = ax2.get_legend_handles_labels()
-ax.legend(h1 + h2, l1 + l2, loc="center left", fontsize=8)
+ax.legend(h1 + h2, l1 + l2, loc="center left", fontsize=9)
 ax.set_title("where and how the impulse acts")
 
 ax = axes[0, 1]
 for i in range(2):
     ax.plot(ms, r[f"vehicles[{i}].crush"] / U.FT, color=f"C{i}", ls="-:"[i], lw=2.5 - i, label=f"{names[i]}")
 ax.set_ylabel("crush (centroid to undeformed box) [ft]")
-ax.legend(fontsize=8)
+ax.legend(fontsize=9)
 ax.set_title("crush")
 
 ax = axes[1, 0]
@@ -733,7 +735,7 @@ for i in range(2):
             label=f"EES {names[i]}")
 ax.set_ylabel("delta-V, EES [mph]")
 ax.set_xlabel("penetration time dt_p [ms]")
-ax.legend(fontsize=8)
+ax.legend(fontsize=9)
 ax.set_title("delta-V and EES")
 
 ax = axes[1, 1]
@@ -747,7 +749,7 @@ for a in axes.flat:
     a.axvline(tbone.inputs.contact.penetration_time * 1000, color="grey", lw=0.8, ls="--")
     a.fill_between(ms, 0, 1, where=~exchange, transform=a.get_xaxis_transform(), color="grey", alpha=0.25,
                    label="separating: no exchange" if a is axes[1, 1] else None)
-axes[1, 1].legend(fontsize=8)
+axes[1, 1].legend(fontsize=9)
 fig.tight_layout()
 """),
         ("md", """
@@ -790,7 +792,7 @@ shown = (0.02, 0.10)
 pair = [dataclasses.replace(tbone, name=f"{tbone.vehicle_names[1]} into {tbone.vehicle_names[0]}: dt_p = {p * 1000:.0f} ms",
                             inputs=ks_jax.set_input(tbone.inputs, "contact.penetration_time", p)) for p in shown]
 sols = ks_jax.solve(pair)
-fig, axes = plt.subplots(1, 2, figsize=(14, 6))
+fig, axes = plt.subplots(1, 2, figsize=(11, 5.5))
 for ax, sol in zip(axes, sols):
     top_view(sol, ax=ax)
 fig.tight_layout()
@@ -875,7 +877,7 @@ def report_rest(sol):
 start = ks_jax.solve(case)
 report_rest(start)
 ax = top_view(start, evidence=measured, sigma=sigma)
-ax.figure.set_size_inches(7.5, 8)
+ax.figure.set_size_inches(7, 7.5)
 """),
         ("md", """
 At 20 and 30 mph both vehicles come to rest well away from the marks (the sedan about 12 ft, the pickup about
@@ -921,7 +923,7 @@ best = ks_jax.solve(at(case, res.estimate, f"{case.name}\\nat the estimate: "
                         + ", ".join(f"{res.estimate[p] / U.MPH:.1f} mph" for p in res.estimate)))
 report_rest(best)
 ax = top_view(best, evidence=measured, sigma=sigma)
-ax.figure.set_size_inches(7.5, 8)
+ax.figure.set_size_inches(7, 7.5)
 """),
         ("md", """
 ## What rest positions cannot tell apart: speed and drag
@@ -1097,7 +1099,7 @@ def held_at(mu):
 profile = np.array([sum(r * r for r in fit.reconstruct(case, held_at(mu)).residuals.values()) for mu in frictions])
 threshold = 0.0324  # where the best fit's contact would stick (the fit's note above)
 
-fig, ax = plt.subplots(figsize=(7, 3.6))
+fig, ax = plt.subplots(figsize=(6.5, 3.4))
 ax.semilogx(frictions, profile, "o-", color="0.3", ms=4, label="best chi^2 with the friction fixed")
 ax.plot(res.estimate["contact.friction"], res.chi2, "D", color="C3", label="the best fit (slides)")
 ax.axvspan(threshold, 1.5, color="C0", alpha=0.12, label="the contact sticks")
@@ -1105,7 +1107,7 @@ ax.axvline(TRUTH["contact.friction"], color="C2", ls="--", label="truth (0.25)")
 ax.set_xlabel("friction at the centroid")
 ax.set_ylabel("chi^2")
 ax.set_ylim(res.chi2 - 0.5, res.chi2 + 5)
-ax.legend(fontsize=8, loc="upper right")
+ax.legend(fontsize=9, loc="upper right")
 print(f"best chi^2 sliding {profile.min():.2f}, sticking {profile[frictions > threshold].min():.2f}"
       f" (every friction above {threshold} alike)")
 """),
@@ -1158,7 +1160,7 @@ def split(ax, x, bins):
             color=["C3", "C0"], label=["draws that slide", "draws that stick"])
 
 
-fig, (a, z, b) = plt.subplots(1, 3, figsize=(12, 3.6))
+fig, (a, z, b) = plt.subplots(1, 3, figsize=(10, 3.2))
 split(a, f, np.linspace(0, 1.5, 151))
 split(z, f, np.linspace(0, 0.1, 41))
 for ax in (a, z):
@@ -1169,9 +1171,9 @@ for ax in (a, z):
     ax.set_xlabel("friction at the centroid")
 a.axvline(TRUTH["contact.friction"], color="C2", ls="--", label="truth")
 a.set_ylabel("probability density")
-a.annotate(f"Laplace: a peak of {gauss(mu, mu, sd):.0f} at {mu:.3f}", (mu, 4), xytext=(0.25, 3.4), fontsize=8,
+a.annotate(f"Laplace: a peak of {gauss(mu, mu, sd):.0f} at {mu:.3f}", (mu, 4), xytext=(0.25, 3.4), fontsize=9,
            arrowprops=dict(arrowstyle="->", lw=0.7))
-a.legend(fontsize=7, loc="center right")
+a.legend(fontsize=8.5, loc="center right")
 z.set_title("the first 0.1 of it", fontsize=9)
 v = column["vehicles[1].speed"] / U.MPH
 split(b, v, np.linspace(v.min(), v.max(), 40))
@@ -1181,7 +1183,7 @@ b.plot(g, gauss(g, res.estimate["vehicles[1].speed"] / U.MPH, laplace_sd["vehicl
 b.axvline(TRUTH["vehicles[1].speed"] / U.MPH, color="C2", ls="--", label="truth")
 b.set_xlabel(f"{case.vehicle_names[1]}'s speed at impact (mph)")
 b.set_yticks([])
-b.legend(fontsize=7)
+b.legend(fontsize=8.5)
 fig.tight_layout()
 """),
         ("md", """
@@ -1193,7 +1195,7 @@ Laplace approximation of the best fit over them (its estimate and 1- and 2-sigma
 paths = post.paths
 scale = np.array([unit[p][0] for p in paths])
 labels = [f"{p} [{unit[p][1]}]" if unit[p][1] else p for p in paths]
-fig = plt.figure(figsize=(7.5, 7.5))
+fig = plt.figure(figsize=(6, 6))
 corner(fig, draws / scale, labels, np.array([res.estimate[p] for p in paths]) / scale,
        np.asarray(res.covariance) / np.outer(scale, scale))
 fig.suptitle("posterior draws and the Laplace approximation (none for the friction: not determined)");
