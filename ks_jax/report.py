@@ -69,13 +69,25 @@ def _wrapped(text, first="  ", then="    "):
                                    break_on_hyphens=False))
 
 
-def _layout(lines):
+UNITS = ("both", "si", "us")  # the panel's unit systems: SI beside US units, or one of them alone
+
+
+def _in_units(row, units):
+    """``row`` with the column of ``units`` alone ("si" or "us"; a row with no US text keeps its text, which
+    is in units both systems use: degrees, seconds, words), or as it is ("both")."""
+    if units == "both" or not row.us:
+        return row
+    return row._replace(si=row.si if units == "si" else row.us, us="")
+
+
+def _layout(lines, units="both"):
     """The panel's text from its lines (text as it is, ``_Row``s in columns). The label column is
     ``LABEL_WIDTH`` wide: a longer label is wrapped within it, its first line beside the values and the
     rest under it, and a row's note is wrapped under the row, so that neither pushes the columns out. The
     SI column is as wide as its widest entry plus ``GAP`` spaces, and at least ``SI_WIDTH``, so that the
     US column starts at one offset in every row and never touches the SI text, whatever the numbers. An
     SI text with no US text beside it (a sentence) may run past its column and widens nothing."""
+    lines = [_in_units(r, units) if isinstance(r, _Row) else r for r in lines]
     rows = [r for r in lines if isinstance(r, _Row)]
     si_width = max([SI_WIDTH] + [len(r.si) + GAP for r in rows if r.us])
     out = []
@@ -107,8 +119,11 @@ def _timing_rows(sol):
             _row("exchange (+ depth of penetration)", f"{_fmt(c.time + dt, 4)} s", f"(+{_fmt(dt, 4)} s)")]
 
 
-def text_report(sol, reference: bool = True) -> str:
-    """The auto-ees panel of one solved case, SI beside US units."""
+def text_report(sol, reference: bool = True, units: str = "both") -> str:
+    """The auto-ees panel of one solved case: SI beside US units (``units="both"``), or in one of them alone
+    ("si" or "us"; angles in degrees and times in seconds either way)."""
+    if units not in UNITS:
+        raise ValueError(f"units = {units!r}: must be one of {', '.join(UNITS)}")
     lines = [f"Case: {visible(sol.case.name)}"]
     if sol.result is None or sol.status.startswith("invalid"):
         lines.append(f"  status: {sol.status}")
@@ -133,7 +148,7 @@ def text_report(sol, reference: bool = True) -> str:
     ref = sol.case.raw.get("reference") if reference else None
     if ref:
         lines += ["", reference_table(sol, ref)]
-    return _layout(lines)
+    return _layout(lines, units)
 
 
 def _contact_rows(sol, c):

@@ -5,6 +5,7 @@ import json
 import re
 import tomllib
 
+import numpy as np
 import pytest
 
 import ks_jax
@@ -144,3 +145,22 @@ def test_long_notes_are_wrapped_and_the_label_column_keeps_its_width(tmp_path):
         assert lines[k + 1] == "    still moving at the time limit (0.5 s): where it is then"
     paragraphs = [" ".join(p.split()) for p in panel.split("\n\n") if p.lstrip().startswith("note: ")]
     assert paragraphs == [f"note: {n}." for n in notes]
+
+
+def test_the_panel_in_one_unit_system_alone():
+    """``text_report(units="us")`` and ``"si"`` (``ks-jax solve --units``): the manual's Lucid-Kia crash,
+    whose exact impulse is 1.1 x 61.04 slug x 22 ft/s = 1477.169 lbf s (6570.775 N s) and whose Kia's delta-V
+    is 10.03 mph. Each panel holds its own system's units and none of the other's; every other row (angles,
+    times, words) is as in the panel of both."""
+    sol = ks_jax.solve(ks_jax.load_case(SEED1))
+    us, si, both = (text_report(sol, units=u) for u in ("us", "si", "both"))
+    assert "1,477.169 lbf s" in us and "10.03 mph" in us
+    assert "6,570.775 N s" in si
+    dv = [[float(m) for m in re.findall(r"delta-V +([\d.]+) (?:m/s|mph)", panel)] for panel in (si, us)]
+    np.testing.assert_allclose(np.array(dv[0]) / 0.44704, dv[1], atol=0.006)  # 1 mph = 0.44704 m/s exactly
+    assert not re.search(r"\b(N s|m/s|J|m)\b", us.split("reference")[0])
+    assert not re.search(r"\b(lbf s|mph|ft lbf|ft)\b", si.split("reference")[0])
+    assert [line for line in both.splitlines() if "deg" in line and "rad" not in line] == \
+        [line for line in si.splitlines() if "deg" in line and "rad" not in line]
+    with pytest.raises(ValueError, match="units"):
+        text_report(sol, units="imperial")

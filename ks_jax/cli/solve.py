@@ -34,12 +34,17 @@ def add_solve_arguments(parser):
     parser.add_argument("--smoothing", type=smoothing_option, default=0.0,
                         help="smooth friction cone, tau in [0, 1) (default 0: exact)")
     parser.add_argument("--plot", metavar="PNG", help="write a top view of the contact to this file")
+    parser.add_argument("--units", choices=("si", "us"), default=None,
+                        help="the panel in SI or US units alone (default: SI beside US); the JSON is SI")
 
 
 def run_solve(args) -> int:
     """``ks-jax solve``: exit status 0, or 1 where a case of several was not solved."""
     if args.plot:
         check_picture_path(args.plot)  # before solving: a bad name loses no work
+    if args.json and args.units:
+        raise CaseError(f"--units {args.units} sets the panel's units; --json is SI (docs/model.md, \"Results\"): "
+                        "give one of them")
     cases = load_cases(args.file)
     if len(cases) == 1 and not cases[0].valid:
         raise CaseError(cases[0].error)
@@ -50,7 +55,7 @@ def run_solve(args) -> int:
             for note in s.notes():
                 print(f"ks-jax: case '{visible(s.case.name)}': {visible(note)}", file=sys.stderr)
     else:
-        print("\n\n".join(text_report(s) for s in solutions))
+        print("\n\n".join(text_report(s, units=args.units or "both") for s in solutions))
     if args.plot:
         save_top_view(solutions, args.plot)
         print(f"\ntop view written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
