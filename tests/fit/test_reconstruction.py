@@ -396,7 +396,7 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
     from ks_jax.cli import main
 
     assert main(["fit", str(FIT_SEED), "--json"]) == 0
-    d = json.loads(capsys.readouterr().out)
+    (d,) = json.loads(capsys.readouterr().out)["cases"]  # always a list of cases, as solve --json
     assert d["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.05)
     assert d["converged"] is True and d["unidentified"] == []
     assert set(d["residuals"]) == {"vehicles[0].delta_v_magnitude", "vehicles[1].delta_v_magnitude"}
