@@ -235,8 +235,7 @@ def problems(draw, path_set: PathSet):
 
 @pytest.mark.parametrize("name", sorted(PATH_SETS))
 @settings(max_examples=2, deadline=None, derandomize=True, database=None,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example,
-                                 HealthCheck.function_scoped_fixture])
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example])
 @given(data=st.data())
 def test_any_drawn_problem_gives_a_finite_fit_a_plain_report_and_valid_json(name, data):
     """Whatever the numbers of a problem (truth, bounds given or left out, start, prior, sigmas), its fit ends
