@@ -99,6 +99,7 @@ def test_a_static_value_without_a_faithful_repr_is_not_stored(tmp_path, monkeypa
     assert _exports(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_a_solve_read_back_gives_the_same_results(tmp_path, monkeypatch):
     """What the command line runs: ``ks_jax.solve`` of a case with automatic contact, its program stored,
     then read back by a new function object (``quick_jit`` made again): no export the second time, and the
@@ -118,6 +119,7 @@ def test_a_solve_read_back_gives_the_same_results(tmp_path, monkeypatch):
     assert exports == [] and _exports(tmp_path) == written
 
 
+@pytest.mark.slow
 def test_keep_programs_in_python_keeps_them_in_its_folder(tmp_path, monkeypatch):
     """``ks_jax.keep_programs(DIR)`` in a notebook's process returns DIR and keeps there what the command line
     keeps: ``solve``'s traced program, and pint's parsed units are put there, with the same results as keeping

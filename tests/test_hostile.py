@@ -312,6 +312,7 @@ def _leaves(d, prefix=()):
         yield prefix
 
 
+@pytest.mark.slow
 def test_every_field_of_a_case_with_any_hostile_value_is_read_or_refused():
     """Each value of the shipped seed case and fit case replaced by each of ``HOSTILE_VALUES``: the case is read,
     or refused with a CaseError naming the field; nothing else is raised, and what is read is finite."""

@@ -10,6 +10,7 @@ import pytest
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
+@pytest.mark.slow
 def test_readme_python_example_reproduces_seed_000():
     text = README.read_text()
     code = re.search(r"```python\n(.*?)```", text, re.S).group(1)

@@ -18,6 +18,7 @@ SEED_TO_REST = CASES / "rest_seed_000.json"
 SPIN_OUT = CASES / "tbone_spin_out.json"
 
 
+@pytest.mark.slow
 def test_solve_json_gives_each_skid_its_closed_form(capsys):
     """The seed chapter's rear-end crash, both cars locked after it: each slides straight on from its position at
     the exchange, along its course after, d = v^2 / (2 mu g) and t = v / (mu g) from its speed after (1e-3)."""
@@ -38,6 +39,7 @@ def test_solve_json_gives_each_skid_its_closed_form(capsys):
     assert "rest position (x, y): at rest" in panel and "distance to rest (CG path)" in panel
 
 
+@pytest.mark.slow
 def test_a_vehicle_still_moving_at_the_time_limit_is_said_so(capsys):
     """The pickup rolling free from 35 mph does not stop in 4 s, the sedan does: its at_rest is false, and a note says what to change."""
     raw = json.loads(SPIN_OUT.read_text())
@@ -51,6 +53,7 @@ def test_a_vehicle_still_moving_at_the_time_limit_is_said_so(capsys):
                for n in d["notes"]), d.get("notes")
 
 
+@pytest.mark.slow
 def test_a_swept_road_friction_scales_the_skids_as_one_over_mu():
     """d = v^2 / (2 mu g): over a sweep of road.friction the distance times mu is the same, and equals the closed
     form from the speed after (the exchange does not depend on the road)."""
@@ -76,6 +79,7 @@ def test_a_swept_road_friction_scales_the_skids_as_one_over_mu():
         ks_jax.sweep(load_case(CASES / "seed_000_saturn_pontiac.json"), {"road.friction": mus})
 
 
+@pytest.mark.slow
 def test_noise_free_rest_positions_and_crush_recover_both_speeds():
     """The spin-out's rest positions computed at 25 and 35 mph, and its crush, as evidence with the speeds unknown
     (started at 20 and 30 mph): the fit finds both to 1e-3 relative."""
@@ -93,6 +97,7 @@ def test_noise_free_rest_positions_and_crush_recover_both_speeds():
     np.testing.assert_allclose(res.estimate["vehicles[1].speed"], 35 * U.MPH, rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_rest_positions_of_an_inline_crash_cannot_separate_speed_from_road_friction():
     """The struck car at rest before an inline crash: both speeds after are proportional to the striking car's
     speed v, so both skids are proportional to v^2 / mu and only that ratio is determined. The fit says so, and

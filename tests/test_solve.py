@@ -47,6 +47,7 @@ def _alone_batched_and_swept(case, monkeypatch):
 
 @pytest.mark.parametrize("name", sorted(p.name for p in (Path(ks_jax.__file__).parent / "cases").iterdir()
                                          if p.suffix in (".json", ".toml")))
+@pytest.mark.slow
 def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, monkeypatch):
     """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three
     stages: programs which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A
@@ -203,6 +204,7 @@ HEAD_ON = {
 }
 
 
+@pytest.mark.slow
 def test_a_vehicle_brought_to_rest_has_no_course_after(tmp_path, capsys):
     """Inline head-on, so the stick impulse (docs/model.md, "The impulse exchange", step 6): v' = vc (1 + eps) - eps v with
     vc = (1500 * 10 - 1800 * 10) / 3300 = -10/11 m/s. Vehicle 2 ends at 0 m/s: at rest, it has no course

@@ -27,6 +27,7 @@ def groups(validation):
     return validation.tables()
 
 
+@pytest.mark.slow
 def test_every_difference_is_within_its_tolerance(validation, groups):
     compared = 0
     for group, rows in groups.items():

@@ -29,6 +29,7 @@ def small_chunks(monkeypatch):
         yield 64
 
 
+@pytest.mark.slow
 def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
     cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
@@ -49,6 +50,7 @@ def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, smal
     assert "scan" not in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*kit.inputs(cases[:64])))
 
 
+@pytest.mark.slow
 def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, random_cases, small_chunks):
     """Both vehicles the same in every row (unbatched), a smooth cone: the rows of the last chunk, which starts
     at row 66 so as to end at row 130, equal the whole-batch program of those 64 rows."""
@@ -61,6 +63,7 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, ran
                      fn(*jax.tree_util.tree_map(lambda x: x[rows], (s1, s2, c))))
 
 
+@pytest.mark.slow
 def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     """Reverse and forward mode through a batch whose values run in chunks, with an unbatched input (one
     vehicle 2 in every row: its gradient is the sum over the rows) and rows with invalid inputs (zero
@@ -97,6 +100,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     np.testing.assert_allclose(float(along), float(np.sum(np.asarray(per_row[1].velocity) * direction)), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_a_batch_of_one_row_is_the_row(kit, random_cases):
     """``jax.vmap(exchange)`` over one row computes the row unbatched: its values are those of ``exchange``
     of the row, and its gradient with one vehicle shared (unbatched) is the row's to rounding, for a valid row
@@ -133,6 +137,7 @@ def test_a_batch_of_one_row_is_the_row(kit, random_cases):
         assert any(np.any(np.asarray(x) != 0) for x in jax.tree_util.tree_leaves(grads)) == (case is good)
 
 
+@pytest.mark.slow
 def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     """Forward over reverse (``jax.hessian``) through a batch whose values run in chunks: the columns of the
     Hessian are central differences of the gradient."""
@@ -154,6 +159,7 @@ def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chu
     assert abs(float(hessian[0, 1])) > 1.0  # the two parameters interact
 
 
+@pytest.mark.slow
 def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
     """With 64-bit types enabled (as in these tests, the CLI and the benchmarks), float32 inputs give
     float32 results computed in float32: no float64 constant may promote them (the stand-ins of

@@ -16,6 +16,7 @@ from ks_jax.model import types as t
 from samples import assert_same_leaves, with_bad_rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
 def test_exchange_batch_equals_vmap(kit, random_cases, kind):
     cases = random_cases[kind][:150]
@@ -46,6 +47,7 @@ def test_exchange_batch_equals_vmap(kit, random_cases, kind):
                        [c for c, g in zip(cases, good) if g])
 
 
+@pytest.mark.slow
 def test_exchange_batch_smoothing_matches_vmap(kit, random_cases):
     args = kit.inputs(random_cases["principal"][:40])
     reference = kit.batch_exchange(args, 0.05)
@@ -65,6 +67,7 @@ def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_c
         jax.jit(lambda *a: ks_jax.exchange_batch(*a).contact.impulse_magnitude)(*args)
 
 
+@pytest.mark.slow
 def test_exchange_batch_writes_into_out(kit, random_cases):
     """``out``: the results of another batch of the same size are overwritten in place (chunks of 16
     over 40 rows, the last one aligned to the end) and equal a fresh call; a wrong ``out`` is refused,
@@ -90,6 +93,7 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
         ks_jax.exchange_batch(*numpy_inputs, out=aliased)
 
 
+@pytest.mark.slow
 def test_exchange_batch_of_no_rows(kit, random_cases):
     """An empty batch (a filtered batch may be) gives empty results with the fields, trailing shapes and
     dtypes of a one-row batch's; an ``out`` of that shape is returned as it is."""
@@ -105,6 +109,7 @@ def test_exchange_batch_of_no_rows(kit, random_cases):
         ks_jax.exchange_batch(*none, out=wrong)
 
 
+@pytest.mark.slow
 def test_exchange_batch_on_the_accelerator_path(kit, random_cases):
     """The accelerator's path (``backend.path``, forced on whatever device runs the tests): rows given as
     NumPy arrays go to the device chunk by chunk (64, 64, then a last chunk aligned to the end), results are

@@ -21,6 +21,7 @@ def _evidence_row_loss(v1, s1, v2, s2, c, target):
     return jnp.where(ok, (delta_v - target) ** 2 + r.vehicles[1].speed_after ** 2 + 1e-4 * r.contact.energy_loss, 0.0)
 
 
+@pytest.mark.slow
 def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     """Chunks of 64 rows over 150 (the last chunk padded), a vehicle and an evidence target shared by
     every row, rows with invalid inputs: the value is the plain sum, the gradients are the per-row
@@ -56,6 +57,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     np.testing.assert_allclose(float(grads[3]), float(fd), rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
     """Forward mode against central differences of the plain sum, and the Hessian of the chunked sum
     (forward over reverse) against central differences of its forward mode."""
@@ -81,6 +83,7 @@ def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
     assert abs(float(hessian[0, 1])) > 1.0  # the two parameters interact
 
 
+@pytest.mark.slow
 def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
     args = kit.inputs(random_cases["principal"][:10])
     with pytest.raises(ValueError, match=r"chunk = 0: chunk must be a positive number of rows"):

@@ -75,6 +75,7 @@ def test_bad_input_is_refused_with_field_value_and_rule(label, tmp_path, capsys)
     assert errtext.splitlines()[-1].startswith("ks-jax: error: case 'units check'") and "Traceback" not in errtext
 
 
+@pytest.mark.slow
 def test_bad_case_in_a_batch_is_reported_and_the_others_solved(tmp_path, capsys):
     good = copy.deepcopy(US_CASE)
     bad = _bad(BAD["restitution"][0])

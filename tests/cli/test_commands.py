@@ -114,6 +114,7 @@ def test_pictures_and_files_in_a_missing_folder_are_refused_before_solving(tmp_p
         assert exc.value.code == 2 and "a seed must be 0 or more" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_ees_note_names_zero_crushes_when_they_are_rounding(tmp_path, capsys):
     """The shipped T-bone with no depth of penetration: the centroid lies on the boxes' faces, crushes of
     rounding size, EES undefined because both crushes count as 0 (derived.ees_pair), not because the

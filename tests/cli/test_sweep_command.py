@@ -26,6 +26,7 @@ def case():
     return ks_jax.load_case(SEED0)
 
 
+@pytest.mark.slow
 def test_bad_sweep_arguments_are_refused_by_name(case):
     """What is not a sweep is refused with its field and rule, before anything is solved; a sweep too
     large to keep in memory names the memory and the way round it."""
@@ -94,6 +95,7 @@ def test_parse_over_random_values():
     np.testing.assert_array_equal(over["contact.friction"], [0.4, 0.5, 0.6])
 
 
+@pytest.mark.slow
 def test_cli_monte_carlo_sweep(tmp_path, capsys, case):
     """Random inputs from the command line: the draws are numpy's default_rng(seed) in the order of the
     --over options, they are stored as the axes of the file, and the results are the sweep of those
@@ -116,6 +118,7 @@ def test_cli_monte_carlo_sweep(tmp_path, capsys, case):
     np.testing.assert_array_equal(data["vehicles[0].delta_v_magnitude"], kept["vehicles[0].delta_v_magnitude"])
 
 
+@pytest.mark.slow
 def test_cli_writes_csv_and_npz(tmp_path, capsys):
     csv_path, npz_path = tmp_path / "r.csv", tmp_path / "r.npz"
     args = [str(SEED1), "--over", "vehicles[1].speed=10mph:30mph:5", "--over", "contact.restitution=0:1.5:4",
@@ -135,6 +138,7 @@ def test_cli_writes_csv_and_npz(tmp_path, capsys):
     np.testing.assert_allclose(data["axis:vehicles[1].speed"], np.linspace(10, 30, 5) * ks_jax.units.MPH)
 
 
+@pytest.mark.slow
 def test_large_csv_without_pyarrow_suggests_it(tmp_path, capsys, monkeypatch):
     """Without pyarrow a large .csv is written by the csv module, and the command says how to write it
     faster; the file holds every point either way."""
@@ -159,6 +163,7 @@ def test_large_csv_without_pyarrow_suggests_it(tmp_path, capsys, monkeypatch):
                                   read_table(tmp_path / "b.csv")["contact.impulse_magnitude"])
 
 
+@pytest.mark.slow
 def test_swept_values_in_us_units_read_as_typed(tmp_path, capsys):
     """A value typed in mph or ft comes back from SI as 24.999999999999996 mph or 1.9999999999999996 ft;
     the file (and the .npz axis) give it as typed, and leave values that are not short decimals as
@@ -279,6 +284,7 @@ def test_one_input_named_twice_is_refused(tmp_path, capsys):
     assert not (tmp_path / "x.csv").exists()
 
 
+@pytest.mark.slow
 def test_undefined_results_are_nan_and_named(case, tmp_path, capsys):
     """Where a solved point has no impulse (restitution -1: (1 + eps) J_c = 0 by hand), its PDOF and impulse
     direction are undefined: NaN in the sweep, not the stand-in 0 (a frontal impact), as null in the JSON of

@@ -25,6 +25,8 @@ from ks_jax.case import get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
 from samples import CASES  # noqa: E402
 
+pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles programs of its own
+
 EVIDENCE = [("vehicles[0].delta_v_magnitude", 0.15), ("vehicles[1].delta_v_magnitude", 0.15),
             ("vehicles[0].speed_after", 0.15), ("vehicles[1].speed_after", 0.15)]
 DRAWS = 500

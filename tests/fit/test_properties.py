@@ -41,6 +41,8 @@ from ks_jax.case import case_from_dict, get_input, get_output, output_kind, set_
 from ks_jax.solve import solve  # noqa: E402
 from samples import CASES  # noqa: E402
 
+pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles programs of its own
+
 BATCH = 8  # cases per fit call: one compiled program per set of paths (its rounds run in calls of as many)
 SMOOTHING = 1e-3  # the fit's default, which the evidence is computed with too
 REACH = 1e-6  # a fit reaches the truth's chi^2 when its own is at most this much (absolute, and relative) above it

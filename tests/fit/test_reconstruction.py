@@ -64,6 +64,7 @@ def oblique():
     return cases, np.array(truths), unknowns, evidence, results
 
 
+@pytest.mark.slow
 def test_the_default_starts_go_on_until_the_best_fit_is_found_twice(oblique):
     """With one round of 8 starts (``max_starts=8``) the fourth case ends in a local minimum at chi^2 about
     70, reached by several starts: its chi^2 is far above its 99% quantile (13.3 for 10 evidence less 6
@@ -79,6 +80,7 @@ def test_the_default_starts_go_on_until_the_best_fit_is_found_twice(oblique):
         assert a.estimate == b.estimate
 
 
+@pytest.mark.slow
 def test_a_fit_that_sticks_is_tried_from_the_slide_side_of_its_edge():
     """A contact that slides at friction 0.28 where sticking needs 0.35, noise-free evidence with sigmas twice
     the usual: one round of 8 starts ends on the sticking plateau (friction far above the edge, chi^2 about 7.5,
@@ -194,6 +196,7 @@ def _fd_residuals(case, us, ev):
     return f
 
 
+@pytest.mark.slow
 def test_standard_errors_match_finite_difference_laplace(oblique):
     cases, truths, unknowns, evidence, results = oblique
     case, us, ev, r = cases[0], unknowns[0], evidence[0], results[0]
@@ -231,6 +234,7 @@ def test_bounds_are_respected(oblique):
             assert u.lower <= r.estimate[u.path] <= u.upper
 
 
+@pytest.mark.slow
 def test_seed_001_recovers_the_kias_speed():
     r = fit.reconstruct(load_case(FIT_SEED))
     kia = r.estimate["vehicles[1].speed"] / U.MPH
@@ -244,6 +248,7 @@ def test_seed_001_recovers_the_kias_speed():
     assert any("not reproduced" in s for s in r.notes)
 
 
+@pytest.mark.slow
 def test_seed_001_monte_carlo_agrees_with_laplace():
     r = fit.reconstruct(load_case(FIT_SEED), monte_carlo=64, seed=3)
     mc = r.monte_carlo
@@ -256,6 +261,7 @@ def test_seed_001_monte_carlo_agrees_with_laplace():
     assert not any("Monte Carlo refits spread" in n for n in r.notes)  # they agree: no note
 
 
+@pytest.mark.slow
 def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing(monkeypatch):
     """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
     calls of one row count (``rows_per_call``), the last call padded, so that both use one compiled program.
@@ -322,6 +328,7 @@ SEED_EVIDENCE = [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6.47 mp
                  {"quantity": "vehicles[1].delta_v_magnitude", "value": "10.03 mph", "sigma": "0.3 mph"}]
 
 
+@pytest.mark.slow
 def test_seed_001_restitution_and_speed_are_not_both_determined():
     case = load_case(SEED)
     r = fit.reconstruct(case, {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]},
@@ -338,6 +345,7 @@ def test_seed_001_restitution_and_speed_are_not_both_determined():
     assert closing * (1 + r.estimate["contact.restitution"]) == pytest.approx(15 * U.MPH * 1.1, rel=2e-3)
 
 
+@pytest.mark.slow
 def test_seed_001_both_speeds_move_together():
     case = load_case(SEED)
     unknowns = {"vehicles[0].speed": {"bounds": ["0 mph", "40 mph"]},
@@ -421,6 +429,7 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
     assert "'bad one' not fitted" in out.err
 
 
+@pytest.mark.slow
 def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsys):
     """EES evidence where both crushes are 0 (the centroid 3 ft above both boxes: docs/model.md, "Results"
     leaves EES undefined there): no start can be evaluated. That case is reported "not fitted", naming
@@ -476,6 +485,7 @@ TBONE = {
 }
 
 
+@pytest.mark.slow
 def test_an_exact_fit_to_copied_evidence_converges():
     """Evidence copied from a solve to eight digits (in mph) leaves residuals of ~1e-7 sigma, where
     rounding stops the cosine test short of its tolerance and no step lowers the cost: such a fit is
@@ -496,6 +506,7 @@ def test_an_exact_fit_to_copied_evidence_converges():
     assert r.converged and r.iterations < 20 and r.starts_converged >= r.starts_at_best >= 6
 
 
+@pytest.mark.slow
 def test_friction_of_a_contact_that_sticks_is_bounded_below_only():
     """The T-bone sticks (|J_t| / J_n = 0.3126 < mu = 0.5): every friction above 0.3126 gives the same
     exchange, so the fit gives friction no standard error and no Monte Carlo interval, and says the
@@ -523,6 +534,7 @@ def test_friction_of_a_contact_that_sticks_is_bounded_below_only():
     assert re.search(r"\n  contact\.friction +no interval: not determined by the evidence", text_report(r))
 
 
+@pytest.mark.slow
 def test_missing_bounds_are_the_inputs_own_limits_and_reports_read_plainly():
     """A speed with no bounds is fitted in [0, inf), a restitution with only a prior in [-1, 1]; errors
     write a bound not given as 'none'; a weight names the mass; the report writes a speed at its bound
@@ -549,6 +561,7 @@ def test_missing_bounds_are_the_inputs_own_limits_and_reports_read_plainly():
     assert fmt(20.0 * U.MPH, "velocity", si=True) == "20 mph (8.941 m/s)"
 
 
+@pytest.mark.slow
 def test_a_fit_that_never_reaches_a_collision_says_so():
     """The Kia (20 mph by the evidence) started at 3 mph, slower than the Lucid's 5 mph: the vehicles
     separate, no unknown moves the evidence there, and the solver's gradient test passes trivially. That
@@ -609,6 +622,7 @@ def test_contact_time_is_evidence_for_automatic_contact_only():
         fit.reconstruct(case, evidence=[{"quantity": "contact.time", "value": 0.1, "sigma": 0.01}])
 
 
+@pytest.mark.slow
 def test_friction_just_below_sticking_is_bounded_below_only():
     """An oblique crash whose contact sticks (friction 0.247; sticking needs 0.034), evidence with noise:
     the best fit slides with friction 0.029 +/- 0.007, yet from 0.039 on the contact would stick and every
@@ -635,6 +649,7 @@ def test_friction_just_below_sticking_is_bounded_below_only():
     assert r_true.chi2 - r.chi2 < 1.0
 
 
+@pytest.mark.slow
 def test_float32_fit_far_from_the_origin_equals_the_fit_at_the_origin(oblique):
     """In float32 a position 512 km out keeps ~3 cm: the same oblique fit there once came out 0.7 std off in
     the centroid and 0.2 std in a speed, its Monte Carlo refits stuck at the estimate. The exchange is the

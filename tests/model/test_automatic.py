@@ -195,6 +195,7 @@ def assert_same_exchange(r, ref, rtol=1e-9):
                                        err_msg=f"vehicles[{i}].{name}")
 
 
+@pytest.mark.slow
 def test_aligned_rear_impact(res):
     r = res["rear"]
     # gap: rear of 1 at 10 + 2.1 - 4.6 = 7.5, front of 2 at 2.6; closing 10 m/s
@@ -324,6 +325,7 @@ def test_user_contact_overrides_one_part(res):
     assert not np.allclose(normal_only.contact.impulse, auto.impulse, rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_vmap_equals_single_calls(res):
     """The batched, jitted kernel row by row against plain single calls (no jit at all)."""
     with jax.disable_jit():
@@ -408,6 +410,7 @@ def _contact_value(r):
     return np.concatenate([[r.contact.time], r.contact.point, normal])
 
 
+@pytest.mark.slow
 def test_contact_gradients_match_central_differences():
     """Time, centroid and normal: implicit differentiation of the touching condition and the
     overlap geometry, against central differences of the full kernel."""
@@ -436,6 +439,7 @@ def cli_json(path, png):
     return json.loads(buf.getvalue())["cases"][0]
 
 
+@pytest.mark.slow
 def test_shipped_automatic_cases_through_the_cli(tmp_path):
     with resources.as_file(resources.files("ks_jax.cases") / "auto_seed_000.json") as path:
         d = cli_json(path, tmp_path / "seed0.png")
@@ -627,6 +631,7 @@ def _numpy_touching(dims, poses, t):
     return ok
 
 
+@pytest.mark.slow
 def test_first_contact_of_turning_vehicles_against_dense_sampling():
     """60 random pairs, vehicle 1 turning at up to 2 rad/s, vehicle 2 aimed at it half of the time: the
     kernel's first contact against a NumPy separating-axis test sampled every 0.2 ms over the 10 s
@@ -710,6 +715,7 @@ def test_a_scene_far_from_the_origin_gives_the_same_contact():
             np.testing.assert_allclose(far.contact.impulse, near.contact.impulse, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_touch_that_has_parted_by_the_exchange_is_refused():
     """A sideswipe by hand: a 4 m car passes a parked one 1 cm inside its side at 10 m/s, from 10 m behind;
     the footprints overlap from t = 0.6 s (front reaches rear) to 1.4 s. A penetration time of 0.5 s puts the
@@ -748,6 +754,7 @@ def _one_sided(value, theta, base, h):
     return (-3 * f0 + 4 * f1 - f2) / (2 * h)
 
 
+@pytest.mark.slow
 def test_centroid_derivative_in_penetration_time_at_the_touch_is_the_growing_triangle():
     """Oblique: vehicle 2's front-left corner touches vehicle 1's right side (y = -0.9) at (0.3, -0.9).
     After a time h the overlap is the triangle of the corner, C = (0.3, -0.9) + h (5, 10 sin60), and
@@ -794,6 +801,7 @@ def test_result_derivatives_in_penetration_time_at_the_touch(name, h):
     assert not np.any(bad), f"outputs {np.flatnonzero(bad)}: derivatives {ad[bad]} vs differences {fd[bad]}"
 
 
+@pytest.mark.slow
 def test_short_penetration_in_float32_is_the_triangle():
     """float32, the oblique corner 0.3 and 1 ms past the touch: the overlap is a triangle 2.6 and 8.7 mm
     deep (test_oblique_corner_impact), whose centroid is the impulse centroid as in float64. An overlap

@@ -32,6 +32,7 @@ def random_results(kit, random_cases):
 
 
 # --------------------------------------------------------------------------- reference
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
 def test_random_cases_match_reference(kit, random_results, kind):
     cases, eng, refb = random_results[kind]
@@ -236,6 +237,7 @@ def _inline_case(m1, m2, speed1, speed2, x1, x2, point_x, dims1, dims2, eps=0.1,
     return veh[0], s1, veh[1], s2, contact
 
 
+@pytest.mark.slow
 def test_seed_000_saturn_pontiac():
     m1 = 3183.475 * U.LBF / U.G0
     m2 = 3496.531 * U.LBF / U.G0
@@ -333,6 +335,7 @@ def _bad_rows(base, rng):
     return [r[0] for r in rows], np.array([r[1] for r in rows])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
 def test_bad_rows_in_a_batch(kit, random_cases, kind):
     rng = np.random.default_rng(13)
@@ -374,6 +377,7 @@ def test_bad_rows_in_a_batch(kit, random_cases, kind):
         assert kit.status_code(ref.input_status(cases[b])) == codes[b]
 
 
+@pytest.mark.slow
 def test_bad_rows_do_not_poison_gradients(kit, random_cases):
     rng = np.random.default_rng(17)
     cases, codes = _bad_rows(random_cases["principal"][1], rng)
@@ -417,6 +421,7 @@ def _case_dict(args):
     return {"vehicles": vehs, "contact": {k: getattr(c, k) for k in ref.CONTACT_INPUTS}}
 
 
+@pytest.mark.slow
 def test_float32_agrees_with_float64(kit, random_cases):
     m1 = 3183.475 * U.LBF / U.G0
     m2 = 3496.531 * U.LBF / U.G0
@@ -443,6 +448,7 @@ def test_float32_agrees_with_float64(kit, random_cases):
     assert float(b["ees"][-1]) / U.MPH == pytest.approx(2.213, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
     """A Python number out of [0, 1) is refused; an array one (traced under jit) flags the row with
     INVALID_SMOOTHING and NaN results; an array one in range gives the Python number's results."""
@@ -485,6 +491,7 @@ def test_create_refuses_two_ways_of_giving_one_thing():
         ks_jax.Contact.create([0.0, 0.0, 0.5], normal=[1.0, 0.0, 0.0], azimuth=1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("tilt", [0.0, 1e-17, -1e-17, 1e-13, -1e-13, 1e-9, 0.05])
 def test_crush_depth_by_hand_for_a_ray_nearly_along_the_sides(tilt, dtype):

@@ -123,6 +123,7 @@ def rear_end(fraction, side, a=0.0, swap=False):
     return row, 0.49, t_x, centroid
 
 
+@pytest.mark.slow
 def test_offset_frontals_take_the_longitudinal_normal():
     """20%, 40%, 60% and 80% of the narrower width, vehicle 2 to either side, the scene also turned
     (-70 deg, 200 deg) and the vehicles' numbers swapped: n is the longitudinal axis, from vehicle 2 into

@@ -139,6 +139,7 @@ def test_an_off_centre_pole_impact_keeps_the_vehicles_angular_momentum_about_the
     assert float(v.crush) == pytest.approx(0.1 / math.cos(math.radians(15.0)), rel=1e-9)  # front face at x = 2
 
 
+@pytest.mark.slow
 def test_first_contact_with_each_object_by_hand():
     """Automatic contact: the sedan's front face (x = 2 m at t = 0) reaches a wall at x = 3 m after 1 / V; a
     pole of 0.3 m at x = 3.15 m (its face at 3.0) at the same time; a barrier whose near face is at x = 4 m
@@ -177,6 +178,7 @@ def test_fixed_objects_in_case_files_say_what_is_wrong():
             case_from_dict(d)
 
 
+@pytest.mark.slow
 def test_sweeps_and_fits_against_a_wall():
     """A sweep over the vehicle's speed gives the hand impulse (1 + e) m v at every speed; a sweep or a fit of
     the object's paths is refused (``test_a_fit_recovers_the_speed_into_a_pole_from_its_delta_v`` fits
@@ -195,6 +197,7 @@ def test_sweeps_and_fits_against_a_wall():
                         [{"quantity": "vehicles[0].delta_v_magnitude", "value": 21.6, "sigma": 0.5}])
 
 
+@pytest.mark.slow
 def test_a_contact_that_cannot_exchange_an_impulse_says_why():
     """Seed chapter 001 (the Kia, 20 mph, into the rear of the Lucid, 5 mph) with its normal reversed (pointing
     from the Lucid into the Kia): no impulse, and the notes give the relative velocity along the normal,
@@ -261,6 +264,7 @@ def test_a_pole_is_met_as_a_circle():
         np.testing.assert_allclose(c.normal, [-1.0, 0.0, 0.0], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_fit_recovers_the_speed_into_a_pole_from_its_delta_v():
     """Noise-free delta-V of an off-centre pole impact (automatic contact with the circle, 0.04 s of
     penetration, the centroid off the sedan's axis so that it spins): the fit, which differentiates through
@@ -290,6 +294,7 @@ def test_the_example_file_of_fixed_objects_solves():
     assert [s.case.vehicle_names[1] for s in (wall, pole, barrier)] == ["retaining wall", "utility pole", "barrier"]
 
 
+@pytest.mark.slow
 def test_a_wall_in_float32_is_met_as_in_float64():
     """A wall is a box kilometres long; in float32 the geometry's tolerances must not grow with it (they
     once put the centroid 0.45 m off and the EES 5 % low): the example wall at 160 deg, solved with float32

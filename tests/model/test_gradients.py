@@ -186,6 +186,7 @@ def test_gradients_match_finite_differences(kit, generic_cases, branch, smoothin
     fd_check(kit, generic_cases[branch], smoothing, rng)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("smoothing", MODES)
 def test_gradients_match_finite_differences_inertia_tensor(kit, random_cases, smoothing):
     """A full 3x3 body inertia tensor: every one of its nine entries is an input."""
@@ -357,6 +358,7 @@ def test_smooth_converges_to_exact_at_rate_tau(smoothing_ratios, kind):
 
 
 
+@pytest.mark.slow
 def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
     """``jax.jacfwd`` of one unbatched exchange (only the tangents are batched, by jacfwd's vmap):
     the Jacobian of every output listed in conftest ``OUTPUTS`` with respect to vehicle 2's
@@ -382,6 +384,7 @@ def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
                                        err_msg=f"argument {k}, component {i}")
 
 
+@pytest.mark.slow
 def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
     """In the inline head-on the force on vehicle 2 is exactly frontal (pdof 0.0) and the impulse
     azimuth is exactly 180 deg (vehicle 1 is pushed straight back). Turning vehicle 2's velocity a
@@ -408,6 +411,7 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
         np.testing.assert_allclose(a, f, rtol=1e-6, err_msg=name)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("file", ["seed_000_saturn_pontiac.json", "auto_tbone.json"])
 def test_a_row_with_a_non_finite_input_leaves_a_shared_gradient_finite(file):
     """A loss over rows that share a parameter (here an angle added to vehicle 2's course, turned

@@ -31,6 +31,7 @@ def test_sincos_within_2_ulp_of_numpy(scale):
         assert np.all((err <= 2 * np.spacing(np.abs(want))) | (err <= floor)), ulps(got, want).max()
 
 
+@pytest.mark.slow
 def test_sincos_exact_points_and_huge_arguments():
     sin, cos = la.sincos(jnp.array([0.0, -0.0, 1e-300, 0.5]))
     np.testing.assert_array_equal(np.asarray(sin)[:3], [0.0, 0.0, 1e-300])
@@ -114,6 +115,7 @@ def test_corrected_zeros_keep_their_derivative():
     assert float(jax.grad(f)(-0.0)) == 3.0 and float(jax.grad(f)(1.0)) == 2.0 and float(f(1.0)) == 2.5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("diagonal", [False, True])
 def test_world_inverse_inertia_derivative_matches_plain_autodiff(diagonal):
     """The hand-written tangent of R I^-1 R^T against autodiff of jnp.linalg.inv and the rotation."""
@@ -148,6 +150,7 @@ def test_world_inverse_inertia_derivative_matches_plain_autodiff(diagonal):
         np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-14)
 
 
+@pytest.mark.slow
 def test_eager_calls_do_not_compile_again(caplog):
     """Outside jit, sin/cos/atan2 run op by op; ``materialize``'s reduction must hit JAX's
     compilation cache on the second call (a fresh reduction function each call recompiled it,

@@ -55,6 +55,7 @@ def _compiled(dt, limit, reverse):
 SKIDS = [(30.0, 0.8), (10.0, 0.7), (3.0, 0.3), (22.0, 1.0)]  # (speed m/s, friction)
 
 
+@pytest.mark.slow
 def test_locked_straight_skid_stops_at_the_closed_form_distance_and_time():
     """All four wheels locked, no yaw rate: d = v^2 / (2 mu g), t = v / (mu g), straight; 1e-3 relative at the
     default step (both the forward loop and the reverse-ready scan)."""
@@ -102,6 +103,7 @@ def test_locked_spin_in_place_stops_at_the_closed_form_time_without_moving_the_c
         assert np.max(np.abs(np.asarray(r.rest_position[k]))) < 1e-9
 
 
+@pytest.mark.slow
 def test_closed_forms_hold_at_every_step_and_a_general_motion_converges_as_the_step_shrinks():
     """The closed forms to 1e-3 at steps from 20 ms to 2.5 ms; a spinning, sliding vehicle with its fronts
     braked (no closed form) converges: the rest position's change from one step to half of it shrinks (first
@@ -179,6 +181,7 @@ def _rest_xy(params, reverse=False):
     return M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=4.0, reverse=reverse).rest_position
 
 
+@pytest.mark.slow
 def test_rest_position_gradients_match_central_differences_forward_and_reverse():
     """d(rest x, y)/d(speeds, yaw rate, friction, brake, steer) by ``jax.jacfwd`` (the forward loop) and by
     ``jax.jacrev`` (the reverse-ready scan) against central differences, and the two modes against each other."""
@@ -206,6 +209,7 @@ STEP_STATES = [
 ]
 
 
+@pytest.mark.slow
 def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
     """The reverse-ready scan's step carries a hand-written adjoint (``_step_reverse``); at states that take each
     branch of the step (sliding, braked, rolling, no grip, a lifted wheel, stopping within the step, a change
@@ -238,6 +242,7 @@ def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
         assert not np.any(bad), (jax.tree_util.keystr(path), got[bad], want[bad])
 
 
+@pytest.mark.slow
 def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
     """A batch (vmap, in one program) gives each row what the row gives alone, unbatched; a vehicle at rest from
     the start has time and distance 0, its yaw unchanged, and finite gradients."""
@@ -274,6 +279,7 @@ def test_wheel_loads_sum_to_the_weight_and_transfer_as_the_moments_say():
         np.testing.assert_allclose(loads.sum(), weight, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_every_tyre_force_stays_inside_its_friction_circle():
     """|F| <= mu Fz for free, locked and braked wheels, at any slip, with the friction left after rolling
     resistance; a locked wheel's force opposes its velocity."""

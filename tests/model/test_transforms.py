@@ -57,6 +57,7 @@ def few_cases(random_cases):
     return random_cases["principal"][:4] + random_cases["principal"][40:44]
 
 
+@pytest.mark.slow
 def test_jit_equals_eager(kit, few_cases):
     for c in few_cases[:3]:
         args = kit.inputs(c)
@@ -73,6 +74,7 @@ def test_eager_smooth_equals_jit_vmap_row(kit, random_cases):
     assert_trees_close(row, eager, RTOL_JIT, "eager vs jit(vmap): ")
 
 
+@pytest.mark.slow
 def test_vmap_equals_stacked_single_calls(kit, random_cases):
     cases = random_cases["principal"][:20]
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
@@ -113,6 +115,7 @@ def _program(text):
 RTOL_QUICK, ATOL_QUICK = 1e-12, 1e-12
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
 @pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json"])
 def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit, name):

@@ -59,6 +59,7 @@ def hand_box(v, xy, yaw_deg):
                      xy + front * f + half * left, xy + rear * f + half * left])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("i", [0, 1])
 def test_cg_path_runs_from_the_exchange_to_the_rest_position(drawn, i):
     sol, paths, ax = drawn

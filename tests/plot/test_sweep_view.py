@@ -46,6 +46,7 @@ def mesh_of(ax):
     return mesh
 
 
+@pytest.mark.slow
 def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     speed = np.linspace(6, 60, 10) * MPH
     eps = np.linspace(0, 1.5, 7)  # above 1 is refused per point (status "invalid: ... restitution")
@@ -72,6 +73,7 @@ def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     assert "180 deg everywhere" in ax.get_title() and not [c for c in ax.collections if c is not mesh_of(ax)]
 
 
+@pytest.mark.slow
 def test_line_for_one_input_and_histogram_for_samples(case):
     speed = np.linspace(10, 40, 16) * MPH
     r = sweep(case, {"vehicles[1].speed": speed}, outputs=[DV1])
@@ -90,6 +92,7 @@ def test_line_for_one_input_and_histogram_for_samples(case):
     assert median.get_xdata()[0] == pytest.approx(np.median(z[DV1][7:]) / MPH, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_a_grid_axis_of_one_value_is_drawn_as_a_line(case):
     """Two swept inputs, one of them with a single value: a line over the other, the fixed value in
     the title (a map one cell wide draws nothing); both single: one point."""
@@ -107,6 +110,7 @@ def test_a_grid_axis_of_one_value_is_drawn_as_a_line(case):
         assert fixed in ax.get_title()
 
 
+@pytest.mark.slow
 def test_sliding_is_drawn_as_stick_or_slide(case):
     r = sweep(case, {"contact.friction": np.linspace(0, 1, 6), "vehicles[1].course": np.radians([0, 20, 40, 60])},
               outputs=["contact.sliding"])
@@ -118,6 +122,7 @@ def test_sliding_is_drawn_as_stick_or_slide(case):
     assert ax.get_ylabel() == "vehicles[1].course (Kia K5) [deg]"
 
 
+@pytest.mark.slow
 def test_thinned_sweep_and_streamed_sample_agree(case):
     """2500 x 3 points: every 10th speed is drawn (at most 250 per axis), the same whether the sweep was
     kept and thinned or streamed through a SweepSample in chunks that do not line up with the lattice."""
@@ -156,6 +161,7 @@ def test_sample_keeps_the_lattice_whatever_the_chunks(mode, shape, limit, stride
     np.testing.assert_array_equal(sample.store["x"].reshape(sample.thin_shape), want)
 
 
+@pytest.mark.slow
 def test_what_cannot_be_drawn_is_refused(case):
     r = sweep(case, {"contact.restitution": [0.1, 0.2], "contact.friction": [0.3, 0.5], "vehicles[1].speed": [8.0, 9.0]},
               outputs=[DV1])
@@ -171,6 +177,7 @@ def test_what_cannot_be_drawn_is_refused(case):
         draw(part)
 
 
+@pytest.mark.slow
 def test_cli_draws_the_sweep_and_refuses_before_solving(tmp_path, capsys):
     out, png = tmp_path / "g.npz", tmp_path / "g.png"
     args = ["sweep", str(SEED1), "--over", "vehicles[1].speed=10mph:60mph:6", "--over", "contact.restitution=0:0.3:4",
@@ -188,6 +195,7 @@ def test_cli_draws_the_sweep_and_refuses_before_solving(tmp_path, capsys):
     assert not (tmp_path / "h.csv").exists() and not (tmp_path / "h.png").exists()
 
 
+@pytest.mark.slow
 def test_separating_points_have_no_stick_or_slide(case):
     """The pickup slower than the Saturn (0 and 1 m/s against 2.24 m/s): separating, no exchange, so neither
     stick nor slide: masked (grey) in the map, as invalid points are, and counted in the title."""
@@ -201,6 +209,7 @@ def test_separating_points_have_no_stick_or_slide(case):
     assert "4 of 8 points without a result (grey)" in ax.get_title()
 
 
+@pytest.mark.slow
 def test_directions_are_drawn_on_the_circle(case):
     """A PDOF spread about 0 deg (the Kia's, with the Lucid's heading drawn about 0): the histogram is one
     hump unwrapped about the circular mean, not two bars at 0 and 360, on an axis that reads as plain
@@ -231,6 +240,7 @@ def test_directions_are_drawn_on_the_circle(case):
     assert "-180" not in ax.get_title()
 
 
+@pytest.mark.slow
 def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(case):
     """The Kia is struck head-on wherever it is: PDOF 0 deg, to rounding on either side of 0 (359.99...,
     0.00...). The colour bar and a line's axis run over whole degrees about 0 (not 0.1 ... 0, 360, 359.9),
@@ -251,6 +261,7 @@ def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(ca
     assert draw(line).get_ylim() == (-1.0, 1.0)
 
 
+@pytest.mark.slow
 def test_drawn_in_the_units_asked_for_and_those_typed(case):
     """SI by default; an input typed in km/h is drawn along its axis in km/h, and every output in the system
     asked for (delta-V in m/s with SI, mph with US, whatever unit the speed was typed in). The values are the
@@ -273,6 +284,7 @@ def test_drawn_in_the_units_asked_for_and_those_typed(case):
         np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), r["contact.energy_loss"] / scale, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_cli_draws_in_the_units_typed_with_the_vehicles_names(tmp_path, capsys):
     """``ks-jax sweep --over vehicles[1].speed=10km/h:80km/h:8 --plot``: the picture's text (an SVG with its
     text kept as text) has the swept speed in km/h with the Kia's name, and its outputs in the system of

@@ -44,6 +44,7 @@ def draw(solution):
     return ax
 
 
+@pytest.mark.slow
 def test_cli_writes_the_picture(tmp_path):
     png = tmp_path / "tbone.png"
     with resources.as_file(case_path("auto_tbone.json")) as path, redirect_stdout(io.StringIO()):

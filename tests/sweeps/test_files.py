@@ -23,6 +23,7 @@ def case():
     return ks_jax.load_case(SEED0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".csv", ".npz", ".parquet"])
 def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     """``ks-jax sweep`` writes chunk by chunk (7 points a chunk here, so 39 chunks over a grid of 273
@@ -127,6 +128,7 @@ def test_csv_numbers_are_the_shortest_text_in_one_notation(value, text):
     assert number_texts(np.array([3, -7], np.int32)) == ["3", "-7"]
 
 
+@pytest.mark.slow
 def test_files_in_us_units(tmp_path, capsys):
     """``--units us`` writes the same sweep in mph, deg, ft lbf, lbf s, deg/s (the unit in each
     column's name), against the SI file divided by the units' definitions (1 mph = 0.44704 m/s,
@@ -181,6 +183,7 @@ def test_files_in_us_units(tmp_path, capsys):
         streamed.table()
 
 
+@pytest.mark.slow
 def test_writer_errors_keep_other_files(tmp_path, capsys):
     """A sweep that fails leaves no file of its own and an earlier file as it was, even after some
     chunks were written; a writer refuses chunks out of order and an incomplete file."""
@@ -207,6 +210,7 @@ def test_writer_errors_keep_other_files(tmp_path, capsys):
     assert not (tmp_path / "empty.csv").exists()
 
 
+@pytest.mark.slow
 def test_file_columns_follow_the_outputs_asked(tmp_path, capsys):
     """The command writes the outputs in the order of --output, as write_results does for the same
     sweep (the compiled program returns them sorted by name)."""

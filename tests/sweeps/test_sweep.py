@@ -88,6 +88,7 @@ def assert_matches(result, case, points):
                 np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-9, err_msg=f"{path} at {point}")
 
 
+@pytest.mark.slow
 def test_grid_values_and_shape(case):
     speeds = np.linspace(3.0, 15.0, 5)
     yaws = np.radians([0.0, 10.0, 25.0])
@@ -104,6 +105,7 @@ def test_grid_values_and_shape(case):
     assert sum(r.status_counts.values()) == 60
 
 
+@pytest.mark.slow
 def test_chunk_boundaries_do_not_change_results(case):
     """Chunks of other sizes (other programs, which XLA may vectorize and contract differently) give the same
     results to rounding, and the same flags and statuses."""
@@ -119,6 +121,7 @@ def test_chunk_boundaries_do_not_change_results(case):
                 np.testing.assert_allclose(part[p], whole[p], rtol=1e-13, atol=1e-13 * scale, err_msg=f"{p}, {chunk}")
 
 
+@pytest.mark.slow
 def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkeypatch):
     """The programs do not depend on the axes' sizes, and a short sweep's one chunk is rounded up to a power
     of two: after a 5 x 3 grid, a 7 x 2 grid and a zip of 11 samples over the same paths compile nothing
@@ -162,6 +165,7 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
             assert grid["status"][i, j] == status
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
 def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, monkeypatch, kit):
     """A sweep of at most ``QUICK_POINTS`` points compiles with ``ks_jax.compilation.QUICK_CPU``, a larger one with
@@ -196,6 +200,7 @@ def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, 
             np.testing.assert_allclose(quick[p], defaults[p], rtol=RTOL, atol=RTOL, err_msg=p)
 
 
+@pytest.mark.slow
 def test_automatic_contact_case_matches_single_solves():
     """A case with automatic contact goes through the geometry in its sweep (three stages: the input rules, the
     contact, the exchange): the same values as solving a point alone, across chunk boundaries."""
@@ -215,6 +220,7 @@ def test_automatic_contact_case_matches_single_solves():
     assert len(set(np.round(r["contact.time"][:, 0], 12))) == 3  # the time to contact depends on the speed
 
 
+@pytest.mark.slow
 def test_automatic_contact_sweep_with_bad_missed_and_turning_rows():
     """Every point of an automatic-contact grid against ``solve_inputs`` alone: a negative speed and a
     restitution of 1.5 (invalid: their status, NaN), the sedan 80 ft ahead (no contact), a turning sedan
@@ -246,12 +252,14 @@ def test_automatic_contact_sweep_with_bad_missed_and_turning_rows():
     assert r.status_counts["ok"] == 4  # 11 and 16 m/s, eps 0.1, the sedan at 0 ft, turning or not
 
 
+@pytest.mark.slow
 def test_default_outputs_and_status(case):
     r = sweep(case, {"contact.restitution": [0.0, 0.1]})
     assert set(r) == set(DEFAULT_OUTPUTS) | {"status"}
     np.testing.assert_allclose(r["contact.impulse_magnitude"][1], 5946.847, rtol=2e-4)  # the seed chapter
 
 
+@pytest.mark.slow
 def test_zip_mode_monte_carlo(case):
     rng = np.random.default_rng(3)
     n = 37
@@ -264,6 +272,7 @@ def test_zip_mode_monte_carlo(case):
         sweep(case, {"vehicles[1].speed": [1.0, 2.0], "contact.friction": [0.1]}, mode="zip")
 
 
+@pytest.mark.slow
 def test_bad_rows_get_their_status_others_match(case):
     eps = np.linspace(0.0, 1.5, 7)  # 1.25 and 1.5 break the rule eps <= 1
     r = sweep(case, {"contact.restitution": eps}, outputs=OUTPUTS)
@@ -276,6 +285,7 @@ def test_bad_rows_get_their_status_others_match(case):
     assert_matches(r, case, [(k, {"contact.restitution": eps[k]}) for k in range(len(eps))])
 
 
+@pytest.mark.slow
 def test_negative_speeds_get_their_status_others_match(case):
     """A case file refuses a negative speed; a sampled one gets the status, NaN results, and the other
     rows are solved. (``solve_inputs`` of one point, as an automatic-contact sweep's rows are finished,
@@ -298,6 +308,7 @@ def test_negative_speeds_get_their_status_others_match(case):
     assert int(res.contact.status) == ks_jax.model.types.INVALID_MASS_1  # an exchange input's reason first
 
 
+@pytest.mark.slow
 def test_yaw_turns_the_course_where_the_case_gives_none(case):
     """Sweeping a yaw gives what solving the case file written with that yaw gives (its course
     defaults to the yaw, docs/model.md, "Inputs"); with a course in the file, only the body turns."""
@@ -321,6 +332,7 @@ def test_yaw_turns_the_course_where_the_case_gives_none(case):
     np.testing.assert_allclose(r2["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"], rtol=RTOL)
 
 
+@pytest.mark.slow
 def test_cg_height_moves_the_cg_where_the_case_gives_a_2d_position(case):
     """A 2-D position puts the CG at z = cg_height (docs/model.md, "Inputs"): sweeping cg_height gives what
     solving the file with that cg_height gives (the Saturn's CG 0.24 m lower than the centroid: a pitch
@@ -340,6 +352,7 @@ def test_cg_height_moves_the_cg_where_the_case_gives_a_2d_position(case):
     np.testing.assert_allclose(held["contact.impulse_magnitude"][:, 0], r["contact.impulse_magnitude"][1], rtol=RTOL)
 
 
+@pytest.mark.slow
 def test_ties_follow_the_case_as_it_is_and_paths_with_spaces(case):
     """A Case whose course (or CG height) was changed with ``set_input`` keeps that value when its yaw (or
     cg_height) is swept: the sweep at the case's own yaw is ``solve`` of that Case. A path spelled with
@@ -373,6 +386,7 @@ def test_automatic_parts_and_swept_outputs_are_refused(case):
         sweep(case, {"contact.point[0]": [0.0, 1.0]}, outputs=["contact.point[0]"])
 
 
+@pytest.mark.slow
 def test_index_range_and_reducing_callback(case):
     over = {"vehicles[1].speed": np.linspace(2, 20, 9), "contact.friction": np.linspace(0, 1, 6)}
     whole = sweep(case, over, outputs=["contact.energy_loss"])
@@ -425,6 +439,7 @@ print(json.dumps({k: [np.asarray(a[k]).tolist(), np.asarray(b[k]).tolist()] for 
 """
 
 
+@pytest.mark.slow
 def test_sharded_equals_unsharded(case):
     env = dict(os.environ, JAX_NUM_CPU_DEVICES="2", XLA_FLAGS="--xla_force_host_platform_device_count=2",
                JAX_PLATFORMS="cpu")
@@ -444,6 +459,7 @@ def test_sharded_equals_unsharded(case):
                                    atol=1e-13 * np.nanmax(np.abs(sharded), initial=0.0), err_msg=k)
 
 
+@pytest.mark.slow
 def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
     """progress=None: a bar on stderr once the sweep has run PROGRESS_DELAY seconds (any size: a million
     points with automatic contact run for 5-15 s), none before; progress=False: never."""
@@ -462,6 +478,7 @@ def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
     assert capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_a_product_of_inertia_keeps_the_tensor_symmetric():
     """Sweeping inertia[0][1] sets [1][0] too (a product of inertia is one number of a symmetric
     tensor): the rows are solved, and equal single solves of the case with both entries set."""
@@ -546,6 +563,7 @@ def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
                 np.testing.assert_allclose(w, v, rtol=0, atol=5e-5 * scale, err_msg=f"{label} {kind} {p}")
 
 
+@pytest.mark.slow
 def test_the_accelerator_path_counts_on_the_device(case):
     """On the accelerator's path (``backend.path``, forced here), each chunk's statuses and undefined values
     are counted on the device over the rows of the range alone; a sweep that keeps nothing copies no rows
