@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import units as U
 from ..case import CIRCULAR_OUTPUTS, input_kind, output_kind, parse_path
-from ..case.errors import CaseError
+from ..case.errors import CaseError, visible
 from ..model.types import STATUS_TEXT, status_text
 from ..report import angle_text
 from ..sweeps import check_kept
@@ -136,7 +136,7 @@ def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=No
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 5))
     shown_in = display_units(result, units, typed)
-    names = tuple(getattr(result, "names", ()))
+    names = tuple(visible(n) for n in getattr(result, "names", ()))
     values, status = np.asarray(result[output]), np.asarray(result["status"])
     categorical = output == "status" or values.dtype == bool
     if categorical:

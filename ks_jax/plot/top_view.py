@@ -39,7 +39,7 @@ import math
 import numpy as np
 
 from .. import units as U
-from ..case import impulse_exchanged
+from ..case import impulse_exchanged, visible, visible_lines
 from ..case.paths import canonical_path
 from ..solve import motion_paths
 from .text import wrap_to_width
@@ -169,13 +169,13 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 7))
     case, res = solution.case, solution.result
-    names = case.vehicle_names
+    names = [visible(n) for n in case.vehicle_names]  # a name's control characters drawn as their escapes
     solved = not (case.inputs is None or res is None or solution.status.startswith("invalid"))
     friction = ""
     if solved and solution.status != "no_contact" and bool(impulse_exchanged(res)):
         friction = ", sliding (|T| = mu N)" if bool(res.contact.sliding) else ", sticking (inside the cone)"
     width = ax.get_position().width * ax.figure.get_figwidth() * 72.0  # points
-    ax.set_title(wrap_to_width(f"{case.name}\nstatus: {solution.status}{friction}", width, TITLE_SIZE, indent=""),
+    ax.set_title(wrap_to_width(f"{visible_lines(case.name)}\nstatus: {solution.status}{friction}", width, TITLE_SIZE, indent=""),
                  fontsize=TITLE_SIZE)
     if not solved:
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
@@ -301,7 +301,7 @@ def _draw_motion_to_rest(ax, solution, moving):
     paths = motion_paths(solution)
     if paths is None:
         return
-    names, inputs = solution.case.vehicle_names, solution.case.inputs
+    names, inputs = [visible(n) for n in solution.case.vehicle_names], solution.case.inputs
     for i in range(moving):
         rest, path = solution.result.rest[i], paths[i]
         if rest is None or path is None:

@@ -1,9 +1,11 @@
 """The top view (ks_jax.plot): what is drawn is where the results and a hand calculation put it."""
 
+import dataclasses
 import io
 import json
 import math
 import re
+import warnings
 from contextlib import redirect_stdout
 from importlib import resources
 
@@ -16,15 +18,17 @@ import pytest  # noqa: E402
 
 pytest.importorskip("matplotlib")
 
+import matplotlib.text  # noqa: E402
 from matplotlib.colors import to_rgba  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Polygon, Wedge  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax import plot  # noqa: E402
-from ks_jax.plot.top_view import clip_polygon  # noqa: E402
+from ks_jax.plot.top_view import clip_polygon, top_view_figure  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
+from samples import SEED0  # noqa: E402
 
 FT2 = U.FT**2
 
@@ -255,3 +259,18 @@ def test_wrapped_lines_fit_the_width_as_drawn():
             drawn = fig.text(0, 0, line, fontsize=6.5).get_window_extent(fig.canvas.get_renderer())
             assert drawn.width <= width + 0.5, (line, drawn.width)
     assert wrap_to_width("a\nb", 100.0, 6.5) == "a\nb"
+
+
+def test_names_with_control_characters_are_drawn_as_their_escapes(tmp_path):
+    """A case and a vehicle named with an escape sequence and a direction override: the picture shows their
+    escapes (as the panel does), so that no glyph is missing and nothing is drawn reversed."""
+    case = ks_jax.load_case(SEED0)
+    bad = ("Crash \x1b[2J\u202eevil\u202c", "Saturn \x07")
+    case = dataclasses.replace(case, name=bad[0], vehicle_names=(bad[1], case.vehicle_names[1]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib warns of a glyph it cannot draw
+        fig = top_view_figure([ks_jax.solve(case)])
+        fig.canvas.draw()
+    texts = [t.get_text() for t in fig.findobj(matplotlib.text.Text)]
+    assert any("\\x1b[2J\\u202eevil\\u202c" in t for t in texts) and any("Saturn \\x07" in t for t in texts)
+    assert not any(c in t for t in texts for c in "\x1b\u202e\u202c\x07")
