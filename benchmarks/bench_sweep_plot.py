@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_sweep_plot.py [--tree DIR ...] [--rounds 3] [--n 1000]
 
-Runs `ks-jax sweep` on an n x n grid of seed chapter 001 (speed x restitution, the default outputs, written
+Runs `ks-jax sweep` on an n x n grid of the manual's Lucid-Kia crash, ks_jax/cases/seed_001_lucid_kia.toml (speed x restitution, the default outputs, written
 to .npz) without and with `--plot`, each in a fresh process, rounds interleaved, after one warm-up run per
 tree (so that every timed run loads its programs from the kept programs). Each `--tree` is a checkout of the
 project (default: this one), run with PYTHONPATH set to it: two trees compare two versions side by side

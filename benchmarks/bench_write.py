@@ -4,9 +4,9 @@
 
 Solves an n x n grid of the seed case (default outputs), then writes it to each format in turn,
 --repeats rounds, and prints every time and each file's size. A .csv is written twice: by pyarrow's CSV
-writer (what ``ResultWriter`` uses where pyarrow is installed) and by the csv module (what it uses without
-pyarrow; here ``ks_jax.sweeps.files._arrow_csv`` is made to return None), which is mostly Python's float
-formatting; the other two write the arrays as they are (.parquet needs pyarrow).
+writer (what ``ResultWriter`` uses where pyarrow is installed) and by ks-jax's own formatting (what it uses
+without pyarrow, byte for byte the same file; here ``ks_jax.sweeps.files._arrow_csv`` is made to return None),
+which is mostly Python's float formatting; the other two write the arrays as they are (.parquet needs pyarrow).
 """
 
 import argparse
@@ -35,10 +35,10 @@ def main():
     result = ks_jax.sweep(ks_jax.load_case(CASE), over, progress=False)
     times, sizes = {}, {}
     for _ in range(args.repeats):
-        for kind in (".csv (pyarrow)", ".csv (csv module)", ".npz", ".parquet"):
+        for kind in (".csv (pyarrow)", ".csv (no pyarrow)", ".npz", ".parquet"):
             out = Path(args.dir) / f"bench_write{kind.split()[0]}"
             arrow_csv = files_module._arrow_csv
-            if kind == ".csv (csv module)":
+            if kind == ".csv (no pyarrow)":
                 files_module._arrow_csv = lambda: None
             try:
                 t = time.perf_counter()

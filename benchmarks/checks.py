@@ -48,7 +48,7 @@ def check(name, ok, detail):
 
 
 def rows(n, seed=0):
-    """n rows around the seed chapter, every input varied by a few percent (inertia as (3, 3) tensors)."""
+    """n rows around the manual's crash, every input varied by a few percent (inertia as (3, 3) tensors)."""
     rng = np.random.default_rng(seed)
     v1, s1, v2, s2, c = to_pytrees(as_arrays(ks_jax.load_case(CASES / "seed_000_saturn_pontiac.json").inputs))
 

@@ -214,7 +214,7 @@ def _label(c, file, k=None):
 
 
 def _seed_label(case, file):
-    """A seed chapter's title and inputs, from its case file as written (the chapter's units)."""
+    """A manual chapter's title and inputs, from its case file as written (the chapter's units)."""
     raw = case.raw
     cars = ", ".join(f"{v['name']} {v.get('weight', v.get('mass'))} at {v['speed']}" for v in raw["vehicles"])
     k = raw["contact"]
@@ -369,7 +369,7 @@ INTRO = """\
 
 Every case below has a value known without ks-jax: a published panel or a closed form. Each table gives
 the case's inputs, that value, ks-jax's, their difference and the tolerance it is held to. The cases
-are case files (the seed chapters in `ks_jax/cases/`, the others in `docs/validation/`, bare numbers
+are case files (the two Virtual CRASH manual chapters in `ks_jax/cases/`, the others in `docs/validation/`, bare numbers
 in SI and angles in degrees), solved by `ks_jax.load_case` and `ks_jax.solve` in float64. The closed
 forms are computed in plain Python from the same files, apart from the library.
 

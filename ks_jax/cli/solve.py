@@ -1,5 +1,5 @@
-"""``ks-jax solve FILE`` (the auto-ees panel, or ``--json``) and ``ks-jax demo`` (the seed chapters beside
-the manual)."""
+"""``ks-jax solve FILE`` (the auto-ees panel, or ``--json``) and ``ks-jax demo`` (the two Virtual CRASH manual
+chapters beside the manual's values)."""
 
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def run_solve(args) -> int:
 
 
 def run_demo(args) -> int:
-    """``ks-jax demo``: both seed chapters solved from the case files shipped in the package."""
+    """``ks-jax demo``: both Virtual CRASH manual chapters solved from the case files shipped in the package."""
     print("ks-jax demo: the two Virtual CRASH manual chapters on Kudlich-Slibar impulse data,\n"
           "solved from the case files shipped in ks_jax/cases, beside the manual's panel values.\n")
     for name in DEMO_CASES:

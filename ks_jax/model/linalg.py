@@ -310,7 +310,7 @@ def safe_sqrt(x):
     may compute one expression in two fused loops and round it differently in each (where the
     compiler contracts a*b + c into one rounding in one loop only). x was then 0 in the test and not in
     the sqrt, or the other way round, and the result sqrt(1) = 1: a single-case ``ks_jax.solve`` gave
-    the seed chapter's inline crash 1.1 N s of tangential impulse instead of 0."""
+    the manual's inline crash (ks_jax/cases/seed_001_lucid_kia.toml) 1.1 N s of tangential impulse instead of 0."""
     tiny = jnp.finfo(jnp.result_type(x, float)).tiny
     return jnp.sqrt(jnp.maximum(x, tiny)) - math.sqrt(float(tiny))
 
