@@ -334,11 +334,21 @@ except (OSError, AttributeError):
     _TRIM = None
 
 
+# Within a file, its programs are freed after a test once the worker holds more than this: a file that solves many
+# kinds of case (tests/test_matrix.py: every shipped case through every command) would otherwise hold all their
+# programs at once.
+FREE_PROGRAMS_ABOVE = 1536 * 2**20
+
+
 @pytest.fixture(autouse=True)
 def _return_freed_memory():
     """XLA frees what a compile allocated, but the C library keeps it in this process: after each test it is
-    given back, so that a worker's memory is that of one test's programs, not the sum of all of them."""
+    given back, so that a worker's memory is that of one test's programs, not the sum of all of them. Above
+    ``FREE_PROGRAMS_ABOVE`` the test's programs are freed too (the run's compile cache keeps them on disk)."""
     yield
+    resident = _resident_bytes()
+    if resident is not None and resident > FREE_PROGRAMS_ABOVE:
+        jax.clear_caches()
     if _TRIM is not None:
         _TRIM(0)
 
