@@ -151,7 +151,7 @@ def save_posterior(result, path):
     samples = post.samples.reshape(-1, len(paths)) / scale
     estimate = np.array([result.estimate[p] for p in paths]) / scale
     return save_corner(path, samples, labels, estimate, np.asarray(result.covariance) / np.outer(scale, scale),
-                       title=f"{result.case_name}: posterior ({post.chains} chains x {post.draws} draws) and Laplace")
+                       title=f"{visible(result.case_name)}: posterior ({post.chains} chains x {post.draws} draws) and Laplace")
 
 
 def case_at_estimate(case, result):

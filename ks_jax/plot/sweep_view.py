@@ -259,7 +259,8 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
     shown_in = display_units(result, units, typed)
     constant = {p: constant_text(result, p, shown_in) for p in outputs if p in result.outputs}
     drawn = [p for p in outputs if constant.get(p) is None] or outputs
-    said = [f"{named(p, getattr(result, 'names', ()))} = {constant[p]}" for p in outputs if p not in drawn]
+    names = tuple(visible(n) for n in getattr(result, "names", ()))
+    said = [f"{named(p, names)} = {constant[p]}" for p in outputs if p not in drawn]
     over = "the points drawn" if any(k > 1 for k in result.strides) else "the sweep"
     if not result.strides:
         result = result.thinned()  # once for every panel
