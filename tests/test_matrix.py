@@ -77,7 +77,6 @@ def _cases(source):
 
 
 FITTED = [s for s in SOURCES if any("unknowns" in c.raw for c in _cases(s))]
-SWEPT = [(s, k) for s in SOURCES for k, c in enumerate(_cases(s)) if c.valid]
 
 
 def _table_names(text, heading):
@@ -140,11 +139,8 @@ def test_every_shipped_case_is_in_the_matrix():
     assert any(s.startswith("docs/") and s in FITTED for s in SOURCES)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("source", SOURCES)
-def test_solve(source, capsys, tmp_path):
-    path = case_file(source, tmp_path)
-    cases = load_cases(path)
+def check_solve(path, cases, capsys, tmp_path):
+    """solve: the panel, in either unit system alone, --json and --plot. Returns the JSON's cases."""
     what = f"ks-jax solve {path.name}"
     assert_clean(*run_cli(capsys, "solve", str(path)), what)
     for units in ("us", "si"):
@@ -162,13 +158,11 @@ def test_solve(source, capsys, tmp_path):
     png = tmp_path / "top.png"
     assert_clean(*run_cli(capsys, "solve", str(path), "--plot", str(png)), f"{what} --plot")
     assert png.stat().st_size > 0
+    return parse_cases(out, f"{what} --json", len(cases))
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("source", FITTED)
-def test_fit(source, capsys, tmp_path):
-    path = case_file(source, tmp_path)
-    cases = load_cases(path)
+def check_fit(path, cases, capsys, tmp_path):
+    """fit: the report, --json, --plot, --monte-carlo 20 and --posterior with a few draws."""
     what = f"ks-jax fit {path.name}"
     assert_clean(*run_cli(capsys, "fit", str(path)), what)
     code, out, err = run_cli(capsys, "fit", str(path), "--json")
@@ -211,11 +205,9 @@ def solved_value(obj, path):
     return float("nan") if value is None else float(value)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("source, k", SWEPT, ids=[f"{s}[{k}]" for s, k in SWEPT])
-def test_sweep(source, k, capsys, tmp_path):
-    path = case_file(source, tmp_path)
-    case = load_cases(path)[k]
+def check_sweep(path, k, case, solved, capsys, tmp_path):
+    """sweep of case ``k`` over its first vehicle's mass into each results format, with a picture; the point at
+    the case's own mass is ``solved`` (the case's object of ``solve --json``)."""
     what = f"ks-jax sweep {path.name} --case {k}"
     common = ["sweep", str(path), "--case", str(k), "--over", swept(case), "--no-progress"]
     for suffix, units in ((".csv", "us"), (".npz", "si"), (".parquet", "si")):
@@ -226,8 +218,6 @@ def test_sweep(source, k, capsys, tmp_path):
         assert out_file.stat().st_size > 0
     assert (tmp_path / "grid.png").stat().st_size > 0
     # the sweep's middle point is the case as it is: what `solve --json` gives for it
-    code, out, err = run_cli(capsys, "solve", str(path), "--json")
-    solved = parse_cases(out, f"ks-jax solve {path.name} --json", len(load_cases(path)))[k]
     table = np.load(tmp_path / "grid.npz")
     results = [c for c in table.files if c.startswith(("contact.", "vehicles["))]
     assert results, f"{what}: no results in the .npz"
@@ -238,3 +228,17 @@ def test_sweep(source, k, capsys, tmp_path):
         got = float(table[column][1])
         assert (math.isnan(got) and math.isnan(expected)) or abs(got - expected) <= 1e-9 * (1 + abs(expected)), \
             f"{what}: {column} at the case's own values is {got!r}, solve --json gives {expected!r}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source", SOURCES)
+def test_every_command(source, capsys, tmp_path):
+    """Every command on ``source``'s cases, one after the other, so that they share the case's programs."""
+    path = case_file(source, tmp_path)
+    cases = load_cases(path)
+    solved = check_solve(path, cases, capsys, tmp_path)
+    if source in FITTED:
+        check_fit(path, cases, capsys, tmp_path)
+    for k, case in enumerate(cases):
+        if case.valid:
+            check_sweep(path, k, case, solved[k], capsys, tmp_path)
