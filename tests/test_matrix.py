@@ -18,6 +18,7 @@ import re
 import tomllib
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 
@@ -230,8 +231,18 @@ def check_sweep(path, k, case, solved, capsys, tmp_path):
             f"{what}: {column} at the case's own values is {got!r}, solve --json gives {expected!r}"
 
 
+@pytest.fixture
+def one_source_at_a_time():
+    """A source's programs are freed once its commands have run: the sources are cases of every kind (motion
+    to rest, fixed objects, automatic contact, fits and their samplers), and a worker holding all their
+    programs at once would hold more memory than any other test file needs."""
+    yield
+    jax.clear_caches()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("source", SOURCES)
+@pytest.mark.usefixtures("one_source_at_a_time")
 def test_every_command(source, capsys, tmp_path):
     """Every command on ``source``'s cases, one after the other, so that they share the case's programs."""
     path = case_file(source, tmp_path)
