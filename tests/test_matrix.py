@@ -233,9 +233,11 @@ def check_sweep(path, k, case, solved, capsys, tmp_path):
 
 @pytest.fixture
 def one_source_at_a_time():
-    """A source's programs are freed once its commands have run: the sources are cases of every kind (motion
-    to rest, fixed objects, automatic contact, fits and their samplers), and a worker holding all their
-    programs at once would hold more memory than any other test file needs."""
+    """A source's commands run with no other programs held, and its programs are freed once they have run:
+    the sources are cases of every kind (motion to rest, fixed objects, automatic contact, fits and their
+    samplers), and one source's commands on top of the programs of a worker's earlier files, or of the other
+    sources, would hold more memory than any other test needs."""
+    jax.clear_caches()
     yield
     jax.clear_caches()
 
