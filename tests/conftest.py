@@ -356,7 +356,7 @@ def _return_freed_memory():
 # A worker keeps its compiled and traced programs from one test file to the next while it holds less than this:
 # the next file then runs the programs it shares with earlier ones (the conftest entry points, the library's
 # solve, ...) without tracing, lowering and loading them again. Above it, they are freed.
-KEEP_PROGRAMS_BELOW = 1024 * 2**20  # bytes of resident memory between two files
+KEEP_PROGRAMS_BELOW = 1280 * 2**20  # bytes of resident memory between two files (a worker peaked at ~2 GiB freeing every file)
 
 
 def _resident_bytes():
