@@ -131,8 +131,8 @@ class ResultWriter:
 
     .csv: one row per point: the swept inputs, the outputs, ``status``, ``status_text``; an invalid
     row's numbers are NaN and its flags (``contact.sliding``) empty (null in .parquet). One format
-    whether pyarrow writes it (where it is installed: several times faster) or the ``csv`` module's
-    path (``csv_texts``), byte for byte: the header unquoted (quoted only where RFC 4180 needs it),
+    whether pyarrow writes it (where it is installed: several times faster) or ks-jax formats it
+    (``csv_texts``), byte for byte: the header unquoted (quoted only where RFC 4180 needs it),
     each number as the shortest text that reads back as the same float (a float32 result as the
     shortest float32 text), in plain notation from 1e-6 to below 1e10 without a trailing ".0"
     (``1``, ``180``, ``0.00001``) and otherwise as ``1e-7``, ``1.5e+10``; ``nan``, ``inf``;
