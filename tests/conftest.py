@@ -384,9 +384,10 @@ def _free_compiled_programs():
 # The files that take longest (compiling is most of their time), handed to the test workers first: with
 # ``--dist loadfile`` a worker takes a whole file, and one of these started last would leave the other
 # worker idle for a minute at the end of the run.
-LONGEST_FIRST = ("test_notebooks.py", "sweeps/test_sweep.py", "fit/test_reconstruction.py", "batch/test_chunks.py",
-                 "model/test_automatic.py", "test_solve.py", "plot/test_sweep_view.py", "model/test_fixed.py",
-                 "fit/test_posterior.py", "batch/test_loss.py", "model/test_collision.py", "test_rest.py")
+LONGEST_FIRST = ("test_matrix.py", "test_notebooks.py", "fit/test_properties.py", "sweeps/test_sweep.py",
+                 "fit/test_reconstruction.py", "batch/test_chunks.py", "model/test_automatic.py", "test_solve.py",
+                 "plot/test_sweep_view.py", "model/test_fixed.py", "fit/test_posterior.py", "batch/test_loss.py",
+                 "model/test_collision.py", "test_rest.py")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -163,22 +163,23 @@ def check_solve(path, cases, capsys, tmp_path):
 
 
 def check_fit(path, cases, capsys, tmp_path):
-    """fit: the report, --json, --plot, --monte-carlo 20 and --posterior with a few draws."""
+    """fit: the report, --json, --plot, --monte-carlo 20 and --posterior with a few draws, in two runs as users
+    combine them (each run fits the case again, and a fit is most of a run's time): the report with the Monte
+    Carlo refits and the top view; the JSON with the posterior and its corner plot."""
     what = f"ks-jax fit {path.name}"
-    assert_clean(*run_cli(capsys, "fit", str(path)), what)
-    code, out, err = run_cli(capsys, "fit", str(path), "--json")
-    assert_clean(code, out, err, f"{what} --json")
+    png = tmp_path / "fit.png"
+    code, out, err = run_cli(capsys, "fit", str(path), "--monte-carlo", "20", "--plot", str(png))
+    assert_clean(code, out, err, f"{what} --monte-carlo 20 --plot")
+    assert "monte carlo" in out.lower(), f"{what} --monte-carlo 20: the report does not show the refits"
+    assert png.stat().st_size > 0
+    png = tmp_path / "post.png"
+    code, out, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json", "--plot", str(png))
+    assert_clean(code, out, err, f"{what} --posterior 6 --chains 2 --json --plot")
     for case, obj in zip(cases, parse_cases(out, f"{what} --json", len(cases))):
         assert obj["name"] == case.name
         assert_documented(obj, "fitted case", f"{what} --json, case '{case.name}'")
-    png = tmp_path / "fit.png"
-    assert_clean(*run_cli(capsys, "fit", str(path), "--plot", str(png)), f"{what} --plot")
-    assert png.stat().st_size > 0
-    assert_clean(*run_cli(capsys, "fit", str(path), "--monte-carlo", "20"), f"{what} --monte-carlo 20")
-    code, out, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json")
-    assert_clean(code, out, err, f"{what} --posterior 6 --chains 2 --json")
-    for case, obj in zip(cases, parse_cases(out, f"{what} --posterior", len(cases))):
         assert set(obj["posterior"]["unknowns"]) == set(obj["estimate"]), f"{what} --posterior: a summary per unknown"
+    assert png.stat().st_size > 0 and (tmp_path / "post_posterior.png").stat().st_size > 0
 
 
 def swept(case):
