@@ -37,6 +37,18 @@ FIT_SEED = CASES / "fit_seed_001.json"
 RECOVER = 1e-5
 LAPLACE_FD = 1e-5
 LAPLACE_FD_HESSIAN = 1e-3
+COPIES = 8  # a one-start fit as a batch of this many copies: the rows of one case's default 8 starts, one program
+
+@pytest.fixture
+def blocks_of_8(monkeypatch):
+    """Monte Carlo refits in calls of 8 rows, the program of one case's default 8 starts, not one of 500 rows of
+    their own (the blocks change no result:
+    ``test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing``)."""
+    from fit import rows as rc
+
+    monkeypatch.setattr(rc, "ROWS_PER_CALL", 8)
+    monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 8)
+
 
 @pytest.fixture(scope="module")
 def oblique():
@@ -181,7 +193,8 @@ def test_recovers_six_unknowns_of_sliding_oblique_cases(oblique):
 
 def _fd_residuals(case, us, ev):
     """The whitened residuals at many points of the physical unknowns, from ``ks_jax.solve``
-    (forward only, one batch) and NumPy: an independent path to the same numbers."""
+    (forward only, a case at a time: the one-case program that the ``oblique`` fixture's solves compiled, not
+    one of its own for a batch of them all) and NumPy: an independent path to the same numbers."""
 
     def f(xs):
         cases = []
@@ -190,7 +203,7 @@ def _fd_residuals(case, us, ev):
             for u, xi in zip(us, x):
                 inputs = set_input(inputs, u.path, xi)
             cases.append(dataclasses.replace(case, inputs=jax.tree_util.tree_map(np.asarray, inputs)))
-        sols = solve(cases, smoothing=1e-3)
+        sols = [solve(c, smoothing=1e-3) for c in cases]
         return np.array([[(float(get_output(s.result, e.path)) - e.value) / e.sigma for e in ev] for s in sols])
 
     return f
@@ -249,7 +262,7 @@ def test_seed_001_recovers_the_kias_speed():
 
 
 @pytest.mark.slow
-def test_seed_001_monte_carlo_agrees_with_laplace():
+def test_seed_001_monte_carlo_agrees_with_laplace(blocks_of_8):
     r = fit.reconstruct(load_case(FIT_SEED), monte_carlo=64, seed=3)
     mc = r.monte_carlo
     p5, p50, p95 = (mc["percentiles"][q]["vehicles[1].speed"] for q in ("5", "50", "95"))
@@ -266,14 +279,15 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
     calls of one row count (``rows_per_call``), the last call padded, so that both use one compiled program.
     Calls of 5 rows split cases between calls and pad the last: each result equals that of calls holding every
-    row of the fit (9, padded to 12) and of the refits (12), and the solver was compiled once for the fit and
-    its refits (twice before, one program per row count)."""
+    row of the fit (6, padded to 8) and of the refits (8), and the solver was compiled once for the fit and
+    its refits (twice before, one program per row count). (2 starts x 4 refits: calls of 8 rows, the program
+    of one case's default 8 starts, which the other fits of this case run.)"""
     from fit import rows as rc
 
     case = load_case(FIT_SEED)
-    kw = dict(starts=3, seed=4, monte_carlo=4)
+    kw = dict(starts=2, seed=3, monte_carlo=4)
     one_call = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc.rows_per_call(4 * 3) == 12
+    assert rc.rows_per_call(4 * 2) == 8
     monkeypatch.setattr(rc, "ROWS_PER_CALL", 5)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 5)
     programs = rc.solver_for(5)._cache_size()
@@ -286,7 +300,7 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     assert blocks[0].estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
 
 
-def test_monte_carlo_cut_off_by_a_bound_is_noted():
+def test_monte_carlo_cut_off_by_a_bound_is_noted(blocks_of_8):
     """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
     half of the standard error's +/- 1.645 sigma. The report says so and points to the percentiles."""
@@ -326,13 +340,18 @@ def test_monte_carlo_refits_draw_the_priors_means_again_as_they_draw_the_evidenc
 
 SEED_EVIDENCE = [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6.47 mph", "sigma": "0.3 mph"},
                  {"quantity": "vehicles[1].delta_v_magnitude", "value": "10.03 mph", "sigma": "0.3 mph"}]
+# the Lucid's mass, measured: an input no unknown changes (a constant in chi^2); with it, the fits of the speed and
+# restitution share one compiled program
+MASS_EVIDENCE = [{"quantity": "vehicles[0].mass", "value": "155.75 slug", "sigma": "1 slug"}]
 
 
 @pytest.mark.slow
 def test_seed_001_restitution_and_speed_are_not_both_determined():
+    """The delta-Vs (and the Lucid's mass, which no unknown moves) cannot fix both the Kia's speed and the
+    restitution: the fit says so, gives neither a standard error, and reproduces the closing speed x (1 + e)."""
     case = load_case(SEED)
     r = fit.reconstruct(case, {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"]},
-                               "contact.restitution": {"bounds": [0, 0.5]}}, SEED_EVIDENCE)
+                               "contact.restitution": {"bounds": [0, 0.5]}}, SEED_EVIDENCE + MASS_EVIDENCE)
     assert len(r.unidentified) == 1
     words = r.unidentified[0]
     assert "vehicles[1].speed" in words and "contact.restitution" in words and "not determined" in words
@@ -390,14 +409,22 @@ def test_bad_unknowns_and_evidence_are_refused(unknowns, evidence, words):
         fit.reconstruct(load_case(SEED), unknowns, evidence)
 
 
+@jax.jit
+def _to_x_and_wrap(z, lo, hi, d):
+    """``to_x`` of z within (lo, hi), ``to_x`` of z = 40 within [0, 1], and ``wrap`` of the angle differences d to
+    a period of 360, in one program (op by op, each operation compiles a program of its own)."""
+    return to_x(z, lo, hi), to_x(jnp.array([40.0]), jnp.array([0.0]), jnp.array([1.0]))[0], wrap(d, 360.0)
+
+
 def test_transforms_and_angle_wrap():
     lo = jnp.array([0.0, -1.0, -jnp.inf, -jnp.inf])
     hi = jnp.array([10.0, jnp.inf, 2.0, jnp.inf])
     x = np.array([9.999, 3.0, -5.0, 7.0])
-    np.testing.assert_allclose(to_x(jnp.asarray(to_z(x, lo, hi)), lo, hi), x, rtol=1e-12)
-    assert float(to_x(jnp.array([40.0]), jnp.array([0.0]), jnp.array([1.0]))[0]) <= 1.0
-    assert float(wrap(jnp.asarray(359.0 - 1.0), 360.0)) == pytest.approx(-2.0)
-    assert float(wrap(jnp.asarray(1.0 - 359.0), 360.0)) == pytest.approx(2.0)
+    back, edge, wrapped = _to_x_and_wrap(jnp.asarray(to_z(x, lo, hi)), lo, hi, jnp.array([359.0 - 1.0, 1.0 - 359.0]))
+    np.testing.assert_allclose(back, x, rtol=1e-12)
+    assert float(edge) <= 1.0
+    assert float(wrapped[0]) == pytest.approx(-2.0)
+    assert float(wrapped[1]) == pytest.approx(2.0)
 
 
 def test_cli_fit_json_and_text(capsys, tmp_path):
@@ -434,7 +461,8 @@ def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsy
     """EES evidence where both crushes are 0 (the centroid 3 ft above both boxes: docs/model.md, "Results"
     leaves EES undefined there): no start can be evaluated. That case is reported "not fitted", naming
     the evidence, with NaN numbers and no blame on the evidence's information; the other case of the
-    batch is fitted; the command exits 1."""
+    batch is fitted; the command exits 1. (The batch takes 4 starts a case: 8 rows, the program of the
+    command's fits, one case of 8 starts each.)"""
     from ks_jax.cli import main
 
     evidence = SEED_EVIDENCE + [{"quantity": "vehicles[0].ees", "value": "8.6 mph", "sigma": "1 mph"}]
@@ -444,7 +472,7 @@ def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsy
     above = case_from_dict(raw)
     assert math.isnan(float(solve(above).result.vehicles[0].ees))  # the model's own answer there
     unknowns = {"vehicles[1].speed": {"bounds": ["0 mph", "40 mph"]}}
-    bad, fitted = fit.reconstruct_batch([above, good], [unknowns] * 2, [evidence] * 2)
+    bad, fitted = fit.reconstruct_batch([above, good], [unknowns] * 2, [evidence] * 2, starts=4)
     assert bad.status.startswith("invalid: vehicles[0].ees cannot be computed (NaN) at any start")
     assert "both crushes are 0" in bad.status and bad.unidentified == [] and not bad.converged
     assert all(math.isnan(v) for d in (bad.estimate, bad.std, bad.fitted, bad.residuals) for v in d.values())
@@ -542,7 +570,7 @@ def test_missing_bounds_are_the_inputs_own_limits_and_reports_read_plainly():
     iterations; evidence on an input no unknown changes is pointed out."""
     case = load_case(SEED)
     r = fit.reconstruct(case, {"vehicles[1].speed": {}, "contact.restitution": {"prior": {"mean": 0.1, "sigma": 0.05}}},
-                        SEED_EVIDENCE + [{"quantity": "vehicles[0].mass", "value": "155.75 slug", "sigma": "1 slug"}])
+                        SEED_EVIDENCE + MASS_EVIDENCE)
     (speed, eps) = r.unknowns
     assert (speed.lower, speed.upper, eps.lower, eps.upper) == (0.0, math.inf, -1.0, 1.0)
     assert r.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.5)
@@ -567,12 +595,16 @@ def test_a_fit_that_never_reaches_a_collision_says_so():
     separate, no unknown moves the evidence there, and the solver's gradient test passes trivially. That
     start is not converged, nothing is called undetermined by the evidence, and the sentence says why; by
     default the fit then draws more starts, which reach 20 mph. With an open upper bound and the case's 0 mph,
-    the default starts spread 10 m/s and reach 20 mph."""
+    the default starts spread 10 m/s and reach 20 mph.
+
+    The one-start fits are fitted as a batch of ``COPIES`` copies of the case (a row each, every further round
+    too), so that they run the program compiled for one case's default 8 starts; the first copy is checked."""
     case = load_case(FIT_SEED)
     slow = {"vehicles[1].speed": {"bounds": ["0 mph", "60 mph"], "start": "3 mph"}}
-    r = fit.reconstruct(case, slow, starts=1, max_starts=1)
+    r = fit.reconstruct_batch([case] * COPIES, [slow] * COPIES, starts=1, max_starts=1)[0]
     assert r.status == "separating" and not r.converged and r.starts_converged == 0
-    again = fit.reconstruct(case, slow, starts=1)  # by default, more starts until two reach the best fit
+    # by default, more starts until two reach the best fit
+    again = fit.reconstruct_batch([case] * COPIES, [slow] * COPIES, starts=1)[0]
     assert again.status == "ok" and again.starts > 1 and again.starts_at_best >= 2
     assert again.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.1)
     (words,) = r.unidentified
@@ -627,8 +659,8 @@ def test_friction_just_below_sticking_is_bounded_below_only():
     """An oblique crash whose contact sticks (friction 0.247; sticking needs 0.034), evidence with noise:
     the best fit slides with friction 0.029 +/- 0.007, yet from 0.039 on the contact would stick and every
     friction above gives the same exchange. So friction is bounded below only (no standard error, not
-    the 31 sigma miss of the truth that +/- 0.007 implied); checked against a refit with friction fixed at
-    the truth, whose chi^2 is within 1 of the best."""
+    the 31 sigma miss of the truth that +/- 0.007 implied); checked against a refit with friction held at
+    the truth (bounds 1e-9 of it wide), whose chi^2 is within 1 of the best."""
     rng = np.random.default_rng(3)
     d = oblique_case(rng)
     case = case_from_dict(d)
@@ -643,9 +675,11 @@ def test_friction_just_below_sticking_is_bounded_below_only():
     assert "bounded below only: the contact slides at the estimate" in words and math.isinf(r.std["contact.friction"])
     threshold = float(re.search(r"but from ([0-9.]+)", words).group(1))
     assert mu < threshold < 0.1 and "contact.friction" in r.not_determined
-    fixed = dict(d, contact=dict(d["contact"], friction=d["contact"]["friction"]))
-    r_true = fit.reconstruct(case_from_dict(fixed), {p: {"bounds": bounds[p]} for p in UNKNOWNS
-                                                     if p != "contact.friction"}, evidence)
+    # the friction held at the truth by bounds 1e-9 of it wide (the same unknowns: the same compiled program)
+    mu_true = d["contact"]["friction"]
+    held = dict(bounds, **{"contact.friction": [mu_true * (1 - 1e-9), mu_true * (1 + 1e-9)]})
+    r_true = fit.reconstruct(case, {p: {"bounds": held[p]} for p in UNKNOWNS}, evidence)
+    assert r_true.estimate["contact.friction"] == pytest.approx(mu_true, rel=1e-9)
     assert r_true.chi2 - r.chi2 < 1.0
 
 
