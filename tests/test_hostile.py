@@ -37,7 +37,7 @@ import fit.problem
 import ks_jax
 from fit.synthetic import oblique_case
 from ks_jax import units as U
-from ks_jax.case import CaseError, case_from_dict, load_cases
+from ks_jax.case import CaseError, case_from_dict, get_input, load_cases
 from ks_jax.case import load as load_module
 from ks_jax.sweeps.files import ResultWriter
 from samples import CASES, SEED0, SEED1, read_table, run_cli
@@ -231,10 +231,13 @@ def test_pictures_of_a_fit_and_a_sweep_draw_names_as_their_escapes(tmp_path, cap
     path = written(tmp_path, "named.json", d)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
-        code, _, err = run_cli(capsys, "fit", str(path), "--starts", "1", "--max-starts", "1", "--posterior", "2",
-                               "--chains", "2", "--plot", str(tmp_path / "fit.png"))
+        # the commands and values of tests/test_matrix.py on the same case: the programs it compiled are loaded
+        code, _, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json",
+                               "--plot", str(tmp_path / "fit.png"))
         assert code in (0, 1) and "Traceback" not in err
-        code, _, err = run_cli(capsys, "sweep", str(path), "--over", "vehicles[1].speed=15mph:25mph:3", "--out",
+        mass = float(np.asarray(get_input(ks_jax.load_case(path).inputs, "vehicles[0].mass")))
+        code, _, err = run_cli(capsys, "sweep", str(path), "--case", "0", "--over",
+                               f"vehicles[0].mass={0.9 * mass!r}kg,{mass!r}kg,{1.1 * mass!r}kg", "--out",
                                str(tmp_path / "s.csv"), "--plot", str(tmp_path / "s.png"), "--no-progress")
         assert code == 0, err
     assert all((tmp_path / f).stat().st_size > 0 for f in ("fit.png", "fit_posterior.png", "s.png"))
