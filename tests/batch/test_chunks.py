@@ -19,6 +19,20 @@ from samples import assert_same_leaves, reference_jit, with_bad_rows
 
 CHUNKS = importlib.import_module("ks_jax.batch.chunks")
 
+# ``jax.vmap(exchange)`` jitted once for the file (one compile per batch shape and dtype; the trace, and so
+# whether it runs in chunks, is the one made under the test's CHUNK_ROWS)
+BATCH = reference_jit(jax.vmap(ks_jax.exchange))
+
+
+def _first(tree):
+    """Row 0 of every leaf, inside a traced function."""
+    return jax.tree_util.tree_map(lambda x: x[0], tree)
+
+
+def _rows(tree, rows):
+    """Rows of every leaf, sliced in NumPy (no program compiled for the slice)."""
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[rows], tree)
+
 
 @pytest.fixture
 def small_chunks(monkeypatch):
@@ -33,9 +47,8 @@ def small_chunks(monkeypatch):
 def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
     cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
-    fn = jax.jit(jax.vmap(ks_jax.exchange))
-    assert "scan" in str(jax.make_jaxpr(fn)(*args))  # the loop over chunks, not the whole-batch program
-    batched = fn(*args)
+    assert "scan" in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*args))  # the loop over chunks, not the whole-batch program
+    batched = BATCH(*args)
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
     stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
     assert_same_leaves(batched, stacked)
@@ -55,12 +68,11 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, ran
     """Both vehicles the same in every row (unbatched), a smooth cone: the rows of the last chunk, which starts
     at row 66 so as to end at row 130, equal the whole-batch program of those 64 rows."""
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:130])
-    first = jax.tree_util.tree_map(lambda x: x[0], (v1, v2))
-    fn = jax.jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
+    first = _rows((v1, v2), 0)
+    fn = reference_jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
     batched = fn(s1, s2, c)
     for rows in (slice(0, 64), slice(66, 130)):  # one chunk: the whole-batch program
-        assert_same_leaves(jax.tree_util.tree_map(lambda x: x[rows], batched),
-                     fn(*jax.tree_util.tree_map(lambda x: x[rows], (s1, s2, c))))
+        assert_same_leaves(_rows(batched, rows), fn(*_rows((s1, s2, c), rows)))
 
 
 @pytest.mark.slow
@@ -71,7 +83,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
     exchange, vmapped; tests/model/test_gradients.py checks those against central differences)."""
     cases = with_bad_rows(random_cases["full"][:150])
     v1, s1, v2, s2, c = kit.inputs(cases)
-    shared = jax.tree_util.tree_map(lambda x: x[0], v2)
+    shared = _rows(v2, 0)
 
     def row_loss(v2, v1, s1, s2, c):
         r = ks_jax.exchange(v1, s1, v2, s2, c)
@@ -82,21 +94,23 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
         return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, v1, s1, s2, c))
 
     assert "scan[" in str(jax.make_jaxpr(loss)(shared, s1, c))  # the forward's loop over chunks
-    grads = reference_jit(jax.grad(loss, argnums=(0, 1, 2)))(shared, s1, c)
-    per_row = reference_jit(jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0)))(
-        shared, v1, s1, s2, c)
+    direction = np.zeros_like(np.asarray(s1.velocity))  # vehicle 1's speed in every row at once
+    direction[:, 0] = 1.0
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, s1)
+
+    def checks(shared, s1, c, tangent):
+        """One program (one compile): reverse and forward mode through the batch, and the per-row gradients."""
+        return (jax.grad(loss, argnums=(0, 1, 2))(shared, s1, c),
+                jax.vmap(jax.grad(row_loss, argnums=(0, 2, 4)), in_axes=(None, 0, 0, 0, 0))(shared, v1, s1, s2, c),
+                jax.jvp(lambda x: loss(shared, x, c), (s1,), (tangent,))[1])  # forward mode (a fit uses jax.jacfwd)
+
+    grads, per_row, along = reference_jit(checks)(shared, s1, c, zeros._replace(velocity=jnp.asarray(direction)))
     reference = (jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[0]), *per_row[1:])
     for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-10)
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(grads))
     for bad in (63, 100):
         assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves(grads[1:]))
-
-    direction = np.zeros_like(np.asarray(s1.velocity))  # vehicle 1's speed in every row at once
-    direction[:, 0] = 1.0
-    zeros = jax.tree_util.tree_map(jnp.zeros_like, s1)
-    _, along = reference_jit(lambda s, t: jax.jvp(lambda x: loss(shared, x, c), (s,), (t,)))(
-        s1, zeros._replace(velocity=jnp.asarray(direction)))  # forward mode (a fit uses jax.jacfwd)
     np.testing.assert_allclose(float(along), float(np.sum(np.asarray(per_row[1].velocity) * direction)), rtol=1e-10)
 
 
@@ -117,16 +131,18 @@ def test_a_batch_of_one_row_is_the_row(kit, random_cases):
     def loss(v2, s1, c, v1, s2):  # one row, batched
         return jnp.sum(jax.vmap(row_loss, in_axes=(None, 0, 0, 0, 0))(v2, s1, c, v1, s2))
 
-    batch = jax.jit(jax.vmap(ks_jax.exchange))
-    grad_batch, grad_row = reference_jit(jax.grad(loss, argnums=(0, 1, 2))), reference_jit(jax.grad(row_loss, argnums=(0, 1, 2)))
+    def checks(v1, s1, v2, s2, c):
+        """One program (one compile): the batch's values, its gradient with vehicle 2 shared, and the row's."""
+        shared, row = _first(v2), _first((v1, s1, v2, s2, c))
+        return (jax.vmap(ks_jax.exchange)(v1, s1, v2, s2, c), jax.grad(loss, argnums=(0, 1, 2))(shared, s1, c, v1, s2),
+                jax.grad(row_loss, argnums=(0, 1, 2))(shared, row[1], row[4], row[0], row[3]))
+
+    program = reference_jit(checks)
     for case in (good, bad):
         v1, s1, v2, s2, c = kit.inputs([case])
-        shared = jax.tree_util.tree_map(lambda x: x[0], v2)
-        row = jax.tree_util.tree_map(lambda x: x[0], (v1, s1, v2, s2, c))
-        assert_same_leaves(batch(v1, s1, v2, s2, c), jax.tree_util.tree_map(lambda x: np.asarray(x)[None],
-                                                                      kit.exchange(*row)))
-        grads = grad_batch(shared, s1, c, v1, s2)
-        reference = grad_row(shared, row[1], row[4], row[0], row[3])
+        shared, row = _rows(v2, 0), _rows((v1, s1, v2, s2, c), 0)
+        batched, grads, reference = program(v1, s1, v2, s2, c)
+        assert_same_leaves(batched, jax.tree_util.tree_map(lambda x: np.asarray(x)[None], kit.exchange(*row)))
         # to rounding: a batch's JVP is jax.vmap's of the row's. Rounding in the loss's units: each derivative
         # times its input (at least 1 SI unit), against the sum of them all
         triples = [(np.asarray(a), np.reshape(np.asarray(b), np.shape(a)), np.maximum(np.abs(np.reshape(x, np.shape(a))), 1))
@@ -149,12 +165,12 @@ def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chu
         return jnp.sum(jnp.where(r.contact.status == 0, r.vehicles[0].delta_v_magnitude ** 2
                                  + r.vehicles[1].speed_after, 0.0))
 
-    p = jnp.array([1.0, 0.9])
-    hessian = np.asarray(reference_jit(jax.hessian(loss))(p))
-    grad, h = reference_jit(jax.grad(loss)), 1e-6
+    p, h = jnp.array([1.0, 0.9]), 1e-6
+    program = reference_jit(lambda p: (jax.hessian(loss)(p), jax.grad(loss)(p)))  # one compile for both
+    hessian = np.asarray(program(p)[0])
     for k in range(2):
         step = h * np.eye(2)[k]
-        column = (np.asarray(grad(p + step)) - np.asarray(grad(p - step))) / (2 * h)
+        column = (np.asarray(program(p + step)[1]) - np.asarray(program(p - step)[1])) / (2 * h)
         np.testing.assert_allclose(hessian[:, k], column, rtol=1e-5, atol=1e-6 * np.abs(hessian).max())
     assert abs(float(hessian[0, 1])) > 1.0  # the two parameters interact
 
@@ -166,7 +182,7 @@ def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
     invalid rows once did). Values against the float64 reference at float32 tolerance."""
     cases = random_cases["full"][:100]
     args = kit.inputs(cases, np.float32)
-    for result in (jax.jit(jax.vmap(ks_jax.exchange))(*args), ks_jax.exchange_batch(*args, chunk=64)):
+    for result in (BATCH(*args), ks_jax.exchange_batch(*args, chunk=64)):
         floats = [x for x in jax.tree_util.tree_leaves(result) if np.asarray(x).dtype.kind == "f"]
         assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
         kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.rtol_float32, cases)
