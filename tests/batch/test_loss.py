@@ -34,17 +34,22 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64)
     target = jnp.asarray(4.0)
 
+    def plain(*a):
+        return jnp.sum(jax.vmap(_evidence_row_loss, in_axes=axes)(*a))
+
+    def checks(*a):
+        """In one program (one compile): the chunked value and gradients, and their references: the jitted
+        ``loss`` (the custom JVP's forward), the plain sum and the per-row gradients, each its own computation."""
+        return (jax.value_and_grad(loss, argnums=(1, 2, 4, 5))(*a), loss(*a), plain(*a),
+                jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes)(*a))
+
     with backend.path("cpu"):  # the chunks fenced apart (on any device)
-        traced = reference_jit(jax.value_and_grad(loss, argnums=(1, 2, 4, 5))).trace(v1, s1, shared, s2, c, target)
+        traced = reference_jit(checks).trace(v1, s1, shared, s2, c, target)
     assert "cond[" in str(traced.jaxpr)
-    value, grads = traced.lower().compile()(v1, s1, shared, s2, c, target)
-    plain_jit = reference_jit(lambda *a: jnp.sum(jax.vmap(_evidence_row_loss, in_axes=axes)(*a)))
-    plain = plain_jit(v1, s1, shared, s2, c, target)
-    np.testing.assert_allclose(float(value), float(plain), rtol=1e-13)
-    loss_jit = jax.jit(loss)
-    np.testing.assert_allclose(float(loss_jit(v1, s1, shared, s2, c, target)), float(plain), rtol=1e-13)
-    per_row = reference_jit(jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes))(
-        v1, s1, shared, s2, c, target)
+    program = traced.lower().compile()
+    (value, grads), jitted, plain_value, per_row = program(v1, s1, shared, s2, c, target)
+    np.testing.assert_allclose(float(value), float(plain_value), rtol=1e-13)
+    np.testing.assert_allclose(float(jitted), float(plain_value), rtol=1e-13)
     reference = (per_row[0], jax.tree_util.tree_map(lambda x: np.sum(np.asarray(x), 0), per_row[1]), per_row[2],
                  np.sum(np.asarray(per_row[3])))
     for a, b in zip(jax.tree_util.tree_leaves(grads), jax.tree_util.tree_leaves(reference)):
@@ -53,7 +58,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
     for bad in (63, 100):
         assert all(np.all(np.asarray(x)[bad] == 0) for x in jax.tree_util.tree_leaves((grads[0], grads[2])))
     h = 1e-6
-    fd = (plain_jit(v1, s1, shared, s2, c, target + h) - plain_jit(v1, s1, shared, s2, c, target - h)) / (2 * h)
+    fd = (program(v1, s1, shared, s2, c, target + h)[2] - program(v1, s1, shared, s2, c, target - h)[2]) / (2 * h)
     np.testing.assert_allclose(float(grads[3]), float(fd), rtol=1e-6)
 
 
@@ -71,9 +76,15 @@ def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
         return jnp.sum(jax.vmap(_evidence_row_loss, in_axes=(0, 0, 0, 0, 0, None))(*args))
 
     p, e, h = jnp.array([1.0, 0.9]), np.eye(2), 1e-6
-    jvp = reference_jit(lambda p, t: jax.jvp(lambda q: scaled(q, loss), (p,), (t,))[1])
-    plain_jit = reference_jit(lambda q: scaled(q, plain))
-    fd = (plain_jit(p + h * e[0]) - plain_jit(p - h * e[0])) / (2 * h)
+
+    def checks(p, t):
+        """One program (one compile) for the plain sum and the chunked sum's derivative along t (the Hessian, whose
+        run costs more, is a program of its own)."""
+        return scaled(p, plain), jax.jvp(lambda q: scaled(q, loss), (p,), (t,))[1]
+
+    program = reference_jit(checks)
+    plain_value, jvp = (lambda p, t: program(p, t)[0]), (lambda p, t: program(p, t)[1])
+    fd = (plain_value(p + h * e[0], e[0]) - plain_value(p - h * e[0], e[0])) / (2 * h)
     np.testing.assert_allclose(float(jvp(p, e[0])), float(fd), rtol=1e-6)
     hessian = np.asarray(reference_jit(jax.hessian(lambda q: scaled(q, loss)))(p))
     for j in range(2):
@@ -93,7 +104,8 @@ def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
     with pytest.raises(ValueError, match=r"in_axes = \(0, None\) has 2 entries for 6 arguments"):
         ks_jax.sum_over_rows(_evidence_row_loss, in_axes=(0, None))(*args, 3.0)
     with pytest.raises(TypeError, match=r"fn returns shape \(3,\) per row; it must return a scalar"):
-        ks_jax.sum_over_rows(lambda *a: ks_jax.exchange(*a).vehicles[0].delta_v)(*args)
+        # traced, not run: the shape check is made while tracing (eagerly, each operation would compile)
+        jax.eval_shape(ks_jax.sum_over_rows(lambda *a: ks_jax.exchange(*a).vehicles[0].delta_v), *args)
 
 
 def test_sum_over_rows_forward_mode_with_a_python_number():
