@@ -71,7 +71,7 @@ def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_c
 def test_exchange_batch_writes_into_out(kit, random_cases):
     """``out``: the results of another batch of the same size are overwritten in place (chunks of 16
     over 40 rows, the last one aligned to the end) and equal a fresh call; a wrong ``out`` is refused,
-    naming the field."""
+    naming the field (every call in chunks of 16: one program)."""
     a, b = (kit.inputs(random_cases["principal"][k:k + 40]) for k in (0, 40))
     fresh = ks_jax.exchange_batch(*a, chunk=16)
     out = ks_jax.exchange_batch(*b, chunk=16)
@@ -82,15 +82,15 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
     assert any(not np.array_equal(x, y) for x, y in zip(before, jax.tree_util.tree_leaves(got)) if x.dtype.kind == "f")
     wrong = out._replace(vehicles=(out.vehicles[0]._replace(pdof=np.zeros(39)), out.vehicles[1]))
     with pytest.raises(ValueError, match=r"out\.vehicles\[0\]\.pdof = ndarray float64\[39\].*float64\[40\]"):
-        ks_jax.exchange_batch(*a, out=wrong)
+        ks_jax.exchange_batch(*a, chunk=16, out=wrong)
     frozen = [np.copy(x) for x in jax.tree_util.tree_leaves(out)]
     frozen[0].flags.writeable = False
     with pytest.raises(ValueError, match="writeable"):
-        ks_jax.exchange_batch(*a, out=jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(out), frozen))
+        ks_jax.exchange_batch(*a, chunk=16, out=jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(out), frozen))
     numpy_inputs = jax.tree_util.tree_map(np.array, a)
     aliased = out._replace(contact=out.contact._replace(energy_loss=numpy_inputs[4].friction))
     with pytest.raises(ValueError, match="out.contact.energy_loss shares memory with an input"):
-        ks_jax.exchange_batch(*numpy_inputs, out=aliased)
+        ks_jax.exchange_batch(*numpy_inputs, chunk=16, out=aliased)
 
 
 @pytest.mark.slow
