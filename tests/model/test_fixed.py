@@ -40,7 +40,9 @@ def wall_case(name="wall", point=None, normal=180.0, e=0.2, mu=0.5, car=None, wa
 
 
 def solve_all(dicts):
-    return ks_jax.solve([case_from_dict(d) for d in dicts])
+    """``ks_jax.solve`` of each case alone: ks_jax.solve compiles a program per contact mode and number of rows,
+    and one row is what the command line solves (``test_full_frontal_into_a_wall_is_the_hand_calculation``)."""
+    return [ks_jax.solve(case_from_dict(d)) for d in dicts]
 
 
 def test_full_frontal_into_a_wall_is_the_hand_calculation(tmp_path, capsys):
@@ -149,7 +151,7 @@ def test_first_contact_with_each_object_by_hand():
     cases = [wall_case(),
              dict(wall_case(), fixed={"kind": "pole", "position": [3.15, 0.4], "diameter": 0.3}),
              dict(wall_case(), fixed=barrier)]
-    wall, pole, box = solve_all(cases)
+    wall, pole, box = ks_jax.solve([case_from_dict(d) for d in cases])  # as a file: the example file's programs
     for sol, t, face in ((wall, 1 / V, 3.0), (pole, 1 / V, 3.0), (box, 2 / V, 4.0)):
         c = sol.result.contact
         assert sol.status == "ok"
