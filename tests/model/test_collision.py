@@ -455,7 +455,13 @@ def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
     args = kit.inputs(random_cases["principal"][5])
     with pytest.raises(ValueError, match=r"smoothing must be in \[0, 1\)"):
         ks_jax.exchange(*args, smoothing=1.5)
-    f = jax.jit(lambda tau: ks_jax.exchange(*args, smoothing=tau))
+    # the test kit's jitted batch, whose smoothing is a traced argument (the program ``random_results`` compiled
+    # for principal moments), over the one row
+    row = kit.inputs([random_cases["principal"][5]])
+
+    def f(tau):
+        return jax.tree_util.tree_map(lambda x: x[0], kit.batch_exchange(row, tau))
+
     for tau in (2.0, -0.1, float("nan"), 1.0):
         res = f(tau)
         assert int(res.contact.status) == t.INVALID_SMOOTHING, tau
