@@ -370,8 +370,13 @@ def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
         res = ks_jax.exchange(v1, s1, v2, s2._replace(velocity=vel), c._replace(point=point), smoothing=TAU)
         return kit.output_vector(res)
 
-    jac_v, jac_p = reference_jit(jax.jacfwd(outputs, argnums=(0, 1)))(s2.velocity, c.point)
-    f = reference_jit(outputs)
+    # one program (one compile) for the Jacobian and the values of the differences
+    program = reference_jit(lambda vel, point: (jax.jacfwd(outputs, argnums=(0, 1))(vel, point), outputs(vel, point)))
+    jac_v, jac_p = program(s2.velocity, c.point)[0]
+
+    def f(vel, point):
+        return program(vel, point)[1]
+
     for k, (x, jac) in enumerate(((s2.velocity, jac_v), (c.point, jac_p))):
         for i in range(3):
             h = H_REL * max(1.0, abs(float(x[i])))
@@ -400,12 +405,16 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
         return jnp.stack([r.vehicles[0].pdof, r.vehicles[1].pdof, r.contact.impulse_azimuth, r.vehicles[0].course_after])
 
     h = 1e-6
-    values = reference_jit(angles)
+    program = reference_jit(lambda vy: (angles(vy), jax.jacrev(angles)(vy)))  # one compile for both
+
+    def values(vy):
+        return program(vy)[0]
+
     at, up, down = (np.asarray(values(vy)) for vy in (0.0, h, -h))
     assert at[1] == 0.0 and at[2] == 180.0
     assert sorted([up[1], down[1]]) == [pytest.approx(0.0, abs=1e-3), pytest.approx(360.0, abs=1e-3)]
     fd = ((up - down + 180.0) % 360.0 - 180.0) / (2 * h)
-    ad = np.asarray(reference_jit(jax.jacrev(angles))(0.0))
+    ad = np.asarray(program(0.0)[1])
     for name, a, f in zip(names, ad, fd):
         assert abs(f) > 1.0, name  # the angle does turn
         np.testing.assert_allclose(a, f, rtol=1e-6, err_msg=name)
