@@ -32,13 +32,21 @@ def _start(vx, vy=0.0, r=0.0, yaw=0.0):
 
 
 def _batch(items):
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x, float) for x in xs]), *items)
+    """Stacked in NumPy (a jnp.stack of each number of rows would compile a program of its own)."""
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x, float) for x in xs]), *items)
+
+
+ROWS = 4  # every batch of ``_rest_many`` padded to this many rows: one program per settings, whatever the cases
 
 
 def _rest_many(chassis, wheels, friction, starts, dt=M.TIME_STEP, limit=M.TIME_LIMIT, reverse=False):
-    """``to_rest`` of each row of (chassis, wheels, friction, start), in one vmapped program per settings."""
-    args = _batch(chassis), _batch(wheels), jnp.asarray(friction, float), _batch(starts)
-    return _compiled(dt, limit, reverse)(*args)
+    """``to_rest`` of each row of (chassis, wheels, friction, start), in one vmapped program per settings (the
+    rows padded to ``ROWS`` by repeating the first), as NumPy arrays of the given rows."""
+    n = len(starts)
+    assert n <= ROWS
+    pad = lambda items: list(items) + [items[0]] * (ROWS - n)  # noqa: E731
+    args = _batch(pad(chassis)), _batch(pad(wheels)), np.asarray(pad(list(friction)), float), _batch(pad(starts))
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], _compiled(dt, limit, reverse)(*args))
 
 
 _PROGRAMS = {}
@@ -249,16 +257,21 @@ def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
     starts = [_start(12.0, 2.0, 1.5, 0.2), _start(0.0, 0.0, 0.0, 1.0), _start(6.0, -1.0, -2.0, -0.4)]
     wheels = [_wheels([1, 1, 0, 0]), _wheels(LOCKED), _wheels([0.2, 0.2, 0.5, 0.5], 0.1)]
     batched = _rest_many([FORWARD] * 3, wheels, [0.7, 0.7, 0.9], starts, limit=6.0)
-    one = reference_jit(lambda w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, w, mu, s, time_limit=6.0))
+
+    def checks(w, mu, s, v):
+        """One program (one compile): a row alone, and the gradient of a motion at rest from the start."""
+        return (M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, w, mu, s, time_limit=6.0),
+                jax.grad(lambda v: jnp.sum(M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(LOCKED), 0.7, _start(v),
+                                                     time_limit=2.0, reverse=True).rest_position))(v))
+
+    one = reference_jit(checks)
     for k in range(3):
-        alone = one(wheels[k], jnp.asarray([0.7, 0.7, 0.9][k]), starts[k])
+        alone, grad = one(wheels[k], jnp.asarray([0.7, 0.7, 0.9][k]), starts[k], 0.0)
         for name in ("rest_position", "rest_yaw", "time_to_rest", "distance_to_rest"):
             np.testing.assert_allclose(np.asarray(getattr(batched, name)[k]), np.asarray(getattr(alone, name)),
                                        rtol=1e-9, atol=1e-9, err_msg=name)
     assert float(batched.time_to_rest[1]) == 0 and float(batched.distance_to_rest[1]) == 0
     np.testing.assert_allclose(float(batched.rest_yaw[1]), math.degrees(1.0), rtol=1e-12)
-    grad = jax.grad(lambda v: jnp.sum(M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(LOCKED), 0.7, _start(v),
-                                                  time_limit=2.0, reverse=True).rest_position))(0.0)
     assert np.isfinite(float(grad))
 
 
@@ -284,10 +297,13 @@ def test_every_tyre_force_stays_inside_its_friction_circle():
     """|F| <= mu Fz for free, locked and braked wheels, at any slip, with the friction left after rolling
     resistance; a locked wheel's force opposes its velocity."""
     rng = np.random.default_rng(4)
-    v = jnp.asarray(rng.normal(0, 8, (200, 4, 2)))
-    loads = jnp.asarray(rng.uniform(0, 6000, (200, 4)))
-    brake = jnp.asarray(rng.uniform(0, 1, (200, 4))).at[:50].set(1.0).at[50:100].set(0.0)
-    force, _ = jax.vmap(lambda w, fz, b: M.tyre_forces(w, fz, _wheels(b), 0.8, M.TIME_STEP))(v, loads, brake)
+    v = rng.normal(0, 8, (200, 4, 2))
+    loads = rng.uniform(0, 6000, (200, 4))
+    brake = rng.uniform(0, 1, (200, 4))
+    brake[:50], brake[50:100] = 1.0, 0.0
+    # jitted: one program (run eagerly, each operation would compile one)
+    force, _ = reference_jit(jax.vmap(lambda w, fz, b: M.tyre_forces(w, fz, _wheels(b), 0.8, M.TIME_STEP)))(
+        v, loads, brake)
     size = np.linalg.norm(np.asarray(force), axis=-1)
     assert np.all(size <= 0.8 * np.asarray(loads) * (1 + 1e-12))
     locked = np.asarray(force[:50])
