@@ -81,12 +81,13 @@ def _zeros(tree):
 
 
 def stack(items):
+    """The rows padded to BATCH, stacked in NumPy (no program compiled for the stacking)."""
     items = list(items) + [items[0]] * (BATCH - len(items))
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *items)
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
 
 
 def row_of(tree, i):
-    return jax.tree_util.tree_map(lambda x: np.asarray(x[i]), tree)
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[i], tree)
 
 
 def _args(rows):
