@@ -21,34 +21,33 @@ from fit.posterior import run_chains  # noqa: E402
 from fit.report import text_report  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
 from ks_jax.cli.fit import posterior_path, save_posterior  # noqa: E402
-from ks_jax.compilation import quick_jit  # noqa: E402
 from ks_jax.case import get_output, load_case, set_input  # noqa: E402
 from ks_jax.solve import solve  # noqa: E402
-from samples import CASES  # noqa: E402
+from samples import CASES, reference_jit  # noqa: E402
 
 pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles programs of its own
 
 EVIDENCE = [("vehicles[0].delta_v_magnitude", 0.15), ("vehicles[1].delta_v_magnitude", 0.15),
             ("vehicles[0].speed_after", 0.15), ("vehicles[1].speed_after", 0.15)]
 DRAWS = 500
-SHORT = 50  # draws (and as many adaptation steps): one segment of the sampler's program of ``DRAWS`` draws
 
-# The programs under test compiled with ``compilation.QUICK_CPU`` on a CPU (XLA's defaults take 2-4 times as long
-# to compile the same arithmetic), once each: the sampler's gradient, the log-density, and the two samplers.
-_value_and_gradient = quick_jit(fit.posterior._value_and_gradient, static_argnums=0)
-_log_density = quick_jit(fit.posterior.log_density, static_argnums=0)
-_run_chains = quick_jit(run_chains, static_argnums=(0, 3, 4))
+# Compiled once each with the quick settings (``samples.reference_jit``; XLA's defaults take 2-4 times as long to
+# compile the same arithmetic): the sampler's gradient (which users run inside the sampler's program, ``_segment``,
+# compiled with them on a CPU), the log-density it is checked against, and the two samplers compared.
+_value_and_gradient = reference_jit(fit.posterior._value_and_gradient, static_argnums=0)
+_log_density = reference_jit(fit.posterior.log_density, static_argnums=0)
+_run_chains = reference_jit(run_chains, static_argnums=(0, 3, 4))
 
 
-def _fit(restitution, seed=3, draws=DRAWS):
+def _fit(restitution, seed=3):
     """The seed case with ``restitution``, its evidence the engine's own values, refitted with the Kia's speed
-    and restitution unknown, and 4 chains x ``draws`` draws of their posterior."""
+    and restitution unknown, and 4 chains x ``DRAWS`` draws of their posterior."""
     case = load_case(CASES / "fit_seed_001.json")
     case = dataclasses.replace(case, inputs=set_input(case.inputs, "contact.restitution", restitution))
     result = solve(case, smoothing=1e-3).result
     evidence = [fit.Evidence(p, float(get_output(result, p)), s) for p, s in EVIDENCE]
     unknowns = [fit.Unknown("vehicles[1].speed", 0.0, 30.0), fit.Unknown("contact.restitution", 0.0, 0.6)]
-    return fit.reconstruct(case, unknowns, evidence, posterior=draws, seed=seed)
+    return fit.reconstruct(case, unknowns, evidence, posterior=DRAWS, seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +120,7 @@ def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_dr
         return jax.lax.scan(step, state, jax.random.split(draw_key, draws))[1].position, tuned["step_size"]
 
     zs, divergent, step_size = _run_chains(density, keys, z0, draws, warmup)
-    expected, expected_step = quick_jit(jax.vmap(blackjax_chain))(keys, z0)
+    expected, expected_step = reference_jit(jax.vmap(blackjax_chain))(keys, z0)
     assert zs.shape == (2, draws, 3) and divergent.shape == (2, draws)
     np.testing.assert_allclose(step_size, expected_step, rtol=1e-12)
     np.testing.assert_allclose(zs, expected, rtol=1e-12, atol=1e-12)
@@ -150,14 +149,10 @@ def test_with_rest_positions_the_gradient_is_forward_mode_through_the_motions_wh
 
 
 def test_a_seeded_posterior_draws_the_same_again_and_another_seed_does_not(gaussian):
-    """The Gaussian case's posterior drawn twice with one seed gives the same draws, and with another seed other
-    draws (``SHORT`` draws each: the program of the ``gaussian`` fixture's, one segment of it)."""
-    first = _fit(0.3, draws=SHORT)
-    again = _fit(0.3, draws=SHORT)
-    assert first.posterior.samples.shape == (4, SHORT, 2)
-    np.testing.assert_array_equal(again.posterior.samples, first.posterior.samples)
-    other = _fit(0.3, seed=4, draws=SHORT)
-    assert not np.array_equal(other.posterior.samples, first.posterior.samples)
+    again = _fit(0.3)
+    np.testing.assert_array_equal(again.posterior.samples, gaussian.posterior.samples)
+    other = _fit(0.3, seed=4)
+    assert not np.array_equal(other.posterior.samples, gaussian.posterior.samples)
 
 
 def test_the_panel_shows_the_posterior_and_bad_draws_are_refused(gaussian, capsys):
