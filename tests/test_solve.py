@@ -4,7 +4,6 @@ differently), and the results the model leaves undefined are said so."""
 import copy
 import json
 import math
-import sys
 import tomllib
 from pathlib import Path
 
@@ -18,11 +17,15 @@ from ks_jax.model.motion import RestResult
 from samples import US_CASE, run_cli
 
 
-def _alone_batched_and_swept(case, monkeypatch):
+def _alone_batched_and_swept(case):
     """[(status, {path: np.ndarray})] of ``case`` solved alone, of the two rows of a batch of it twice, and of the
     first point of a sweep of two points (its own speed twice). ``solve`` compiles one case unbatched and two
-    cases with vmap, with ``compilation.QUICK_CPU``; the sweep is made to compile with XLA's defaults
-    (``QUICK_POINTS`` 0), as a large sweep's program is: programs which XLA fuses and rounds differently."""
+    cases with vmap, and the sweep its own chunk of the case's stages, all with ``compilation.QUICK_CPU``:
+    programs which XLA fuses and rounds differently. (That the quick settings give the values of XLA's
+    defaults is checked apart, once: tests/model/test_transforms.py::
+    test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values for ``solve`` and
+    tests/sweeps/test_sweep.py::test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults for
+    ``sweep``.)"""
     out = []
     for sol in (ks_jax.solve(case), *ks_jax.solve([case, case])):
         leaves = jax.tree_util.tree_flatten_with_path(sol.result)[0]
@@ -35,7 +38,6 @@ def _alone_batched_and_swept(case, monkeypatch):
             continue  # the sweep's status is its own; a first-contact time is automatic contact's
         columns[path] = None if np.ndim(x) == 0 else [f"{path[1:]}[{i}]" for i in range(len(x))]
     speed = float(get_input(case.inputs, "vehicles[1].speed"))
-    monkeypatch.setattr(sys.modules["ks_jax.sweeps.engine"], "QUICK_POINTS", 0)
     swept = ks_jax.sweep(case, {"vehicles[1].speed": [speed, speed]}, mode="zip",
                          outputs=[c for p, cols in columns.items() for c in (cols or [p[1:]])])
     results = {p: np.asarray(float(swept[p[1:]][0]) if cols is None else [float(swept[c][0]) for c in cols])
@@ -48,14 +50,13 @@ def _alone_batched_and_swept(case, monkeypatch):
 @pytest.mark.parametrize("name", sorted(p.name for p in (Path(ks_jax.__file__).parent / "cases").iterdir()
                                          if p.suffix in (".json", ".toml")))
 @pytest.mark.slow
-def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, monkeypatch):
+def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
     """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three
     stages: programs which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A
     quantity that is 0 up to rounding (the tangential impulse of the inline seed crashes) is where a
     double-where's stand-in could leak: alone, the seed chapter's crash gave 1.1 N s of tangential impulse,
     in a batch 0."""
-    (status, alone), *others = _alone_batched_and_swept(load_case(Path(ks_jax.__file__).parent / "cases" / name),
-                                                        monkeypatch)
+    (status, alone), *others = _alone_batched_and_swept(load_case(Path(ks_jax.__file__).parent / "cases" / name))
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
     if load_case(Path(ks_jax.__file__).parent / "cases" / name).motion is not None:
@@ -75,7 +76,7 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name, monkeypatch):
     ("seed_000_saturn_pontiac.json", (180, 180), 1.0, 1.0, 180),
 ])
 def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched_and_swept(
-        name, yaws, friction, restitution, normal, monkeypatch):
+        name, yaws, friction, restitution, normal):
     """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone, in
     a batch and in a sweep (programs rounded differently). By hand: at mu = 0 an impulse with no tangential part
     does not slide (|T_c| = mu N_c = 0: ``sliding`` False); a sticking elastic exchange (eps = 1) loses no
@@ -89,7 +90,7 @@ def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched
     d["contact"].update(friction=friction, restitution=restitution)
     if normal is not None:
         d["contact"]["normal"] = normal
-    for status, res in _alone_batched_and_swept(case_from_dict(d), monkeypatch):
+    for status, res in _alone_batched_and_swept(case_from_dict(d)):
         assert status == "ok"
         magnitude = float(res[".contact.impulse_magnitude"])
         if friction == 0.0:
