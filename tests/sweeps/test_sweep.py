@@ -22,6 +22,9 @@ from samples import CASES, SEED0, SEED1, SWEEP_OUTPUTS as OUTPUTS, reference_jit
 
 
 RTOL = 1e-12  # sweep vs single solve: the same kernel, batched; only rounding may differ
+# a grid of 65 to 128 points over speed and restitution: test_chunk_boundaries_do_not_change_results' whole sweep
+# and test_sharded_equals_unsharded's sweep in this process, one program
+GRID_OUTPUTS = OUTPUTS + ["vehicles[0].delta_v[1]"]
 
 
 @pytest.fixture(scope="module")
@@ -110,10 +113,10 @@ def test_chunk_boundaries_do_not_change_results(case):
     """Chunks of other sizes (other programs, which XLA may vectorize and contract differently) give the same
     results to rounding, and the same flags and statuses."""
     over = {"vehicles[1].speed": np.linspace(2, 20, 13), "contact.restitution": np.linspace(0, 1, 7)}
-    whole = sweep(case, over, outputs=OUTPUTS, chunk_size=1000)
+    whole = sweep(case, over, outputs=GRID_OUTPUTS, chunk_size=1000)
     for chunk in (5, 13):
-        part = sweep(case, over, outputs=OUTPUTS, chunk_size=chunk)
-        for p in OUTPUTS + ["status"]:
+        part = sweep(case, over, outputs=GRID_OUTPUTS, chunk_size=chunk)
+        for p in GRID_OUTPUTS + ["status"]:
             if whole[p].dtype.kind in "bi":
                 np.testing.assert_array_equal(part[p], whole[p], err_msg=f"{p}, chunk {chunk}")
             else:
@@ -274,8 +277,11 @@ def test_zip_mode_monte_carlo(case):
 
 @pytest.mark.slow
 def test_bad_rows_get_their_status_others_match(case):
+    """Restitutions above 1 get their status and NaN, the others the values of single solves: every default
+    output (the program of test_default_outputs_and_status, a sweep of the restitution alone)."""
     eps = np.linspace(0.0, 1.5, 7)  # 1.25 and 1.5 break the rule eps <= 1
-    r = sweep(case, {"contact.restitution": eps}, outputs=OUTPUTS)
+    r = sweep(case, {"contact.restitution": eps})
+    assert set(r) == set(DEFAULT_OUTPUTS) | {"status"}
     bad = eps > 1
     assert np.all(r["status"][bad] == ks_jax.model.types.INVALID_RESTITUTION)
     assert np.all(r["status"][~bad] == 0)
@@ -300,11 +306,12 @@ def test_negative_speeds_get_their_status_others_match(case):
     assert_matches(r, case, [(k, {"vehicles[1].speed": speeds[k]}) for k in np.flatnonzero(~bad)])
     r = sweep(case, {"vehicles[0].speed": [-1.0], "vehicles[1].speed": [-1.0]})
     assert r["status"][0, 0] == ks_jax.model.types.INVALID_SPEED_1  # the first vehicle's reason first
-    res = ks_jax.solve_inputs(as_arrays(set_input(case.inputs, "vehicles[1].speed", -1.0)))
+    # solve_inputs jitted as single() runs it (one program for the file), not op by op: ~100 small programs
+    res = _SOLVE(as_arrays(set_input(case.inputs, "vehicles[1].speed", -1.0)), False, False)
     assert int(res.contact.status) == ks_jax.model.types.INVALID_SPEED_2
     assert all(np.isnan(x).all() for x in jax.tree_util.tree_leaves(res) if np.asarray(x).dtype.kind == "f")
     inputs = set_input(case.inputs, "vehicles[0].mass", -5.0)
-    res = ks_jax.solve_inputs(as_arrays(set_input(inputs, "vehicles[1].speed", -1.0)))
+    res = _SOLVE(as_arrays(set_input(inputs, "vehicles[1].speed", -1.0)), False, False)
     assert int(res.contact.status) == ks_jax.model.types.INVALID_MASS_1  # an exchange input's reason first
 
 
@@ -448,7 +455,7 @@ def test_sharded_equals_unsharded(case):
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads(proc.stdout.strip().splitlines()[-1])
     here = sweep(case, {"vehicles[1].speed": np.linspace(2, 20, 11), "contact.restitution": np.linspace(0, 1.2, 7)},
-                 outputs=["contact.impulse_magnitude", "vehicles[0].delta_v[1]", "contact.sliding"])
+                 outputs=GRID_OUTPUTS)  # the subprocess's outputs and more: the program of a test above
     for k, (sharded, single_device) in data.items():
         sharded = np.array(sharded, dtype=float)
         np.testing.assert_array_equal(sharded, np.array(single_device, dtype=float), err_msg=k)
@@ -489,8 +496,8 @@ def test_a_product_of_inertia_keeps_the_tensor_symmetric():
     for k, v in enumerate(values):
         inputs = as_arrays(case.inputs)
         inertia = jnp.asarray(inputs.vehicles[0].inertia).at[0, 1].set(v).at[1, 0].set(v)
-        one = ks_jax.solve_inputs(inputs._replace(vehicles=(inputs.vehicles[0]._replace(inertia=inertia),
-                                                            inputs.vehicles[1])))
+        one = _SOLVE(inputs._replace(vehicles=(inputs.vehicles[0]._replace(inertia=inertia), inputs.vehicles[1])),
+                     False, False)  # solve_inputs alone, jitted as single() runs it
         for p in ("vehicles[0].delta_yaw_rate", "contact.impulse[1]"):
             np.testing.assert_allclose(r[p][k], get_output(one, p), rtol=RTOL, atol=1e-12, err_msg=f"{p} at {v}")
 
