@@ -28,6 +28,13 @@ from ks_jax.sweeps import SweepSample, sweep  # noqa: E402
 SEED1 = Path(ks_jax.__file__).parent / "cases" / "seed_001_lucid_kia.toml"
 MPH = 1609.344 / 3600  # m/s per mph, written out here (ks_jax.units is what is tested)
 DV1 = "vehicles[0].delta_v_magnitude"
+# outputs shared by several tests' sweeps (a sweep's program is compiled per paths, outputs and size bucket, ~2 s
+# each): those of a grid of 17 to 32 points (at most 8 a side) over the Kia's speed and the restitution, and of a
+# line of 3 to 8 speeds
+FIGURE_OUTPUTS = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", DV1,
+                  "vehicles[1].delta_v_magnitude", "vehicles[0].pdof", "vehicles[1].pdof"]
+LINE_OUTPUTS = [DV1, "contact.energy_loss", "vehicles[1].pdof"]
+GRID_OUTPUTS = [DV1, "contact.sliding"]  # of a grid of at most 8 points over the Kia's speed and the restitution
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +75,8 @@ def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     np.testing.assert_allclose(shown[:, ~bad], r["contact.energy_loss"][:, ~bad] / (0.3048 * 4.4482216152605), rtol=1e-12)
     # an inline rear impact: the Lucid is struck from behind (PDOF 180 deg) wherever it is struck; a
     # single value is said, not drawn as contours of its rounding
-    pdof = sweep(case, {"vehicles[1].speed": speed, "contact.restitution": eps[:3]}, outputs=["vehicles[0].pdof"])
-    ax = draw(pdof)
+    pdof = sweep(case, {"vehicles[1].speed": speed[:8], "contact.restitution": eps[:3]}, outputs=FIGURE_OUTPUTS)
+    ax = draw(pdof, "vehicles[0].pdof")
     assert "180 deg everywhere" in ax.get_title() and not [c for c in ax.collections if c is not mesh_of(ax)]
 
 
@@ -100,8 +107,8 @@ def test_a_grid_axis_of_one_value_is_drawn_as_a_line(case):
     for over, x in (({"vehicles[1].speed": [20 * MPH], "contact.restitution": eps}, eps),
                     ({"contact.restitution": eps, "vehicles[1].speed": [20 * MPH]}, eps),
                     ({"vehicles[1].speed": [20 * MPH], "contact.restitution": [0.1]}, np.array([20.0]))):
-        r = sweep(case, over, outputs=[DV1])
-        ax = draw(r)
+        r = sweep(case, over, outputs=GRID_OUTPUTS)
+        ax = draw(r)  # the first output, DV1
         (line,) = ax.get_lines()
         assert not [c for c in ax.collections if isinstance(c, QuadMesh)]
         np.testing.assert_allclose(line.get_xdata(), x, rtol=1e-12)
@@ -197,10 +204,11 @@ def test_cli_draws_the_sweep_and_refuses_before_solving(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_separating_points_have_no_stick_or_slide(case):
-    """The pickup slower than the Saturn (0 and 1 m/s against 2.24 m/s): separating, no exchange, so neither
-    stick nor slide: masked (grey) in the map, as invalid points are, and counted in the title."""
-    r = sweep(case, {"vehicles[1].speed": np.array([0.0, 1.0, 5.0, 9.0]), "contact.friction": np.array([0.1, 0.9])},
-              outputs=["contact.sliding"])
+    """The Kia slower than the Lucid (0 and 1 m/s against 2.24 m/s): separating, no exchange, so neither
+    stick nor slide: masked (grey) in the map, as invalid points are, and counted in the title (a grid over
+    speed and restitution: the program of test_a_grid_axis_of_one_value_is_drawn_as_a_line)."""
+    r = sweep(case, {"vehicles[1].speed": np.array([0.0, 1.0, 5.0, 9.0]), "contact.restitution": np.array([0.1, 0.9])},
+              outputs=GRID_OUTPUTS)
     separating = r["status"] == 1
     assert separating[:2].all() and not separating[2:].any()
     ax = draw(r, "contact.sliding")
@@ -216,11 +224,12 @@ def test_directions_are_drawn_on_the_circle(case):
     numbers about 0 (-0.4, not 359.6), and its percentiles are those of the unwrapped samples, reported in
     [0, 360) and said where they are drawn."""
     yaw = np.radians(np.random.default_rng(5).normal(0.0, 3.0, 300))
-    z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[1].pdof"], mode="zip")
+    # the Kia's PDOF, and the Lucid's for the second histogram below
+    z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[1].pdof", "vehicles[0].pdof"], mode="zip")
     pdof = z["vehicles[1].pdof"]
     assert (pdof > 350).any() and (pdof < 10).any()  # both sides of north
     unwrapped = (pdof + 180.0) % 360.0 - 180.0
-    ax = draw(z)
+    ax = draw(z, "vehicles[1].pdof")
     lines = {ln.get_label().split(" ")[0]: ln for ln in ax.get_lines()}
     for name, q in (("median", 50), ("5th", 5), ("95th", 95)):
         x = np.percentile(unwrapped, q)
@@ -234,8 +243,7 @@ def test_directions_are_drawn_on_the_circle(case):
     assert "drawn from -180 to 180 deg" in ax.get_title()
 
     # about 180 deg (the Lucid's PDOF): [0, 360) holds the hump, and the axis is as it would be anyway
-    z = sweep(case, {"vehicles[0].yaw": yaw}, outputs=["vehicles[0].pdof"], mode="zip")
-    ax = draw(z)
+    ax = draw(z, "vehicles[0].pdof")  # the same sweep
     assert 170 < min(p.get_x() for p in ax.patches) < 180 < max(p.get_x() + p.get_width() for p in ax.patches) < 190
     assert "-180" not in ax.get_title()
 
@@ -245,11 +253,12 @@ def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(ca
     """The Kia is struck head-on wherever it is: PDOF 0 deg, to rounding on either side of 0 (359.99...,
     0.00...). The colour bar and a line's axis run over whole degrees about 0 (not 0.1 ... 0, 360, 359.9),
     and the title says the value."""
-    r = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 5), "contact.restitution": [0.0, 0.2, 0.4]},
-              outputs=["vehicles[1].pdof"])
+    # 8 x 3 points: the program of test_a_figure_leaves_out_what_is_constant_and_keeps_one_unit_system's
+    r = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 8), "contact.restitution": [0.0, 0.2, 0.4]},
+              outputs=FIGURE_OUTPUTS)
     pdof = r["vehicles[1].pdof"]
     assert np.all(np.minimum(pdof, 360.0 - pdof) < 1e-9)
-    ax = draw(r)
+    ax = draw(r, "vehicles[1].pdof")
     mesh = mesh_of(ax)
     assert (mesh.norm.vmin, mesh.norm.vmax) == (-1.0, 1.0)
     assert np.all(np.abs(mesh.get_array()) < 1e-9)
@@ -257,8 +266,8 @@ def test_a_direction_the_same_everywhere_is_drawn_on_a_scale_of_whole_degrees(ca
     ticks = [bar.yaxis.get_major_formatter()(v, 0) for v in bar.get_yticks()]
     assert all(-1.0 <= float(t) <= 1.0 for t in ticks), ticks
     assert "0 deg everywhere" in ax.get_title()
-    line = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 5)}, outputs=["vehicles[1].pdof"])
-    assert draw(line).get_ylim() == (-1.0, 1.0)
+    line = sweep(case, {"vehicles[1].speed": np.linspace(8, 20, 5)}, outputs=LINE_OUTPUTS)
+    assert draw(line, "vehicles[1].pdof").get_ylim() == (-1.0, 1.0)
 
 
 @pytest.mark.slow
@@ -268,7 +277,7 @@ def test_drawn_in_the_units_asked_for_and_those_typed(case):
     sweep's divided by the unit's size, written out here: 1 km/h = 1/3.6 m/s, 1 ft lbf = 0.3048 x
     4.4482216152605 J."""
     speed = np.array([20.0, 40.0, 60.0]) / 3.6
-    r = sweep(case, {"vehicles[1].speed": speed}, outputs=[DV1, "contact.energy_loss"])
+    r = sweep(case, {"vehicles[1].speed": speed}, outputs=LINE_OUTPUTS)  # DV1 first: drawn when none is named
     si = draw(r, units="si")
     assert si.get_xlabel() == "vehicles[1].speed (Kia K5) [m/s]" and si.get_ylabel() == f"{DV1} (Lucid Air) [m/s]"
     np.testing.assert_allclose(si.get_lines()[0].get_ydata(), r[DV1], rtol=1e-12)
@@ -346,8 +355,7 @@ def test_a_figure_leaves_out_what_is_constant_and_keeps_one_unit_system(case, un
     from behind (PDOF 180 deg) and the Kia from the front (0 deg) at every point, and an inline contact sticks
     (no tangential impulse): these get no panel but one line that says them; the panels left are every output
     that changes, each in the one system asked for (only the swept speed's axis in the unit it was typed in)."""
-    outputs = ["contact.impulse_magnitude", "contact.energy_loss", "contact.sliding", DV1,
-               "vehicles[1].delta_v_magnitude", "vehicles[0].pdof", "vehicles[1].pdof"]
+    outputs = FIGURE_OUTPUTS
     r = sweep(case, {"vehicles[1].speed": np.linspace(10, 60, 6) * MPH, "contact.restitution": [0.0, 0.1, 0.3]},
               outputs=outputs)
     fig = plot.sweep_figure(r, units=units, typed=typed)
