@@ -305,10 +305,12 @@ def test_undefined_results_are_nan_and_named(case, tmp_path, capsys):
     text = r.summary()
     assert "undefined (NaN) at 2 solved points: vehicles[0].pdof, where no impulse was exchanged" in text
     assert "undefined (NaN) at 2 solved points: vehicles[0].ees, where both crushes are 0" in text
-    code = main(["sweep", str(SEED0), "--over", "contact.restitution=-1,0.1", "--output", "vehicles[0].pdof",
-                 "--out", str(tmp_path / "u.csv")])
+    # the command over the same grid and outputs (one program with the sweep above)
+    code = main(["sweep", str(SEED0), "--over", "contact.restitution=-1,0.1", "--over", "contact.point[2]=0.54m,10ft",
+                 *sum((["--output", p] for p in outs), []), "--out", str(tmp_path / "u.csv")])
     out = capsys.readouterr().out
-    assert code == 0 and "undefined (NaN) at 1 solved point: vehicles[0].pdof, where no impulse" in out
+    assert code == 0 and "undefined (NaN) at 2 solved points: vehicles[0].pdof, where no impulse" in out
+    assert "undefined (NaN) at 2 solved points: vehicles[0].ees, where both crushes are 0" in out
 
 
 def test_cli_over_refuses_a_dropped_stop_and_non_finite_values():
