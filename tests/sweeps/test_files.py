@@ -204,7 +204,8 @@ def test_writer_errors_keep_other_files(tmp_path, capsys):
         w.abort()
         assert (tmp_path / f"w{suffix}").read_text() == "earlier results\n"
         assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # nothing left behind
-    empty = sweep(ks_jax.load_case(SEED0), {"contact.friction": [0.1, 0.2]}, index_range=(1, 1))
+    # over the restitution with the default outputs: the program of test_files_in_us_units' streamed sweep
+    empty = sweep(ks_jax.load_case(SEED0), {"contact.restitution": [0.1, 0.2]}, index_range=(1, 1))
     with pytest.raises(CaseError, match="no points to write"):
         write_results(empty, tmp_path / "empty.csv")
     assert not (tmp_path / "empty.csv").exists()
