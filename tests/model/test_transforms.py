@@ -119,18 +119,19 @@ RTOL_QUICK, ATOL_QUICK = 1e-12, 1e-12
 
 @pytest.mark.slow
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
-@pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json"])
+@pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json", "rest_seed_000.json"])
 def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit, name):
     """``ks_jax.solve``'s program (a file's few cases) is compiled with ``ks_jax.compilation.QUICK_CPU``, not
     with XLA's defaults (another program), and give the values of the programs compiled at XLA's defaults:
-    the seed chapter (explicit contact) and its staging with automatic contact, solved as a file of two
-    cases (the case and the same one with the bullet car 3 mph faster), every result of every stage."""
+    the seed chapter (explicit contact), its staging with automatic contact and its motion to rest, solved as a
+    file of two cases (the case and the same one with the bullet car 3 mph faster), every result of every
+    stage."""
     sv = importlib.import_module("ks_jax.solve")  # the module (ks_jax.solve is the function)
     case = load_case(os.path.join(os.path.dirname(ks_jax.__file__), "cases", name))
     faster = ks_jax.set_input(case.inputs, "vehicles[1].speed", ks_jax.get_input(case.inputs, "vehicles[1].speed")
                               + 3 * ks_jax.units.MPH)
     inputs = ks_jax.case.as_arrays(jax.tree_util.tree_map(lambda *x: np.stack(x), case.inputs, faster))
-    args = (inputs, case.auto_point, case.auto_normal, 0.0)
+    args = (inputs, case.auto_point, case.auto_normal, 0.0, False, case.motion)
     plain = sv._solve.plain._cache_size()
     quick = sv._solve(*args)  # what ks_jax.solve runs: the quick program, not the plain one
     assert sv._solve.plain._cache_size() == plain and sv._solve.quick._cache_size() >= 1
@@ -145,6 +146,7 @@ def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit
         else:
             np.testing.assert_allclose(x, y, rtol=RTOL_QUICK, atol=ATOL_QUICK, equal_nan=True, err_msg=name)
     assert np.all(np.asarray(quick.contact.status) == 0)
+    assert (quick.rest is not None) == name.startswith("rest_")  # the motion to rest compared where it is
     assert _program(sv._solve.quick.lower(*args).compile().as_text()) != \
         _program(sv._solve.plain.lower(*args).compile().as_text())  # another program
 
