@@ -164,8 +164,8 @@ def check_solve(path, cases, capsys, tmp_path):
 
 def check_fit(path, cases, capsys, tmp_path):
     """fit: the report, --json, --plot, --monte-carlo 20 and --posterior with a few draws, in two runs as users
-    combine them (each run fits the case again, and a fit is most of a run's time): the report with the Monte
-    Carlo refits and the top view; the JSON with the posterior and its corner plot."""
+    combine them: the report with the Monte Carlo refits and the top view; the JSON with the posterior and its
+    corner plot."""
     what = f"ks-jax fit {path.name}"
     png = tmp_path / "fit.png"
     code, out, err = run_cli(capsys, "fit", str(path), "--monte-carlo", "20", "--plot", str(png))
