@@ -108,11 +108,12 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     on_host = not cpu and len(given) == len(jax.tree_util.tree_leaves(args))  # sent to the device by chunks
     args = args if on_host else jax.tree_util.tree_map(jnp.asarray, args)
     if n == 0:  # nothing to solve (a filtered batch may be empty): empty results, shaped and typed
-        empty = jax.vmap(functools.partial(collision.exchange, smoothing=float(smoothing)))(
-            *jax.tree_util.tree_map(jnp.asarray, args))
+        # their shapes and dtypes from tracing alone: running the vmapped exchange eagerly on no rows compiled
+        # each of its operations
+        shapes = jax.eval_shape(jax.vmap(functools.partial(collision.exchange, smoothing=float(smoothing))), *args)
+        empty = jax.tree_util.tree_map(lambda s: np.zeros(s.shape, s.dtype), shapes)
         if not to_host:
-            return empty
-        empty = jax.tree_util.tree_map(np.array, empty)
+            return jax.tree_util.tree_map(jnp.asarray, empty)
         if target is None:
             return empty
         _checked_out(target, empty, 0, given)
