@@ -11,7 +11,8 @@ Public API:
   single inputs and results: ``get_input``, ``set_input``, ``get_output``;
 - solving cases: ``solve`` (-> ``Solution``), ``solve_inputs`` (a case as a pure function of its inputs);
 - sweeps: ``sweep`` (-> ``SweepResult``);
-- ``keep_programs`` (keep compiled programs between processes), ``units`` (conversions to SI).
+- ``keep_programs`` (keep compiled programs between processes), ``free_programs`` (free this process's
+  compiled programs), ``units`` (conversions to SI).
 
 Also: ``ks_jax.plot`` (pictures; matplotlib, the ``plot`` extra, is imported when a picture is drawn),
 ``ks_jax.report`` (the text panel), and ``fit`` (the reconstruction package installed beside ``ks_jax``).
@@ -20,7 +21,7 @@ Also: ``ks_jax.plot`` (pictures; matplotlib, the ``plot`` extra, is imported whe
 from . import plot, report, units
 from .batch import exchange, exchange_batch, sum_over_rows
 from .case import Case, CaseError, CaseInputs, get_input, get_output, load_case, load_cases, set_input
-from .compilation import keep_programs
+from .compilation import free_programs, keep_programs
 from .model.types import Contact, ContactResult, ExchangeResult, State, Vehicle, VehicleResult
 from .model.types import normal_from_angles, status_text
 from .solve import Solution, solve, solve_inputs
@@ -40,6 +41,7 @@ __all__ = [
     "VehicleResult",
     "exchange",
     "exchange_batch",
+    "free_programs",
     "get_input",
     "get_output",
     "keep_programs",

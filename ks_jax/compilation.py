@@ -88,6 +88,14 @@ def compiled(jitted, *args):
     return _executable(jitted, tree, avals)
 
 
+def free_programs():
+    """Free every compiled program this process holds: JAX's caches (``jax.clear_caches``) and the executables
+    that ``compiled`` keeps, which ``jax.clear_caches`` does not reach. A later call traces and compiles its
+    program again (or loads it, where programs are kept: ``keep_programs``)."""
+    _executable.cache_clear()
+    jax.clear_caches()
+
+
 def keep_programs(folder=None, limit=CACHE_LIMIT):
     """Keep this process's programs in ``folder`` for later processes, as the command line does; returns the
     folder. Every program compiled afterwards goes to JAX's persistent compilation cache there; the traced

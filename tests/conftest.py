@@ -48,6 +48,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
+from ks_jax.compilation import free_programs  # noqa: E402
 from ks_jax.model import types as kt  # noqa: E402
 import reference as ref  # noqa: E402
 from samples import reference_jit  # noqa: E402
@@ -348,7 +349,7 @@ def _return_freed_memory():
     yield
     resident = _resident_bytes()
     if resident is not None and resident > FREE_PROGRAMS_ABOVE:
-        jax.clear_caches()
+        free_programs()
     if _TRIM is not None:
         _TRIM(0)
 
@@ -376,7 +377,7 @@ def _free_compiled_programs():
         _TRIM(0)
     resident = _resident_bytes()
     if resident is None or resident > KEEP_PROGRAMS_BELOW:
-        jax.clear_caches()
+        free_programs()
         if _TRIM is not None:
             _TRIM(0)
 

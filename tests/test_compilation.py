@@ -222,3 +222,17 @@ def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names[:2] + ["notes-cache"])
     assert prune_cache(tmp_path, 0) == 2
     assert [p.name for p in tmp_path.iterdir()] == ["notes-cache"]
+
+
+def test_free_programs_frees_the_executables_jax_clear_caches_leaves():
+    """``compiled`` keeps executables that ``jax.clear_caches`` does not reach: after ``jax.clear_caches`` the
+    same executable comes back; after ``free_programs`` a new one is compiled, and it computes the same."""
+    jitted = jax.jit(lambda x: 2.0 * x + 1.0)
+    x = jnp.arange(3.0)
+    first = compilation.compiled(jitted, x)
+    jax.clear_caches()
+    assert compilation.compiled(jitted, x) is first
+    compilation.free_programs()
+    again = compilation.compiled(jitted, x)
+    assert again is not first
+    np.testing.assert_array_equal(np.asarray(again(x)), 2.0 * np.arange(3.0) + 1.0)

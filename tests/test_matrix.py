@@ -18,12 +18,12 @@ import re
 import tomllib
 from pathlib import Path
 
-import jax
 import numpy as np
 import pytest
 
 import ks_jax
 from ks_jax.case import CaseError, cases_from_data, get_input, load_cases
+from ks_jax.compilation import free_programs
 from samples import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -238,9 +238,9 @@ def one_source_at_a_time():
     the sources are cases of every kind (motion to rest, fixed objects, automatic contact, fits and their
     samplers), and one source's commands on top of the programs of a worker's earlier files, or of the other
     sources, would hold more memory than any other test needs."""
-    jax.clear_caches()
+    free_programs()
     yield
-    jax.clear_caches()
+    free_programs()
 
 
 @pytest.mark.slow
