@@ -65,6 +65,14 @@ def run_cli(capsys, *argv):
     return code, out.out, out.err
 
 
+def mass_sweep(case):
+    """The ``--over`` of ``ks-jax sweep`` that tests/test_matrix.py runs on every case: the first vehicle's mass
+    at 0.9, 1 and 1.1 times the case's, typed in kg (which reads the same in both unit systems; the middle point
+    is the case itself)."""
+    mass = float(np.asarray(ks_jax.get_input(case.inputs, "vehicles[0].mass")))
+    return f"vehicles[0].mass={0.9 * mass!r}kg,{mass!r}kg,{1.1 * mass!r}kg"
+
+
 def read_table(path):
     """Columns of a .csv or .parquet sweep file as NumPy arrays (status_text as str)."""
     if path.suffix == ".parquet":

@@ -37,10 +37,10 @@ import fit.problem
 import ks_jax
 from fit.synthetic import oblique_case
 from ks_jax import units as U
-from ks_jax.case import CaseError, case_from_dict, get_input, load_cases
+from ks_jax.case import CaseError, case_from_dict, load_cases
 from ks_jax.case import load as load_module
 from ks_jax.sweeps.files import ResultWriter
-from samples import CASES, SEED0, SEED1, read_table, run_cli
+from samples import CASES, SEED0, SEED1, mass_sweep, read_table, run_cli
 
 FIT_CASE = CASES / "fit_seed_001.json"
 
@@ -235,10 +235,8 @@ def test_pictures_of_a_fit_and_a_sweep_draw_names_as_their_escapes(tmp_path, cap
         code, _, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json",
                                "--plot", str(tmp_path / "fit.png"))
         assert code in (0, 1) and "Traceback" not in err
-        mass = float(np.asarray(get_input(ks_jax.load_case(path).inputs, "vehicles[0].mass")))
-        code, _, err = run_cli(capsys, "sweep", str(path), "--case", "0", "--over",
-                               f"vehicles[0].mass={0.9 * mass!r}kg,{mass!r}kg,{1.1 * mass!r}kg", "--out",
-                               str(tmp_path / "s.csv"), "--plot", str(tmp_path / "s.png"), "--no-progress")
+        code, _, err = run_cli(capsys, "sweep", str(path), "--case", "0", "--over", mass_sweep(ks_jax.load_case(path)),
+                               "--out", str(tmp_path / "s.csv"), "--plot", str(tmp_path / "s.png"), "--no-progress")
         assert code == 0, err
     assert all((tmp_path / f).stat().st_size > 0 for f in ("fit.png", "fit_posterior.png", "s.png"))
 

@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 import ks_jax
-from ks_jax.case import CaseError, cases_from_data, get_input, load_cases
+from ks_jax.case import CaseError, cases_from_data, load_cases
 from ks_jax.compilation import free_programs
-from samples import run_cli
+from samples import mass_sweep, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGED = Path(ks_jax.__file__).parent / "cases"
@@ -173,21 +173,14 @@ def check_fit(path, cases, capsys, tmp_path):
     assert "monte carlo" in out.lower(), f"{what} --monte-carlo 20: the report does not show the refits"
     assert png.stat().st_size > 0
     png = tmp_path / "post.png"
-    code, out, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json", "--plot", str(png))
+    code, out, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json",
+                             "--plot", str(png))
     assert_clean(code, out, err, f"{what} --posterior 6 --chains 2 --json --plot")
     for case, obj in zip(cases, parse_cases(out, f"{what} --json", len(cases))):
         assert obj["name"] == case.name
         assert_documented(obj, "fitted case", f"{what} --json, case '{case.name}'")
         assert set(obj["posterior"]["unknowns"]) == set(obj["estimate"]), f"{what} --posterior: a summary per unknown"
     assert png.stat().st_size > 0 and (tmp_path / "post_posterior.png").stat().st_size > 0
-
-
-def swept(case):
-    """One input of ``case`` to sweep, and three values of it about the case's own, typed with a unit that
-    reads the same in both unit systems: the first vehicle's mass, 0.9, 1 and 1.1 times the case's (the
-    middle one exactly the case's, so that the sweep's middle point is the case itself)."""
-    mass = float(np.asarray(get_input(case.inputs, "vehicles[0].mass")))
-    return f"vehicles[0].mass={0.9 * mass!r}kg,{mass!r}kg,{1.1 * mass!r}kg"
 
 
 def solved_value(obj, path):
@@ -211,7 +204,7 @@ def check_sweep(path, k, case, solved, capsys, tmp_path):
     """sweep of case ``k`` over its first vehicle's mass into each results format, with a picture; the point at
     the case's own mass is ``solved`` (the case's object of ``solve --json``)."""
     what = f"ks-jax sweep {path.name} --case {k}"
-    common = ["sweep", str(path), "--case", str(k), "--over", swept(case), "--no-progress"]
+    common = ["sweep", str(path), "--case", str(k), "--over", mass_sweep(case), "--no-progress"]
     for suffix, units in ((".csv", "us"), (".npz", "si"), (".parquet", "si")):
         out_file = tmp_path / f"grid{suffix}"
         extra = ["--plot", str(tmp_path / "grid.png")] if suffix == ".csv" else []

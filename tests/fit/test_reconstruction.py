@@ -23,6 +23,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import fit  # noqa: E402
+from fit import rows as rc  # noqa: E402
 from fit.problem import Problem, to_x, to_z, wrap  # noqa: E402
 from fit.rounds import OFF_BOUND, other_side  # noqa: E402
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
@@ -44,8 +45,6 @@ def blocks_of_8(monkeypatch):
     """Monte Carlo refits in calls of 8 rows, the program of one case's default 8 starts, not one of 500 rows of
     their own (the blocks change no result:
     ``test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing``)."""
-    from fit import rows as rc
-
     monkeypatch.setattr(rc, "ROWS_PER_CALL", 8)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 8)
 
@@ -282,7 +281,6 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     row of the fit (6, padded to 8) and of the refits (8), and the solver was compiled once for the fit and
     its refits (twice before, one program per row count). (2 starts x 4 refits: calls of 8 rows, the program
     of one case's default 8 starts, which the other fits of this case run.)"""
-    from fit import rows as rc
 
     case = load_case(FIT_SEED)
     kw = dict(starts=2, seed=3, monte_carlo=4)
