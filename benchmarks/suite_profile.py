@@ -1,0 +1,110 @@
+"""Where the test suite's time goes, program by program: a pytest plugin that records, for each test, its CPU
+and wall seconds, and every program JAX compiles during it (its name, its seconds, and whether the run's shared
+compile cache had it); and, run as a script, a summary of a profiled run.
+
+    PROF_DIR=/tmp/prof PROF_TAG=run1 PYTHONPATH=benchmarks .venv/bin/python -m pytest -q -n auto --dist loadfile \\
+        -p suite_profile
+    .venv/bin/python benchmarks/suite_profile.py /tmp/prof run1
+
+Each process (each pytest-xdist worker) writes PROF_DIR/TAG_<worker>.json. The summary lists per file and per
+test the CPU seconds, the CPU seconds of compiles the cache did not have, their count, and the programs compiled
+most; then the programs that cost most over the whole run. The hook wraps ``jax._src.compiler``'s
+``compile_or_get_cached`` (JAX's own entry to XLA's compile and its persistent cache): a private name, for
+measuring only."""
+
+from __future__ import annotations
+
+import collections
+import glob
+import json
+import os
+import resource
+import sys
+import time
+
+import jax._src.compiler as compiler
+import jax.monitoring as monitoring
+import pytest
+
+_HITS = [0]
+_ROWS, _TESTS, _CURRENT = [], [], ["<none>"]
+
+
+def _install():
+    def event(name, **kwargs):
+        if name == "/jax/compilation_cache/cache_hits":
+            _HITS[0] += 1
+
+    monitoring.register_event_listener(event)
+    original = compiler.compile_or_get_cached
+
+    def wrapped(backend, computation, *args, **kwargs):
+        name = str(computation.operation.attributes["sym_name"]).strip('"')
+        hits, wall, cpu = _HITS[0], time.perf_counter(), time.process_time()
+        out = original(backend, computation, *args, **kwargs)
+        _ROWS.append((_CURRENT[0], name, time.perf_counter() - wall, time.process_time() - cpu, _HITS[0] - hits))
+        return out
+
+    compiler.compile_or_get_cached = wrapped
+
+
+def pytest_configure(config):
+    _install()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    _CURRENT[0] = item.nodeid
+    wall, cpu = time.perf_counter(), time.process_time()
+    yield
+    _TESTS.append((item.nodeid, time.perf_counter() - wall, time.process_time() - cpu,
+                   resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+
+
+def pytest_sessionfinish(session):
+    folder = os.environ.get("PROF_DIR", "/tmp/prof")
+    os.makedirs(folder, exist_ok=True)
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    with open(os.path.join(folder, f"{os.environ.get('PROF_TAG', 'run')}_{worker}.json"), "w") as f:
+        json.dump({"compiles": _ROWS, "tests": _TESTS}, f)
+
+
+def summary(folder, tag, top=40):
+    compiles, tests = [], []
+    for path in glob.glob(os.path.join(folder, f"{tag}_*.json")):
+        with open(path) as f:
+            data = json.load(f)
+        compiles += data["compiles"]
+        tests += data["tests"]
+    cost, count = collections.defaultdict(float), collections.Counter()
+    names, programs = collections.defaultdict(collections.Counter), collections.defaultdict(lambda: [0, 0.0])
+    for test, name, _, cpu, hit in compiles:
+        if not hit:
+            cost[test] += cpu
+            count[test] += 1
+            names[test][name] += 1
+            programs[name][0] += 1
+            programs[name][1] += cpu
+    files = collections.defaultdict(lambda: [0.0, 0.0, 0])
+    for test, _, cpu, _ in tests:
+        f = files[test.split("::")[0]]
+        f[0] += cpu
+        f[1] += cost[test]
+        f[2] += count[test]
+    print(f"{len(tests)} tests; {sum(count.values())} compiles not in the cache ({sum(cost.values()):.0f} CPU s), "
+          f"{sum(1 for c in compiles if c[4])} loaded from it\n\nper file: CPU s, compile CPU s, compiles")
+    for name, (cpu, co, n) in sorted(files.items(), key=lambda x: -x[1][0]):
+        print(f"{cpu:7.1f} {co:7.1f} {n:5d}  {name}")
+    print("\nper test (the costliest): CPU s, compile CPU s, compiles, programs compiled most")
+    for test, _, cpu, _ in sorted(tests, key=lambda x: -x[2])[:top]:
+        most = ", ".join(f"{k} x{v}" for k, v in names[test].most_common(3))
+        print(f"{cpu:7.1f} {cost[test]:7.1f} {count[test]:5d}  {test}  [{most}]")
+    print("\nper program: compile CPU s, compiles")
+    for name, (n, cpu) in sorted(programs.items(), key=lambda x: -x[1][1])[:top]:
+        print(f"{cpu:7.1f} {n:5d}  {name}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        sys.exit("usage: suite_profile.py PROF_DIR TAG")
+    summary(sys.argv[1], sys.argv[2])
