@@ -57,10 +57,15 @@ def linearisation_notes(result) -> list:
 
 
 def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
-                 chunk, block, devices=None):
+                    chunk, block, devices=None, everywhere=True):
     """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2), and of each Gaussian prior's
-    mean, perturbed by N(0, prior sigma^2); the first start of each refit is the estimate, the others are drawn
-    as for the fit. Calls of ``block`` rows, on ``devices`` (``rows.run_rows``).
+    mean, perturbed by N(0, prior sigma^2). Calls of ``block`` rows, on ``devices`` (``rows.run_rows``).
+
+    Where to start each refit: ``everywhere`` (the fit's own starts ended in more than one minimum:
+    ``rows.several_minima``), from ``starts`` starts, the first at the estimate and the others drawn as for the
+    fit, so that a refit whose perturbed evidence prefers another minimum can find it. Otherwise from the
+    estimate alone, the perturbed problem's minimum being the one the estimate lies in, and again from every
+    start where that did not converge: a fit whose starts all ended at one cost found one minimum in the bounds.
 
     A prior is a measurement of its unknown like any evidence (the fit weighs its mean by its sigma as it weighs
     a measured value), so the parametric bootstrap draws it again too: refits with the priors held fixed would
@@ -79,23 +84,37 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
     x0 = np.stack([first_starts(paths, a, starts, rng) for _ in range(n_mc)])
     z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
     z0[:, 0] = z_best
-    size = min(chunk, n_mc) if progress else n_mc
     bar = Progress(n_mc, "monte carlo", "fit") if progress else None
-    xs, conv = [], []
-    for s in range(0, n_mc, size):
-        k = min(size, n_mc - s)
-        sigmas, lo, hi, pw = (np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pw"))
-        out = run_rows(problem, solver, max_iter, stack([a["inputs"]] * k), values[s:s + k], sigmas, lo, hi,
-                       prior_means[s:s + k], pw, z0[s:s + k], smoothing, dtype, starts, block, devices)
-        best = best_start(out["cost"], out["converged"])
-        xs.append(out["x"][np.arange(k), best])
-        conv.append(out["converged"][np.arange(k), best])
-        if bar is not None:
-            bar.update(k)
+
+    def refit(which, z_starts, count):
+        """The best start's x and convergence of the refits ``which``, each from its ``z_starts`` (k, S, n)."""
+        size = min(chunk, len(which)) if progress else len(which)
+        xs, conv = [], []
+        for s in range(0, len(which), size):
+            rows = which[s:s + size]
+            k = len(rows)
+            sigmas, lo, hi, pw = (np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pw"))
+            out = run_rows(problem, solver, max_iter, stack([a["inputs"]] * k), values[rows], sigmas, lo, hi,
+                           prior_means[rows], pw, z_starts[s:s + k], smoothing, dtype, z_starts.shape[1], block,
+                           devices)
+            best = best_start(out["cost"], out["converged"])
+            xs.append(out["x"][np.arange(k), best])
+            conv.append(out["converged"][np.arange(k), best])
+            if count and bar is not None:
+                bar.update(k)
+        return np.concatenate(xs), np.concatenate(conv)
+
+    everyone = np.arange(n_mc)
+    if everywhere:
+        xs, conv = refit(everyone, z0, True)
+    else:
+        xs, conv = refit(everyone, z0[:, :1], True)
+        again = np.flatnonzero(~conv)
+        if again.size:
+            xs[again], conv[again] = refit(again, z0[again], False)
     if bar is not None:
         bar.close()
-    xs = np.concatenate(xs) + a["x_offset"]
-    conv = np.concatenate(conv)
+    xs = xs + a["x_offset"]
     use = xs[conv] if conv.any() else xs
     pct = {str(p): {path: float(v) for path, v in zip(paths, np.percentile(use, p, axis=0))} for p in PERCENTILES}
     return {"samples": n_mc, "converged_fraction": float(conv.mean()), "percentiles": pct, "x": xs, "converged": conv}

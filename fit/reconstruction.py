@@ -31,7 +31,7 @@ from .posterior import sampler
 from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .problem import predict, to_z
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
-from .rows import count_at_best, rows_per_call, run_rows, stack, stick_thresholds
+from .rows import count_at_best, rows_per_call, run_rows, several_minima, stack, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, one
@@ -469,8 +469,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     x0 = first_starts(problem.unknowns, stacked, starts, rng)
     per_case = ("values", "sigmas", "lo", "hi", "pm", "pw")
     # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
-    # (``ROWS_PER_CALL``): one compiled program
-    block = rows_per_call(max(len(cases), int(monte_carlo)) * starts) if monte_carlo else None
+    # (``ROWS_PER_CALL``): one compiled program. A refit starts at the estimate (``refit_perturbed``), so that
+    # the calls hold the fit's starts or the refits, whichever are more
+    block = rows_per_call(max(len(cases) * starts, int(monte_carlo))) if monte_carlo else None
     first = run_rows(problem, solver, max_iter, inputs, *(stacked[k] for k in per_case),
                      to_z(x0, stacked["lo"][:, None], stacked["hi"][:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)
@@ -526,7 +527,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                                            seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
                                            offset=stacked["x_offset"][i], progress=progress)
         if monte_carlo:
+            everywhere = several_minima(found.table["cost"][i], found.table["converged"][i])
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,
-                                            smoothing, dtype, progress, chunk, block, devices)
+                                            smoothing, dtype, progress, chunk, block, devices, everywhere)
             r.notes += linearisation_notes(r)
     return results

@@ -114,6 +114,27 @@ def count_at_best(cost):
     return int(n) if n.ndim == 0 else n
 
 
+FLIP_Z = 5.0  # a minimum this many standard deviations of a refit's perturbation above the best is never preferred
+
+
+def several_minima(cost, converged):
+    """Whether a fit's starts (costs (S,), inf where absent; ``converged`` (S,)) ended in more than one minimum
+    that refits of perturbed evidence could prefer to the best (``monte_carlo.refit_perturbed``), or in none
+    converged (nothing then says there is one). Perturbing the whitened residuals by e ~ N(0, 1) moves the
+    difference of two minima's chi^2 by 2 (r_b - r_a) . e, of standard deviation 2 |r_b - r_a| <= 2 (sqrt(chi2_a)
+    + sqrt(chi2_b)): a converged minimum whose chi^2 exceeds the best's by more than ``FLIP_Z`` times that is one
+    no refit prefers, and one within ``AGREE_COST`` of the best is the best."""
+    cost = np.asarray(cost, np.float64)
+    ok = np.asarray(converged, bool) & np.isfinite(cost)
+    if not ok.any():
+        return True
+    chi2 = 2.0 * cost[ok]
+    best = chi2.min()
+    same = chi2 <= best + 2.0 * (AGREE_COST * max(best / 2.0, 1.0) + 1e-9)
+    near = chi2 - best < FLIP_Z * 2.0 * (np.sqrt(best) + np.sqrt(chi2))
+    return bool(np.any(near & ~same))
+
+
 def stack(trees):
     """Trees of the same structure (a batch's CaseInputs) as one tree of float64 NumPy arrays, the trees along a
     new leading axis."""

@@ -273,19 +273,42 @@ def test_seed_001_monte_carlo_agrees_with_laplace(blocks_of_8):
     assert not any("Monte Carlo refits spread" in n for n in r.notes)  # they agree: no note
 
 
+def test_a_fit_has_several_minima_where_a_refit_could_prefer_another():
+    """Hand costs (cost = chi^2 / 2) of a fit's starts: one minimum reached by every start, or another whose chi^2
+    lies beyond what a refit's perturbation moves (183 above a best of 0.0007: 5 standard deviations are
+    2 x 5 x (0.03 + 13.5) = 135), is one; a second minimum 0.6 of chi^2 above the best, or none converged, is not."""
+    inf = np.inf
+    assert not rc.several_minima([3.4e-4, 3.4e-4, inf], [True, True, False])
+    assert not rc.several_minima([3.4e-4, 3.4e-4 * (1 + 1e-9), 91.49, 91.49], [True] * 4)
+    assert not rc.several_minima([3.4e-4, 0.5, 91.49], [True, False, True])  # 0.5 did not converge
+    assert rc.several_minima([6.2023, 6.4958, 6.2023], [True] * 3)
+    assert rc.several_minima([3.4e-4, 3.4e-4], [False, False])
+
+
+@pytest.mark.slow
+def test_refits_from_the_estimate_alone_are_the_refits_from_every_start_where_the_fit_has_one_minimum(monkeypatch):
+    """The seed reconstruction's starts end in one minimum, so that its refits start at the estimate alone; made
+    to start from all eight starts as well (the estimate among them), each refit ends where it did."""
+    kw = dict(starts=8, seed=3, monte_carlo=16)
+    alone = fit.reconstruct(load_case(FIT_SEED), **kw).monte_carlo
+    monkeypatch.setattr(fit.reconstruction, "several_minima", lambda cost, converged: True)
+    everywhere = fit.reconstruct(load_case(FIT_SEED), **kw).monte_carlo
+    assert alone["converged"].all() and everywhere["converged"].all()
+    np.testing.assert_allclose(alone["x"], everywhere["x"], rtol=1e-6)
+
+
 @pytest.mark.slow
 def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing(monkeypatch):
     """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
     calls of one row count (``rows_per_call``), the last call padded, so that both use one compiled program.
-    Calls of 5 rows split cases between calls and pad the last: each result equals that of calls holding every
-    row of the fit (6, padded to 8) and of the refits (8), and the solver was compiled once for the fit and
-    its refits (twice before, one program per row count). (2 starts x 4 refits: calls of 8 rows, the program
-    of one case's default 8 starts, which the other fits of this case run.)"""
+    Calls of 5 rows split cases between calls and pad the last: each result equals that of one call holding
+    every row of the fit (3 cases x 2 starts) and of the refits (4, each from the estimate, padded to 6), and
+    the solver was compiled once for the fit and its refits (twice before, one program per row count)."""
 
     case = load_case(FIT_SEED)
     kw = dict(starts=2, seed=3, monte_carlo=4)
     one_call = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc.rows_per_call(4 * 2) == 8
+    assert rc.rows_per_call(max(3 * 2, 4)) == 6
     monkeypatch.setattr(rc, "ROWS_PER_CALL", 5)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 5)
     programs = rc.solver_for(5)._cache_size()
