@@ -7,6 +7,7 @@ import math
 import operator
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 from functools import lru_cache
 
 import jax
@@ -94,10 +95,38 @@ def _chunk_values(start, axes, mode, sizes, n_rows, total):
     return out[::-1]
 
 
+@dataclass(frozen=True)
+class ChunkProgram:
+    """What the compiled program of one chunk of a sweep is made from: its cache key (``_program``).
+
+    paths, ties: the swept input paths and the paths that follow them (``case.input_ties``); outputs: the
+    results kept; mode: "grid" or "zip"; n_rows: the chunk's points; static_sizes: the axes' sizes compiled in
+    (a sweep of several chunks: dividing by a constant is cheaper), or None: read at run time (a whole sweep in
+    one chunk: a sweep of another size in the same ``_bucket`` runs the same program); auto_point, auto_normal,
+    pole, motion: the case's pipeline (``solve.stages``); smoothing: tau of the smooth cone; out_dtype: the
+    kept results' float dtype; devices: the rows are sharded over them; quick: compiled quickly
+    (``QUICK_POINTS``); cpu: ``backend.on_cpu()`` (the stages are fenced on the CPU's path only)."""
+
+    paths: tuple
+    ties: tuple
+    outputs: tuple
+    mode: str
+    n_rows: int
+    static_sizes: tuple | None
+    auto_point: bool
+    auto_normal: bool
+    smoothing: float
+    out_dtype: np.dtype
+    devices: tuple
+    quick: bool = False
+    cpu: bool = True
+    pole: object = False
+    motion: object = None
+
+
 @lru_cache(maxsize=32)
-def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_normal, smoothing, out_dtype, devices,
-             quick=False, cpu=True, pole=False, motion=None):
-    """The jitted program of one chunk of ``n_rows`` points, sharded over ``devices`` along the rows.
+def _program(key: ChunkProgram):
+    """The jitted program of one chunk of ``key.n_rows`` points, sharded over ``key.devices`` along the rows.
 
     Called as ``(start, stop, axes, sizes, total, base)``: it makes each row's swept values from its flat
     index (grid: the index unravelled into one position per axis; zip: the k-th sample of every path),
@@ -105,27 +134,25 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
     rebuilds the rows' inputs from ``base`` and the values, which costs less than storing them), and returns
     the requested outputs (NaN where undefined), the status, and, over the rows before ``stop``, the count
     of each status (``STATUS_CODES``, then any other) and of undefined values per output in
-    ``undefined``: a sweep that keeps nothing then copies none of its rows to the host. ``static_sizes``: the
-    axes' sizes compiled in (a sweep of several chunks: dividing by a constant is cheaper), or None: read from ``sizes`` (a whole
-    sweep in one chunk: a sweep of another size in the same ``_bucket`` runs the same program). ``quick``:
-    compiled quickly (``QUICK_POINTS``). ``cpu``: ``backend.on_cpu()``, part of the key (the stages are fenced
-    on the CPU's path only)."""
-    rows, replicated = row_placement(devices)
-    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion)
+    ``undefined``: a sweep that keeps nothing then copies none of its rows to the host."""
+    rows, replicated = row_placement(key.devices)
+    pipeline = stages(key.auto_point, key.auto_normal, key.smoothing, key.pole, key.motion)
+    undefined = tuple(p for p in key.outputs if undefined_kind(p))
 
     def chunk(start, stop, axes, sizes, total, base):
-        vals = _chunk_values(start, axes, mode, sizes if static_sizes is None else static_sizes, n_rows, total)
+        vals = _chunk_values(start, axes, key.mode, sizes if key.static_sizes is None else key.static_sizes,
+                             key.n_rows, total)
         vals = tuple(jax.lax.with_sharding_constraint(v, rows) for v in vals)
 
         def on_values(stage, last=False):
             def one(vals, *earlier):
-                out = stage(_row_inputs(base, paths, vals, ties), *earlier)
-                return _selected(out, outputs, out_dtype) if last else out
+                out = stage(_row_inputs(base, key.paths, vals, key.ties), *earlier)
+                return _selected(out, key.outputs, key.out_dtype) if last else out
             one.block_rows = getattr(stage, "block_rows", 0)  # the motion to rest runs in blocks on a CPU
             return one
 
         out = run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
-        counted = start + jnp.arange(n_rows, dtype=start.dtype) < stop
+        counted = start + jnp.arange(key.n_rows, dtype=start.dtype) < stop
         status = out["status"].astype(jnp.int32)
         known = [jnp.sum(counted & (status == c), dtype=jnp.int32) for c in STATUS_CODES]
         solved = counted & ~invalid_rows(status)
@@ -134,9 +161,8 @@ def _program(paths, ties, outputs, mode, n_rows, static_sizes, auto_point, auto_
                                          or [jnp.int32(0)])}
         return out, counts
 
-    undefined = tuple(p for p in outputs if undefined_kind(p))
     return jax.jit(chunk, in_shardings=(replicated,) * 6, out_shardings=(rows, replicated),
-                   compiler_options=compiler_options(quick))
+                   compiler_options=compiler_options(key.quick))
 
 
 def _selected(result, outputs, out_dtype):
@@ -200,12 +226,53 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     index_range: (lo, hi) solve only these flat indices (row-major over the grid), e.g. one
     process's share of a multi-host sweep; the result is then flat, shape (hi - lo,).
     """
+    request = check(case, over, outputs, mode, smoothing, index_range)
+    return run_plan(plan(request, chunk_size, devices, output_dtype), keep, on_chunk, progress)
+
+
+@dataclass(frozen=True, eq=False)
+class Request:
+    """A sweep's arguments, checked (``check``): the case, its swept values by canonical path (``axes``, SI,
+    float64), the outputs kept (canonical paths, ``"status"`` apart), the mode, the smoothing, the number of
+    points of the whole sweep (``total``), the flat indices to solve (``lo`` .. ``hi``) and the result's shape
+    (the sweep's, or flat where an index range was given)."""
+
+    case: Case
+    axes: dict
+    outputs: tuple
+    mode: str
+    smoothing: float
+    total: int
+    lo: int
+    hi: int
+    shape: tuple
+
+
+def check(case, over, outputs=None, mode="grid", smoothing=0.0, index_range=None) -> Request:
+    """``sweep``'s arguments checked, each fault a ``CaseError`` naming it: the case, the swept paths and their
+    values, the outputs, the mode, the smoothing and the index range."""
     if not isinstance(case, Case):
         raise CaseError(f"sweep needs a Case (ks_jax.load_case), got {type(case).__name__}")
     if not case.valid:
         raise CaseError(case.error)
     if mode not in ("grid", "zip"):
         raise CaseError(f"sweep mode = {mode!r}: mode must be 'grid' or 'zip'")
+    axes = _checked_over(case, over)
+    outputs = _checked_outputs(case, outputs, axes)
+    if not 0.0 <= float(smoothing) < 1.0:
+        raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
+    shape = result_shape({p: len(a) for p, a in axes.items()}, mode)
+    total = math.prod(shape)
+    if total > np.iinfo(np.int64).max:
+        raise CaseError(f"the sweep has {total:.3g} points, more than a 64-bit index counts "
+                        f"({np.iinfo(np.int64).max:.3g}): sweep fewer values")
+    lo, hi = _checked_range(index_range, total)
+    return Request(case, axes, outputs, mode, float(smoothing), total, lo, hi,
+                   shape if index_range is None else (hi - lo,))
+
+
+def _checked_over(case, over):
+    """{canonical path: values (float64)} of ``over``, each path an input the case lets a sweep vary."""
     if not isinstance(over, Mapping):
         raise CaseError(f"sweep over: give a mapping {{path: values}}, got {type(over).__name__}")
     if not over:
@@ -215,8 +282,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
             raise CaseError(f"sweep over {p!r}: an input path is a string, e.g. 'vehicles[1].speed'")
     check_distinct(tuple(over), "sweep over")
     over = {canonical_path(p): v for p, v in over.items()}  # "vehicles[0]. yaw" is "vehicles[0].yaw"
-    paths = tuple(over)
-    for p in paths:
+    for p in over:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
         if why := on_fixed_object(case, p) or without_road(case, p):
             raise CaseError(f"sweep over {why}")
@@ -224,9 +290,14 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
                             f"contact.{name}), so it is computed, not an input; give contact.{name} in the case "
                             "to vary it")
-    axes = {p: _check_values(p, over[p]) for p in paths}
+    return {p: _check_values(p, v) for p, v in over.items()}
+
+
+def _checked_outputs(case, outputs, axes):
+    """The canonical output paths to keep (``"status"`` apart, always kept): ``outputs``, or the defaults."""
     if outputs is None:  # against a fixed object, vehicles[1] is the object: no results of its own
-        outputs = [p for p in DEFAULT_OUTPUTS + (DEFAULT_REST_OUTPUTS if case.motion else ()) if not on_fixed_object(case, p)]
+        outputs = [p for p in DEFAULT_OUTPUTS + (DEFAULT_REST_OUTPUTS if case.motion else ())
+                   if not on_fixed_object(case, p)]
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
@@ -244,27 +315,44 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         raise CaseError("output 'contact.time' is the first-contact time of automatic contact (docs/model.md); "
                         "this case gives contact.point and contact.normal, so its exchange is at the case state "
                         "(leave contact.time out)")
-    if not 0.0 <= float(smoothing) < 1.0:
-        raise CaseError(f"smoothing = {smoothing}: smoothing must be in [0, 1)")
-    sizes = tuple(len(a) for a in axes.values())
-    shape = result_shape(dict(zip(paths, sizes)), mode)
-    total = math.prod(shape)
-    if total > np.iinfo(np.int64).max:
-        raise CaseError(f"the sweep has {total:.3g} points, more than a 64-bit index counts ({np.iinfo(np.int64).max:.3g}): "
-                        "sweep fewer values")
+    return outputs
+
+
+def _checked_range(index_range, total):
+    """(lo, hi): the flat indices to solve, all of them by default."""
     if index_range is None:
-        lo, hi = 0, total
-    else:
-        if isinstance(index_range, (str, bytes)) or not hasattr(index_range, "__len__") or len(index_range) != 2:
-            raise CaseError(f"index_range = {index_range!r}: give two whole numbers (lo, hi)")
-        try:
-            lo, hi = (operator.index(v) for v in index_range)
-        except TypeError:
-            raise CaseError(f"index_range = {tuple(index_range)}: lo and hi must be whole numbers") from None
+        return 0, total
+    if isinstance(index_range, (str, bytes)) or not hasattr(index_range, "__len__") or len(index_range) != 2:
+        raise CaseError(f"index_range = {index_range!r}: give two whole numbers (lo, hi)")
+    try:
+        lo, hi = (operator.index(v) for v in index_range)
+    except TypeError:
+        raise CaseError(f"index_range = {tuple(index_range)}: lo and hi must be whole numbers") from None
     if not 0 <= lo <= hi <= total:
         raise CaseError(f"index_range = {index_range}: must satisfy 0 <= lo <= hi <= {total}")
-    n_points = hi - lo
+    return lo, hi
 
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """How a checked sweep (``request``) runs: its chunk's program (``program``, the key of ``_program``), the
+    scene's inputs as arrays (``base``, moved about the CGs' midpoint in float32 far from the origin), the
+    swept values as the program reads them (``axes``: padded to their ``_bucket`` in a sweep of one chunk) and
+    the axes' sizes, the offsets added back to moved outputs (``moved``: path -> metres), and the index dtype."""
+
+    request: Request
+    program: ChunkProgram
+    base: object
+    axes: tuple
+    sizes: object
+    moved: dict
+    index_dtype: object
+
+
+def plan(request: Request, chunk_size=None, devices=None, output_dtype=None) -> Plan:
+    """The ``Plan`` of ``request``: rows per chunk (``chunk_size`` per device, default ``backend.chunk_rows``; a
+    small sweep is one chunk rounded up to its ``_bucket``), where the scene is solved, and its program."""
+    case, n_points = request.case, request.hi - request.lo
     devices = tuple(jax.local_devices() if devices is None else devices)
     if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.chunk_rows``)
         one_row = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], as_arrays(case.inputs))
@@ -273,62 +361,60 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
         per_device = _whole_number(chunk_size, "chunk_size")
     if per_device <= 0:
         raise CaseError(f"chunk_size = {chunk_size}: must be positive")
-    n_rows = per_device * len(devices)
     # small sweeps: one short chunk, of a length rounded up (``_bucket``) so that other sizes reuse its programs
-    n_rows = min(n_rows, _bucket(-(-max(n_points, 1) // len(devices))) * len(devices))
+    n_rows = min(per_device * len(devices), _bucket(-(-max(n_points, 1) // len(devices))) * len(devices))
 
     # float32 far from the origin: the scene, swept positions included, is solved about the CGs' midpoint
     # (case.scale.scene_origin), and contact.point outputs are moved back, in float64
-    origin = scene_origin(case.inputs, [v for p, v in axes.items() if xy_index(p) is not None])
-    moved = {} if origin is None else {p: origin_offset(p, origin) for p in (*paths, *outputs)}
+    paths = tuple(request.axes)
+    origin = scene_origin(case.inputs, [v for p, v in request.axes.items() if xy_index(p) is not None])
+    moved = {} if origin is None else {p: origin_offset(p, origin) for p in (*paths, *request.outputs)}
     moved = {p: float(off) for p, off in moved.items() if off is not None}
     inputs = case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point)
-    swept = {p: a - moved.get(p, 0.0) for p, a in axes.items()}
+    swept = {p: a - moved.get(p, 0.0) for p, a in request.axes.items()}
     warn_far_from_origin(inputs, [v for p, v in swept.items() if p in moved], what="the swept scene",
                          about="the origin" if origin is None else "its CGs' midpoint", auto_point=case.auto_point)
-    base = as_arrays(inputs)
     dtype = jnp.result_type(float)
-    out_dtype = np.dtype(output_dtype or dtype)
-    quick = n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices)
+    index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
+    if request.total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
+        raise CaseError(f"{request.total} points need 64-bit indices: enable jax_enable_x64")
     # a whole sweep in one chunk: its axes padded and its sizes an argument, for any size in the same buckets;
     # a larger one (or a range of one) keeps its exact axes (a zip of 10^8 samples is not padded) and sizes
-    one_chunk = total <= n_rows
-    static_sizes = None if one_chunk else sizes
-    program = _program(paths, input_ties(case, paths), outputs, mode, n_rows, static_sizes, case.auto_point,
-                       case.auto_normal, float(smoothing), out_dtype, devices, quick, on_cpu(), case.pole,
-                       case.motion)
-    index_dtype = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
-    if total > np.iinfo(np.int32).max and index_dtype == jnp.int32:
-        raise CaseError(f"{total} points need 64-bit indices: enable jax_enable_x64")
-    dev_axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
-    dev_sizes = jnp.asarray(sizes, dtype=index_dtype)
-    total_arr = jnp.asarray(total, dtype=index_dtype)
+    one_chunk = request.total <= n_rows
+    sizes = tuple(len(a) for a in request.axes.values())
+    program = ChunkProgram(paths, input_ties(case, paths), request.outputs, request.mode, n_rows,
+                           None if one_chunk else sizes, case.auto_point, case.auto_normal, request.smoothing,
+                           np.dtype(output_dtype or dtype), devices,
+                           n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), on_cpu(),
+                           case.pole, case.motion)
+    axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
+    return Plan(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
 
-    store = {}
-    if keep:
-        itemsize = sum(1 if p.endswith(".sliding") else 8 if p in moved else out_dtype.itemsize for p in outputs)
-        check_memory(n_points * (itemsize + 1), f"keeping {n_points} points of {len(outputs)} outputs",
-                      "pass keep=False and on_chunk (ks-jax sweep --out writes chunk by chunk), index_range, "
-                      "output_dtype=np.float32 or fewer outputs")
-        for p in outputs:
-            store[p] = np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved
-                                else out_dtype)
-        store["status"] = np.empty(n_points, dtype=np.int8)
+
+def run_plan(plan: Plan, keep=True, on_chunk=None, progress=None) -> SweepResult:
+    """Solve ``plan``'s points chunk by chunk, each dispatched while the previous one's results are collected:
+    kept (``keep``) and handed to ``on_chunk``, the statuses and undefined results counted."""
+    request, key = plan.request, plan.program
+    lo, hi, n_points = request.lo, request.hi, request.hi - request.lo
+    store = _store(request, key.out_dtype, plan.moved) if keep else {}
     counts = np.zeros(len(STATUS_CODES) + 1, dtype=np.int64)
-    undefined = {p: 0 for p in outputs if undefined_kind(p)}
+    undefined = {p: 0 for p in request.outputs if undefined_kind(p)}
     rows_wanted = keep or on_chunk is not None  # else only the counts leave the device
-    stop = jnp.asarray(hi, dtype=index_dtype)
 
-    show = n_points > n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
+    def index(i):
+        return jnp.asarray(i, dtype=plan.index_dtype)
+
+    stop, total = index(hi), index(request.total)
+    show = n_points > key.n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
     bar = Progress(n_points, "ks-jax sweep", "pt", show, PROGRESS_DELAY if progress is None else 0.0)
     # compiled before the clock starts: a sweep's seconds and rate count solving, its compile is said apart
     t0 = time.perf_counter()
-    executable = compiled(program, jnp.asarray(lo, dtype=index_dtype), stop, dev_axes, dev_sizes, total_arr, base)
+    executable = compiled(_program(key), index(lo), stop, plan.axes, plan.sizes, total, plan.base)
     compile_seconds = time.perf_counter() - t0
     t0 = time.perf_counter()
 
     def launch(start):
-        out, tally = executable(jnp.asarray(start, dtype=index_dtype), stop, dev_axes, dev_sizes, total_arr, base)
+        out, tally = executable(index(start), stop, plan.axes, plan.sizes, total, plan.base)
         if rows_wanted and not on_cpu():  # start the copy to the host now: it runs while the next chunk computes
             for x in out.values():
                 x.copy_to_host_async()
@@ -336,26 +422,24 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
 
     def collect(item):
         start, out, tally = item
-        n = min(n_rows, hi - start)
+        n = min(key.n_rows, hi - start)
         counts[:] += np.asarray(tally["status"])
         for p, k in zip(undefined, np.asarray(tally["undefined"])):
             undefined[p] += int(k)
         if rows_wanted:
-            chunk = {k: np.asarray(out[k])[:n] for k in (*outputs, "status")}  # in the order asked (jit sorts keys)
-            for p in outputs:
-                if p in moved:
-                    chunk[p] = chunk[p].astype(np.float64) + moved[p]
-            a, b = start - lo, start - lo + n
-            if keep:
-                for k, v in chunk.items():
-                    store[k][a:b] = v
+            chunk = {k: np.asarray(out[k])[:n] for k in (*request.outputs, "status")}  # in the order asked
+            for p in request.outputs:
+                if p in plan.moved:
+                    chunk[p] = chunk[p].astype(np.float64) + plan.moved[p]
+            for k, v in chunk.items() if keep else ():
+                store[k][start - lo:start - lo + n] = v
             if on_chunk is not None:
                 on_chunk(start, start + n, chunk)
         bar.update(n)
 
     try:
         pending = None
-        for start in range(lo, hi, n_rows):
+        for start in range(lo, hi, key.n_rows):
             item = launch(start)  # dispatched asynchronously: overlaps the previous transfer
             if pending is not None:
                 collect(pending)
@@ -365,15 +449,31 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     finally:
         bar.close()
     seconds = time.perf_counter() - t0
+    return _result(request, store, counts, undefined, seconds, compile_seconds)
 
-    final_shape = shape if (index_range is None) else (n_points,)
-    if keep:
-        store = {k: v.reshape(final_shape) for k, v in store.items()}
+
+def _store(request: Request, out_dtype, moved):
+    """The arrays a kept sweep's results are written into (flat), its memory checked first."""
+    n_points, outputs = request.hi - request.lo, request.outputs
+    itemsize = sum(1 if p.endswith(".sliding") else 8 if p in moved else out_dtype.itemsize for p in outputs)
+    check_memory(n_points * (itemsize + 1), f"keeping {n_points} points of {len(outputs)} outputs",
+                  "pass keep=False and on_chunk (ks-jax sweep --out writes chunk by chunk), index_range, "
+                  "output_dtype=np.float32 or fewer outputs")
+    store = {p: np.empty(n_points, dtype=bool if p.endswith(".sliding") else np.float64 if p in moved else out_dtype)
+             for p in outputs}
+    store["status"] = np.empty(n_points, dtype=np.int8)
+    return store
+
+
+def _result(request, store, counts, undefined, seconds, compile_seconds):
+    """The ``SweepResult`` of a run: the kept arrays in the result's shape, and the statuses counted."""
     status_counts = {status_text(c): int(k) for c, k in zip(STATUS_CODES, counts) if k}
     if counts[-1]:
         status_counts["invalid: unknown status"] = int(counts[-1])
-    return SweepResult(store, axes, final_shape, mode, n_points, status_counts, seconds, (lo, hi), outputs,
-                       undefined=undefined, compile_seconds=compile_seconds, names=tuple(case.vehicle_names))
+    return SweepResult({k: v.reshape(request.shape) for k, v in store.items()}, request.axes, request.shape,
+                       request.mode,
+                       request.hi - request.lo, status_counts, seconds, (request.lo, request.hi), request.outputs,
+                       undefined=undefined, compile_seconds=compile_seconds, names=tuple(request.case.vehicle_names))
 
 
 def check_distinct(paths, what):

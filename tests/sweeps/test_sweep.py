@@ -136,9 +136,9 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
 
     calls = []
 
-    def spy(*args):
-        calls.append(args)
-        programs.append(compiled(*args))
+    def spy(key):
+        calls.append(key)
+        programs.append(compiled(key))
         return programs[-1]
 
     monkeypatch.setattr(engine, "_program", spy)
@@ -159,7 +159,7 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
     many = {paths[0]: np.linspace(3.0, 15.0, 40000), paths[1]: np.linspace(0.0, 0.5, 40000)}
     part = sweep(case, many, outputs=OUTPUTS, mode="zip", index_range=(39990, 40000))
     assert part.shape == (10,) and set(part.status_counts) == {"ok"}
-    assert calls[-1][5] == (40000, 40000)  # static_sizes
+    assert calls[-1].static_sizes == (40000, 40000)
     for i, j in ((0, 0), (6, 1), (3, 0)):
         point = {paths[0]: over[paths[0]][i], paths[1]: over[paths[1]][j]}
         for p in OUTPUTS:
@@ -178,9 +178,9 @@ def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, 
     seen = []
     compiled = engine._program
 
-    def spy(*args):
-        seen.append(args[11])  # quick
-        return compiled(*args)
+    def spy(key):
+        seen.append(key.quick)
+        return compiled(key)
 
     monkeypatch.setattr(engine, "_program", spy)
     over = {"vehicles[1].speed": np.linspace(3.0, 15.0, 3), "vehicles[1].yaw": np.radians([0.0, 25.0]),
