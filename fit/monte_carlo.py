@@ -58,7 +58,7 @@ def linearisation_notes(result) -> list:
 
 def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
                     chunk, block, devices=None, everywhere=True):
-    """Refit ``samples`` copies of the evidence, each perturbed by N(0, sigma^2), and of each Gaussian prior's
+    """Refit ``samples`` copies of the evidence of one case (``a``: its ``FitArrays.row``), each perturbed by N(0, sigma^2), and of each Gaussian prior's
     mean, perturbed by N(0, prior sigma^2). Calls of ``block`` rows, on ``devices`` (``rows.run_rows``).
 
     Where to start each refit: ``everywhere`` (the fit's own starts ended in more than one minimum:
@@ -73,16 +73,16 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
     prior's share, and most where the prior dominates. With both drawn, the refits of a problem linear over its
     uncertainty spread as its Laplace covariance (J^T W J + P)^-1."""
     n_mc = int(samples)
-    noise = rng.standard_normal((n_mc, len(a["values"])))
-    values = a["values"] + a["sigmas"] * noise
-    has_prior = a["pw"] > 0
-    prior_means = np.repeat(a["pm"][None], n_mc, 0)
+    noise = rng.standard_normal((n_mc, len(a.values)))
+    values = a.values + a.sigmas * noise
+    has_prior = a.pw > 0
+    prior_means = np.repeat(a.pm[None], n_mc, 0)
     if has_prior.any():  # drawn only where there are priors: the draws of a fit without them are as they were
-        prior_sigma = np.where(has_prior, 1.0 / np.where(has_prior, a["pw"], 1.0), 0.0)
-        prior_means = prior_means + prior_sigma * rng.standard_normal((n_mc, len(a["pm"])))
+        prior_sigma = np.where(has_prior, 1.0 / np.where(has_prior, a.pw, 1.0), 0.0)
+        prior_means = prior_means + prior_sigma * rng.standard_normal((n_mc, len(a.pm)))
     paths = [u.path for u in unknowns]
     x0 = np.stack([first_starts(paths, a, starts, rng) for _ in range(n_mc)])
-    z0 = np.stack([to_z(x, a["lo"], a["hi"]) for x in x0])
+    z0 = np.stack([to_z(x, a.lo, a.hi) for x in x0])
     z0[:, 0] = z_best
     bar = Progress(n_mc, "monte carlo", "fit") if progress else None
 
@@ -93,8 +93,8 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
         for s in range(0, len(which), size):
             rows = which[s:s + size]
             k = len(rows)
-            sigmas, lo, hi, pw = (np.repeat(a[key][None], k, 0) for key in ("sigmas", "lo", "hi", "pw"))
-            out = run_rows(problem, solver, max_iter, stack([a["inputs"]] * k), values[rows], sigmas, lo, hi,
+            sigmas, lo, hi, pw = (np.repeat(v[None], k, 0) for v in (a.sigmas, a.lo, a.hi, a.pw))
+            out = run_rows(problem, solver, max_iter, stack([a.inputs] * k), values[rows], sigmas, lo, hi,
                            prior_means[rows], pw, z_starts[s:s + k], smoothing, dtype, z_starts.shape[1], block,
                            devices)
             best = best_start(out["cost"], out["converged"])
@@ -114,7 +114,7 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
             xs[again], conv[again] = refit(again, z0[again], False)
     if bar is not None:
         bar.close()
-    xs = xs + a["x_offset"]
+    xs = xs + a.x_offset
     use = xs[conv] if conv.any() else xs
     pct = {str(p): {path: float(v) for path, v in zip(paths, np.percentile(use, p, axis=0))} for p in PERCENTILES}
     return {"samples": n_mc, "converged_fraction": float(conv.mean()), "percentiles": pct, "x": xs, "converged": conv}

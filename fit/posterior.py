@@ -35,8 +35,9 @@ from ks_jax.backend import row_placement
 from ks_jax.compilation import quick_jit
 from ks_jax.progress import PROGRESS_DELAY, Progress
 
+from .arrays import FitArrays
 from .problem import Problem, to_x
-from .rows import whitened
+from .rows import Row, whitened
 
 QUANTILES = {"q025": 2.5, "q16": 16.0, "q50": 50.0, "q84": 84.0, "q975": 97.5}
 RHAT_LIMIT = 1.01  # above: the chains disagree
@@ -87,7 +88,7 @@ def log_density(problem: Problem, z, d, smoothing):
     (``rows.whitened``): -|r|^2 / 2 plus log |dx/dz|; -inf where it is not finite (no exchange can be
     computed there)."""
     r, _ = whitened(problem, z, d, smoothing)
-    dxdz = jax.jvp(lambda q: to_x(q, d["lo"], d["hi"]), (z,), (jnp.ones_like(z),))[1]
+    dxdz = jax.jvp(lambda q: to_x(q, d.lo, d.hi), (z,), (jnp.ones_like(z),))[1]
     value = -0.5 * jnp.sum(r * r) + jnp.sum(jnp.log(dxdz))
     return jnp.where(jnp.isfinite(value), value, -jnp.inf)
 
@@ -243,12 +244,12 @@ def _no_carry(problem: Problem, d, smoothing, z0):
     return jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)
 
 
-def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, warmup: int | None = None,
+def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int = 4, warmup: int | None = None,
            seed: int = 0, smoothing: float = 1e-3, dtype=None, devices=None, offset=None,
            progress: bool = False) -> Posterior:
     """``draws`` NUTS draws per chain from the posterior of one fit's unknowns (the module's docstring).
 
-    row: the fit's arrays of one case ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw"); z_best (n,): its
+    row: the fit's arrays of one case (``FitArrays.row``); z_best (n,): its
     estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
     added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``). progress: a bar (stderr)
@@ -263,8 +264,8 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
     n = len(problem.unknowns)
     z0 = np.asarray(z_best, np.float64)[None] + START_JITTER * rng.standard_normal((chains, n))
     keys = jax.random.split(jax.random.key(seed), chains)
-    d = {k: jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), row[k])
-         for k in ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw")}
+    d = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype),
+                               Row(row.inputs, row.values, row.sigmas, row.lo, row.hi, row.pm, row.pw))
     z0 = jnp.asarray(z0, dtype)
     if len(devices) > 1 and chains % len(devices) == 0:
         place = row_placement(devices)
@@ -286,7 +287,7 @@ def sample(problem: Problem, row: dict, z_best, *, draws: int, chains: int = 4, 
     bar.close()
     zs, divergent = (np.concatenate(a, axis=1)[:, warmup:steps] for a in zip(*parts))
     step_size = carry[1].step_size
-    x = np.asarray(jax.vmap(jax.vmap(lambda z: to_x(z, d["lo"], d["hi"])))(zs), np.float64)
+    x = np.asarray(jax.vmap(jax.vmap(lambda z: to_x(z, d.lo, d.hi)))(zs), np.float64)
     x = x + (0.0 if offset is None else np.asarray(offset, np.float64))
     return summarize(list(problem.unknowns), x, int(np.sum(np.asarray(divergent))), warmup, seed,
                      [float(s) for s in np.asarray(step_size)])

@@ -18,12 +18,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.case import Case, CaseError, get_input
-from ks_jax.case.scale import move_scene, origin_offset, scene_origin
+from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
 from ks_jax.limits import check_memory
 from ks_jax.model.types import OK, status_text
 
+from .arrays import batch_arrays
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
@@ -31,7 +31,7 @@ from .posterior import sampler
 from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .problem import predict, to_z
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
-from .rows import count_at_best, rows_per_call, run_rows, several_minima, stack, stick_thresholds
+from .rows import count_at_best, rows_per_call, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, one
@@ -150,50 +150,6 @@ def _prepare(case: Case, unknowns, evidence, checks: PathChecks | None = None):
     return unknowns, evidence, problem
 
 
-def _arrays(case, unknowns, evidence, dtype):
-    """One case's ``_batch_arrays``: a dict of (n,) and (m,) arrays and its ``inputs``."""
-    stacked, inputs, _ = _batch_arrays([case], [(unknowns, evidence, None)], dtype)
-    return {k: v[0] for k, v in stacked.items()} | {"inputs": inputs[0]}
-
-
-def _batch_arrays(cases, prepared, dtype):
-    """The fit's arrays of a batch of cases (``prepared``: each case's unknowns and evidence, the same paths in
-    each), SI, float64: a dict of (B, n) and (B, m) arrays, the list of the cases' inputs and those stacked
-    (``rows.stack``).
-
-    In float32 with a scene more than 1 km from the origin, the scene is fitted about its CGs' midpoint
-    (``ks_jax.case.scale.scene_origin``): ``inputs``, the bounds (``lo``, ``hi``), prior means (``pm``) and
-    evidence ``values`` of x, y positions are moved by it, and ``x_offset``/``e_offset`` (what was subtracted
-    from each unknown and each piece of evidence) move the results back. ``pw`` is 1 / the prior's sigma (0 where
-    none). ``current`` (the case's values of the unknowns) and the unknowns' own ``lower``, ``upper``, ``start``,
-    ``prior_mean`` and ``prior_sigma`` (NaN where none), for the starts and the analysis, stay unmoved."""
-    B = len(cases)
-    paths = [u.path for u in prepared[0][0]]
-    evidence_paths = [e.path for e in prepared[0][1]]
-    n, m = len(paths), len(evidence_paths)
-    nan = float("nan")
-    own = np.array([[(u.lower, u.upper, nan if u.start is None else u.start, *(u.prior or (nan, nan))) for u in us]
-                    for us, _, _ in prepared], np.float64).reshape(B, n, 5)
-    measured = np.array([[(e.value, e.sigma) for e in es] for _, es, _ in prepared], np.float64).reshape(B, m, 2)
-    x_offset, e_offset, inputs = np.zeros((B, n)), np.zeros((B, m)), []
-    for i, case in enumerate(cases):
-        origin = scene_origin(case.inputs, dtype=dtype)
-        inputs.append(case.inputs if origin is None else move_scene(case.inputs, origin, case.auto_point))
-        if origin is not None:
-            x_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in paths]
-            e_offset[i] = [float(origin_offset(p, origin) or 0.0) for p in evidence_paths]
-    stacked = stack(inputs)
-    unmoved = stacked if all(a is c.inputs for a, c in zip(inputs, cases)) else stack([c.inputs for c in cases])
-    current = np.stack([get_input(unmoved, p) for p in paths], axis=-1).reshape(B, n)
-    lower, upper, start, prior_mean, prior_sigma = np.moveaxis(own, 2, 0)
-    has_prior = ~np.isnan(prior_sigma)
-    return {"values": measured[..., 0] - e_offset, "sigmas": measured[..., 1], "lo": lower - x_offset,
-            "hi": upper - x_offset, "pm": np.where(has_prior, prior_mean, 0.0) - x_offset,
-            "pw": np.where(has_prior, 1.0 / np.where(has_prior, prior_sigma, 1.0), 0.0), "current": current,
-            "x_offset": x_offset, "e_offset": e_offset, "lower": lower, "upper": upper, "start": start,
-            "prior_mean": prior_mean, "prior_sigma": prior_sigma}, inputs, stacked
-
-
 @functools.lru_cache(maxsize=64)
 def _labels(problem: Problem):
     """A problem's evidence keys (``_keys``), their units (``output_units``) and which are inputs: the same for
@@ -203,7 +159,7 @@ def _labels(problem: Problem):
         tuple(not is_out for _, is_out, _ in problem.evidence)
 
 
-def _results(cases, prepared, problem, rows, found, info, fitted, stacked) -> list[FitResult]:
+def _results(cases, prepared, problem, rows, found, info, fitted, arrays) -> list[FitResult]:
     """The FitResults of the ``fitted`` cases of a batch (indices; the rows of ``info``, their analysis by
     ``analyse_batch``, in that order), from each case's best start (``rows``: (B, ...), with ``at_best``, how many
     starts reached it, and ``stick_threshold``) and its starts (``found``). The analysis is edited here where a
@@ -228,7 +184,7 @@ def _results(cases, prepared, problem, rows, found, info, fitted, stacked) -> li
         info["undetermined"][k] = True
         info["std"][k] = np.inf
     chi2 = 2.0 * cost
-    dof = m + np.count_nonzero(stacked["pw"][F] > 0, axis=1) - np.count_nonzero(~info["undetermined"], axis=1)
+    dof = m + np.count_nonzero(arrays.pw[F] > 0, axis=1) - np.count_nonzero(~info["undetermined"], axis=1)
     improbable = ~stalled & (dof > 0) & (chi2 > chi2_quantile(np.maximum(dof, 1), CHI2_Z))
     res = rows["residuals"][F, :m].astype(np.float64)
     misfit = ~stalled & (np.abs(res) > 3).any(axis=1)
@@ -249,8 +205,8 @@ def _results(cases, prepared, problem, rows, found, info, fitted, stacked) -> li
             else:
                 _friction_bounded_below(mine, j, float(threshold[k]), prior, sliding=(float(mu[k]), float(sd[k])))
             info["statements"][k] = mine["statements"]
-    x = (rows["x"][F].astype(np.float64) + stacked["x_offset"][F]).tolist()
-    predicted = (rows["predicted"][F].astype(np.float64) + stacked["e_offset"][F]).tolist()
+    x = (rows["x"][F].astype(np.float64) + arrays.x_offset[F]).tolist()
+    predicted = (rows["predicted"][F].astype(np.float64) + arrays.e_offset[F]).tolist()
     std, corr, singular = info["std"].tolist(), info["corr"].tolist(), info["singular"].tolist()
     not_determined = (info["undetermined"] | info["poorly"]).tolist()
     converged, iterations = rows["converged"][F].tolist(), rows["iterations"][F].tolist()
@@ -341,7 +297,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     """The result of a case whose residuals (or their derivatives) are not finite at any start: its
     status says which evidence cannot be computed there, and why where that is known; every number is
     NaN (nothing was fitted, and nothing is blamed on the evidence's information)."""
-    inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays["inputs"])
+    inputs = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype), arrays.inputs)
     pred, _ = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
     pred = np.asarray(pred, np.float64)
     keys, kinds, _ = _labels(problem)
@@ -464,37 +420,40 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                  "give fewer starts (--starts) or fit fewer cases at once")
     check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
                  "give fewer refits")
-    stacked, case_inputs, inputs = _batch_arrays(cases, prepared, dtype)
+    arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
-    x0 = first_starts(problem.unknowns, stacked, starts, rng)
-    per_case = ("values", "sigmas", "lo", "hi", "pm", "pw")
+    x0 = first_starts(problem.unknowns, arrays, starts, rng)
+
+    def per_case(a):  # what the solver's rows take of each case, after its inputs
+        return a.values, a.sigmas, a.lo, a.hi, a.pm, a.pw
+
     # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
     # (``ROWS_PER_CALL``): one compiled program. A refit starts at the estimate (``refit_perturbed``), so that
     # the calls hold the fit's starts or the refits, whichever are more
     block = rows_per_call(max(len(cases) * starts, int(monte_carlo))) if monte_carlo else None
-    first = run_rows(problem, solver, max_iter, inputs, *(stacked[k] for k in per_case),
-                     to_z(x0, stacked["lo"][:, None], stacked["hi"][:, None]), smoothing, dtype, starts, block, devices)
+    first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
+                     to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)
     limit = MORE_STARTS * starts if max_starts is None else max(int(max_starts), starts)
-    dof = len(problem.evidence) + np.sum(stacked["pw"] > 0, axis=1) - len(problem.unknowns)
+    dof = len(problem.evidence) + np.sum(arrays.pw > 0, axis=1) - len(problem.unknowns)
     probed = np.zeros(len(cases), bool)
     while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
         room = found.count + starts <= limit
         todo = np.flatnonzero(room & ~settled(found.table["cost"], dof))
         if todo.size:
-            x_more = first_starts(problem.unknowns, {k: v[todo] for k, v in stacked.items()}, starts + 1, rng)[:, 1:]
+            x_more = first_starts(problem.unknowns, arrays.take(todo), starts + 1, rng)[:, 1:]
         else:  # settled: once per case, starts where the rounds can stop short (``rounds.other_side``)
             ask = np.flatnonzero(room & ~probed & np.isfinite(found.table["cost"]).any(axis=1))
             best = found.best(ask, ("x", "status", "sliding", "stick_ratio"))
-            sides, x_more = other_side(best, problem, *(stacked[k][ask] for k in ("lo", "hi", "pw")), starts)
+            sides, x_more = other_side(best, problem, arrays.lo[ask], arrays.hi[ask], arrays.pw[ask], starts)
             todo = ask[sides]
             if not todo.size:
                 break
             probed[todo] = True
-        z_more = to_z(x_more, stacked["lo"][todo, None], stacked["hi"][todo, None])
-        found.add(todo, run_rows(problem, solver, max_iter, jax.tree_util.tree_map(lambda v: v[todo], inputs),
-                                 *(stacked[k][todo] for k in per_case), z_more, smoothing, dtype, starts,
-                                 block or more_block(len(cases), todo.size, starts), devices))
+        z_more = to_z(x_more, arrays.lo[todo, None], arrays.hi[todo, None])
+        some = arrays.take(todo)
+        found.add(todo, run_rows(problem, solver, max_iter, some.inputs, *per_case(some), z_more, smoothing, dtype,
+                                 starts, block or more_block(len(cases), todo.size, starts), devices))
     everyone = np.arange(len(cases))
     rows = found.best(everyone)
     rows["at_best"] = count_at_best(found.table["cost"])
@@ -505,17 +464,18 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         sliding = fitted[(rows["status"][fitted] == OK) & rows["sliding"][fitted].astype(bool)]
         if sliding.size:
             rows["stick_threshold"][sliding] = stick_thresholds(
-                problem, jax.tree_util.tree_map(lambda v: v[sliding], inputs), rows["x"][sliding], smoothing, dtype)
-    info = analyse_batch(problem.unknowns, rows["x"][fitted] + stacked["x_offset"][fitted], rows["jacobian"][fitted],
-                         len(problem.evidence), *(stacked[k][fitted] for k in ("lower", "upper", "prior_sigma", "pw")),
+                problem, arrays.take(sliding).inputs, rows["x"][sliding], smoothing, dtype)
+    kept = arrays.take(fitted)
+    info = analyse_batch(problem.unknowns, rows["x"][fitted] + kept.x_offset, rows["jacobian"][fitted],
+                         len(problem.evidence), kept.lower, kept.upper, kept.prior_sigma, kept.pw,
                          rtol)
 
     def arrays_of(i):
-        return {k: v[i] for k, v in stacked.items()} | {"inputs": case_inputs[i]}
+        return arrays.row(i, case_inputs[i])
 
     results = [None] * len(cases)
     with _collector_paused():
-        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, found, info, fitted, stacked)):
+        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, found, info, fitted, arrays)):
             results[i] = r
     for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
         if results[i] is None:  # no start could even be evaluated
@@ -525,7 +485,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         if posterior:
             r.posterior = sample_posterior(problem, arrays_of(i), z, draws=int(posterior), chains=int(chains),
                                            seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
-                                           offset=stacked["x_offset"][i], progress=progress)
+                                           offset=arrays.x_offset[i], progress=progress)
         if monte_carlo:
             everywhere = several_minima(found.table["cost"][i], found.table["converged"][i])
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,

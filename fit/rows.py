@@ -4,6 +4,7 @@ vmapped call, or in calls of one row count where a fit and its Monte Carlo refit
 from __future__ import annotations
 
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -19,14 +20,28 @@ from .solvers import SOLVERS
 Z_LIMIT = 40.0  # |z| bound of a transform's saturating side: x within ~4e-18 of the bound (no underflow)
 
 
-def whitened(problem: Problem, z, d, smoothing):
-    """The whitened residuals (m + n,) at the unconstrained unknowns z (n,): the evidence's deviations in sigmas
-    (angles wrapped), then the priors' (0 where none); and (predicted evidence (m,), the exchange's flags).
-    ``d``: one row's "inputs", "values", "sigmas", "lo", "hi", "pm" (prior means), "pw" (1 / prior sigmas)."""
-    x = to_x(z, d["lo"], d["hi"])
-    pred, flags = predict(problem, d["inputs"], x, smoothing)
-    dev = jnp.stack([wrap(pred[k] - d["values"][k], period) for k, (_, _, period) in enumerate(problem.evidence)])
-    return jnp.concatenate([dev / d["sigmas"], (x - d["pm"]) * d["pw"]]), (pred, flags)
+class Row(NamedTuple):
+    """What the residuals of one row (one start of one case, or one case) are computed from: the case's
+    ``inputs``, its evidence's ``values`` and ``sigmas`` (m,), its unknowns' bounds ``lo``, ``hi``, priors' means
+    ``pm`` and 1 / sigmas ``pw`` (n,; 0 where none). Stacked along a leading axis: many rows."""
+
+    inputs: object
+    values: object
+    sigmas: object
+    lo: object
+    hi: object
+    pm: object
+    pw: object
+
+
+def whitened(problem: Problem, z, d: Row, smoothing):
+    """The whitened residuals (m + n,) at the unconstrained unknowns z (n,) of row ``d``: the evidence's deviations
+    in sigmas (angles wrapped), then the priors' (0 where none); and (predicted evidence (m,), the exchange's
+    flags)."""
+    x = to_x(z, d.lo, d.hi)
+    pred, flags = predict(problem, d.inputs, x, smoothing)
+    dev = jnp.stack([wrap(pred[k] - d.values[k], period) for k, (_, _, period) in enumerate(problem.evidence)])
+    return jnp.concatenate([dev / d.sigmas, (x - d.pm) * d.pw]), (pred, flags)
 
 
 @partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
@@ -44,8 +59,7 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     def fun(z, d):
         return whitened(problem, z, d, smoothing)
 
-    data = {"inputs": inputs, "values": values, "sigmas": sigmas, "lo": lo, "hi": hi, "pm": prior_mean,
-            "pw": prior_weight}
+    data = Row(inputs, values, sigmas, lo, hi, prior_mean, prior_weight)
     z_min = jnp.where(jnp.isfinite(lo), -Z_LIMIT, -jnp.inf)
     z_max = jnp.where(jnp.isfinite(hi), Z_LIMIT, jnp.inf)
     sol = SOLVERS[solver](fun, z0, data, max_iter, z_min, z_max)

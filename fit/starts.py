@@ -56,10 +56,10 @@ def starts(paths, lower, upper, start, prior_mean, prior_sigma, current, n_start
 
 
 def first_starts(paths, arrays, n_starts, rng) -> np.ndarray:
-    """``starts`` in the fit's coordinates (moved as ``arrays``: one fit's (n,) or a batch's (B, n) arrays of
-    ``reconstruction._arrays``): (S, n) or (B, S, n)."""
-    one = np.ndim(arrays["lower"]) == 1
+    """``starts`` in the fit's coordinates (moved as ``arrays``, a ``FitArrays``: one fit's (n,) or a batch's
+    (B, n)): (S, n) or (B, S, n)."""
+    one = np.ndim(arrays.lower) == 1
     lift = (lambda a: np.asarray(a)[None]) if one else np.asarray
-    x = starts(paths, *(lift(arrays[k]) for k in ("lower", "upper", "start", "prior_mean", "prior_sigma", "current")),
-               n_starts, rng) - lift(arrays["x_offset"])[:, None]
+    x = starts(paths, *map(lift, (arrays.lower, arrays.upper, arrays.start, arrays.prior_mean, arrays.prior_sigma,
+                                  arrays.current)), n_starts, rng) - lift(arrays.x_offset)[:, None]
     return x[0] if one else x

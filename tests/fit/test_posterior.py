@@ -17,6 +17,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import fit  # noqa: E402
+from fit.arrays import case_arrays  # noqa: E402
 from fit.posterior import run_chains  # noqa: E402
 from fit.report import text_report  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
@@ -132,10 +133,10 @@ def test_with_rest_positions_the_gradient_is_forward_mode_through_the_motions_wh
     central differences of the log-density (step 1e-5 in z) to 1e-6 of its size."""
     case = load_case(CASES / "fit_rest_positions.json")
     unknowns, evidence, problem = fit.reconstruction._prepare(case, None, None)
-    a = fit.reconstruction._arrays(case, unknowns, evidence, np.float64)
-    d = {k: jax.tree_util.tree_map(jnp.asarray, a[k]) for k in ("inputs", "values", "sigmas", "lo", "hi", "pm", "pw")}
+    a = case_arrays(case, unknowns, evidence, np.float64)
+    d = jax.tree_util.tree_map(jnp.asarray, a)
     assert problem.motion is not None and not problem.motion.reverse
-    z = jnp.asarray(fit.problem.to_z(np.array([25.0, 35.0]) * 0.44704, a["lo"], a["hi"]))
+    z = jnp.asarray(fit.problem.to_z(np.array([25.0, 35.0]) * 0.44704, a.lo, a.hi))
     smoothing = jnp.asarray(1e-3)
     value, gradient = _value_and_gradient(problem, z, d, smoothing)
 
