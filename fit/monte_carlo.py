@@ -7,13 +7,12 @@ import math
 
 import numpy as np
 
-from ks_jax.case import input_kind
 from ks_jax.progress import Progress
 
 from .problem import to_z
+from .report import linearisation_note
 from .rows import best_start, run_rows, stack
 from .starts import first_starts
-from .uncertainty import fmt
 
 PERCENTILES = (5, 50, 95)
 
@@ -48,11 +47,7 @@ def linearisation_notes(result) -> list:
         shift = (p50 - result.estimate[u.path]) / s
         if 1 / MC_SPREAD_RATIO <= ratio <= MC_SPREAD_RATIO and abs(shift) <= MC_MEDIAN_SHIFT:
             continue
-        kind = input_kind(u.path)
-        notes.append(f"{u.path}: the Monte Carlo refits spread {fmt(p5, kind)} to {fmt(p95, kind)} (5-95%), median "
-                     f"{fmt(p50, kind)}, where the standard error gives {fmt(result.estimate[u.path] - 1.645 * s, kind)} "
-                     f"to {fmt(result.estimate[u.path] + 1.645 * s, kind)}: the results are not linear in it over its "
-                     f"uncertainty, or a bound cuts the refits off; read the Monte Carlo percentiles")
+        notes.append(linearisation_note(u.path, result.estimate[u.path], s, p5, p50, p95))
     return notes
 
 

@@ -252,7 +252,7 @@ def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int 
     row: the fit's arrays of one case (``FitArrays.row``); z_best (n,): its
     estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
-    added to the draws (a scene fitted about its own origin, ``reconstruction._arrays``). progress: a bar (stderr)
+    added to the draws (a scene fitted about its own origin: ``FitArrays.x_offset``). progress: a bar (stderr)
     once the draws have taken ``PROGRESS_DELAY`` s: they run in compiled segments of ``SEGMENT`` transitions."""
     sampler()
     if draws < 1 or chains < 1:

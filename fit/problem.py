@@ -53,7 +53,7 @@ from ks_jax.case import (
 )
 from ks_jax.solve import solve_inputs
 
-from .uncertainty import fmt
+from .report import fmt
 
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
 NOT_FITTABLE = {"sliding": "a yes/no flag", "at_rest": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}

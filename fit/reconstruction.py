@@ -34,7 +34,8 @@ from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
 from .rows import count_at_best, rows_per_call, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
-from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, one
+from .report import improbable_note, misfit_note, not_fitted_status, stalled_statement, status_note, unmoved_note
+from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, friction_bounded_below
 
 
 @dataclass
@@ -176,39 +177,24 @@ def _results(cases, prepared, problem, rows, found, info, fitted, arrays) -> lis
     for k in np.flatnonzero(stalled):
         i = F[k]
         reached = int(count[k]) - int(np.count_nonzero(found.table["stalled"][i] & found.table["present"][i]))
-        info["statements"][k] = [
-            f"nothing is determined: the fit ended where the exchange is '{texts[status[k]]}' (no impulse), and there "
-            f"no unknown changes any evidence; {reached} of {count[k]} starts reached an exchange. This says nothing "
-            "about the evidence: give starts or bounds where the vehicles collide (e.g. a speed's lower bound), or "
-            "more starts (--starts)"]
-        info["undetermined"][k] = True
-        info["std"][k] = np.inf
+        info.statements[k] = [stalled_statement(texts[status[k]], reached, count[k])]
+        info.undetermined[k] = True
+        info.std[k] = np.inf
     chi2 = 2.0 * cost
-    dof = m + np.count_nonzero(arrays.pw[F] > 0, axis=1) - np.count_nonzero(~info["undetermined"], axis=1)
+    dof = m + np.count_nonzero(arrays.pw[F] > 0, axis=1) - np.count_nonzero(~info.undetermined, axis=1)
     improbable = ~stalled & (dof > 0) & (chi2 > chi2_quantile(np.maximum(dof, 1), CHI2_Z))
     res = rows["residuals"][F, :m].astype(np.float64)
     misfit = ~stalled & (np.abs(res) > 3).any(axis=1)
     unmoved = ~np.any(rows["jacobian"][F, :m] != 0, axis=2) & np.array(is_input, bool)  # (K, m)
-    if "contact.friction" in paths:  # after chi^2's degrees of freedom: the evidence's, as the fit has them
+    if "contact.friction" in paths:  # after chi^2's degrees of freedom
         j = paths.index("contact.friction")
-        ok = status == OK
-        mu, sd = rows["x"][F, j].astype(np.float64), info["std"][:, j].copy()
-        threshold = rows["stick_threshold"][F]
-        sticks = ok & ~rows["sliding"][F].astype(bool)
-        with np.errstate(invalid="ignore"):
-            near = (ok & ~sticks & np.isfinite(sd) & np.isfinite(threshold) & (mu + NEAR_STICK * sd >= threshold))
-        for k in np.flatnonzero(sticks | near):
-            mine = one(info, k)
-            prior = prepared[F[k]][0][j].prior
-            if sticks[k]:
-                _friction_bounded_below(mine, j, float(rows["stick_ratio"][F[k]]), prior)
-            else:
-                _friction_bounded_below(mine, j, float(threshold[k]), prior, sliding=(float(mu[k]), float(sd[k])))
-            info["statements"][k] = mine["statements"]
+        friction_bounded_below(info, j, rows["x"][F], status == OK, rows["sliding"][F].astype(bool),
+                               rows["stick_ratio"][F], rows["stick_threshold"][F],
+                               [prepared[i][0][j].prior for i in F])
     x = (rows["x"][F].astype(np.float64) + arrays.x_offset[F]).tolist()
     predicted = (rows["predicted"][F].astype(np.float64) + arrays.e_offset[F]).tolist()
-    std, corr, singular = info["std"].tolist(), info["corr"].tolist(), info["singular"].tolist()
-    not_determined = (info["undetermined"] | info["poorly"]).tolist()
+    std, corr, singular = info.std.tolist(), info.corr.tolist(), info.singular.tolist()
+    not_determined = (info.undetermined | info.poorly).tolist()
     converged, iterations = rows["converged"][F].tolist(), rows["iterations"][F].tolist()
     converged_starts = np.count_nonzero(found.table["converged"][F] & found.table["present"][F], axis=1).tolist()
     res_list = res.tolist()
@@ -218,79 +204,27 @@ def _results(cases, prepared, problem, rows, found, info, fitted, arrays) -> lis
         starts, best = int(count[k]), int(at_best[k])
         notes = []
         if misfit[k]:
-            worst = [(key, r) for key, r in zip(keys, res_list[k]) if abs(r) > 3]
-            notes.append("evidence not reproduced within 3 sigma: " + ", ".join(f"{key} ({r:+.1f} sigma)"
-                                                                                for key, r in worst)
-                         + ": " + _misfit_cause(best, starts))
+            notes.append(misfit_note([(key, r) for key, r in zip(keys, res_list[k]) if abs(r) > 3], best, starts))
         if improbable[k]:
-            d = int(dof[k])
-            notes.append(f"chi^2 = {chi2[k]:.3g} for {d} degree{'s' * (d != 1)} of freedom: larger than the sigmas "
-                         f"allow (by chance in under 1% of fits): " + _misfit_cause(best, starts))
-        notes += [f"evidence {key} is an input that no unknown changes: it only adds a constant to chi^2"
-                  for key, u in zip(keys, unmoved[k]) if u]
+            notes.append(improbable_note(chi2[k], int(dof[k]), best, starts))
+        notes += [unmoved_note(key) for key, u in zip(keys, unmoved[k]) if u]
         text = texts[status[k]]
         if text != "ok":
-            notes.append(f"the exchange at the estimate has status '{text}'")
+            notes.append(status_note(text))
         out.append(FitResult(
             case_name=cases[i].name, unknowns=list(unknowns), evidence=list(evidence),
             estimate=dict(zip(paths, x[k])), std=dict(zip(paths, std[k])),
             correlation={p: dict(zip(paths, r)) for p, r in zip(paths, corr[k])},
             fitted=dict(zip(keys, predicted[k])), residuals=dict(zip(keys, res_list[k])),
-            converged=bool(converged[k]), unidentified=info["statements"][k], at_bound=info["at_bound"][k],
+            converged=bool(converged[k]), unidentified=info.statements[k], at_bound=info.at_bound[k],
             not_determined=[p for p, nd in zip(paths, not_determined[k]) if nd],
             cost=float(cost[k]), status=text, starts=starts, starts_converged=converged_starts[k],
             starts_at_best=best, iterations=int(iterations[k]), singular_values=singular[k],
-            covariance=info["cov"][k].copy(), notes=notes, evidence_kinds=list(kinds)))
+            covariance=info.cov[k].copy(), notes=notes, evidence_kinds=list(kinds)))
     return out
 
 
 _predict = quick_jit(predict, static_argnums=0)  # one row: quick to compile (``compilation.quick_jit``)
-
-
-def _friction_bounded_below(info, j, least, prior=None, sliding=None):
-    """A contact that sticks at the estimate: friction only has to exceed ``least`` (|J_t| / J_n); any
-    value above gives the same exchange (to the smoothing), so the evidence sets no estimate of it.
-    Marks unknown ``j`` not determined in ``info`` (``uncertainty.one`` of ``analyse_batch``'s dict) and says so; with a prior
-    (mean, sigma) on it, the prior alone fixes it: its standard error is the prior's sigma.
-    ``sliding`` = (estimate, standard error): the contact slides at the estimate, but would stick from
-    ``least`` on, within NEAR_STICK standard errors: above ``least`` the fit is as flat, so the
-    standard error says nothing of how high friction can be; the evidence gives a lower limit only."""
-    info["poorly"][j] = False
-    info["corr"][j, :] = info["corr"][:, j] = np.nan
-    info["cov"][j, :] = info["cov"][:, j] = np.inf
-    if sliding is None:
-        text = (f"contact.friction is bounded below only: the contact sticks at the estimate, which needs a friction "
-                f"of at least {least:.3g}; any friction above that gives the same exchange, so the evidence sets no "
-                "value")
-    else:
-        mu, s = sliding
-        text = (f"contact.friction is bounded below only: the contact slides at the estimate ({mu:.3g} +/- {s:.2g} "
-                f"by the linearisation), but from {least:.3g}, within {NEAR_STICK:g} standard errors, it would stick, "
-                f"and every friction above that gives the same exchange; the evidence puts friction above about "
-                f"{max(mu - NEAR_STICK * s, 0.0):.3g} and sets no value")
-    if prior is None:
-        info["std"][j] = np.inf
-        info["undetermined"][j] = True
-    else:
-        info["std"][j] = prior[1]
-        info["cov"][j, :] = info["cov"][:, j] = 0.0
-        info["cov"][j, j] = prior[1] ** 2
-        info["corr"][j, j] = 1.0
-        text += ". Only the prior on contact.friction fixes it: its standard error is the prior's"
-    info["statements"] = [s for s in info["statements"] if not s.startswith("contact.friction is ")] + [text]
-
-
-NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
-
-
-def _misfit_cause(at_best: int, starts: int) -> str:
-    """Why a fit leaves evidence unexplained: bad evidence or sigmas, or a local minimum if few starts found it."""
-    text = ("the evidence disagrees with itself or with the fixed inputs (the standard errors assume the sigmas "
-            "are right, and are too small if they are not)")
-    if at_best <= max(1, starts // 4):
-        text += (f"; or this is a local minimum: only {at_best} of {starts} starts reached it, so run more starts "
-                 "(--starts) before blaming the evidence")
-    return text
 
 
 def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, starts) -> FitResult:
@@ -301,14 +235,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     pred, _ = _predict(problem, inputs, jnp.asarray(x, dtype), jnp.asarray(smoothing, dtype))
     pred = np.asarray(pred, np.float64)
     keys, kinds, _ = _labels(problem)
-    bad = [k for k, v in zip(keys, pred) if not np.isfinite(v)]
-    if bad:
-        why = ("; EES is undefined where both crushes are 0 (the impulse centroid on or outside both boxes), "
-               "so it cannot be evidence for such a contact" if any(k.split(" ")[0].endswith(".ees") for k in bad)
-               else "")
-        reason = f"invalid: {', '.join(bad)} cannot be computed (NaN) at any start{why}"
-    else:
-        reason = "invalid: the derivatives of the residuals are not finite at any start: nothing can be fitted"
+    reason = not_fitted_status([k for k, v in zip(keys, pred) if not np.isfinite(v)])
     paths = [u.path for u in unknowns]
     nan = float("nan")
     return FitResult(

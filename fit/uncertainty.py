@@ -1,4 +1,5 @@
-"""Uncertainty at the optimum: Laplace covariance, what the evidence does not determine, in words.
+"""Uncertainty at the optimum: Laplace covariance, and the rules of what the evidence does not determine (said in
+words by ``report``).
 
 Everything here is NumPy, after the jitted fit, on a batch of fits of the same unknowns (small n x n
 matrices, decomposed in one batched call each).
@@ -31,34 +32,15 @@ bound width: the bound, not the evidence, sets them; their Laplace std ignores t
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from ks_jax import units as U
-from ks_jax.case import input_kind
+from .report import FRICTION_STATEMENT, NO_DERIVATIVES, at_bound_statement, direction_statement, friction_statement
+from .report import poorly_statement
 
 INVOLVED = 0.01
 AT_BOUND = 1e-4
-
-# display units: kind -> (unit name, SI per unit, step used in sentences, in display units)
-DISPLAY = {
-    "velocity": ("mph", U.MPH, 1.0),
-    "length": ("ft", U.FT, 1.0),
-    "angle": ("deg", U.DEG, 1.0),
-    "angular_velocity": ("deg/s", U.DEG_S, 1.0),
-    "time": ("s", 1.0, 0.01),
-    "mass": ("lb", U.LB, 100.0),
-    "inertia": ("kg m^2", 1.0, 100.0),
-    "dimensionless": ("", 1.0, 0.01),
-    "degrees": ("deg", 1.0, 1.0),
-    "impulse": ("lbf s", U.LBF_S, 10.0),
-    "energy": ("ft lbf", U.FT_LBF, 100.0),
-    "force": ("lbf", U.LBF, 10.0),
-}
-SI_NAME = {"velocity": "m/s", "length": "m", "angle": "rad", "angular_velocity": "rad/s", "time": "s",
-           "mass": "kg", "inertia": "kg m^2", "dimensionless": "", "degrees": "deg", "impulse": "N s",
-           "energy": "J", "force": "N"}
-
 
 CHI2_Z = 2.326  # the standard normal's 99% quantile: a chi^2 above its 99% quantile is a note
 
@@ -72,30 +54,6 @@ def chi2_quantile(dof: int, z: float) -> float:
 
 def default_rtol(dtype) -> float:
     return 1e-6 if np.finfo(dtype).eps < 1e-10 else 1e-3
-
-
-def fmt(x_si: float, kind: str, digits: int = 4, si: bool = False) -> str:
-    """A value in the reconstructionist's unit, e.g. '20.01 mph'; with si=True also '(8.944 m/s)'."""
-    if x_si is None or not math.isfinite(x_si):
-        return "not determined" if x_si is None or math.isinf(x_si) else "nan"
-    name, scale, _ = DISPLAY.get(kind, ("", 1.0, 1.0))
-    text = _number(x_si / scale, digits) + (f" {name}" if name else "")
-    if si and SI_NAME.get(kind, "") != name:
-        text += f" ({_number(x_si, digits)}{' ' + SI_NAME[kind] if SI_NAME.get(kind) else ''})"
-    return text
-
-
-def _number(v: float, digits: int) -> str:
-    """``digits`` significant digits; 0 for a value within rounding of 0 (a speed at its bound of 0 is
-    1e-16 m/s), whole numbers with thousands separators from 10^digits on (89,798 ft lbf, not 8.98e+04), and
-    powers of ten from 1e15 on (a value far beyond any crash, shown so that its size can be read)."""
-    if abs(v) < 1e-9:
-        return "0"
-    if abs(v) >= 1e15:
-        return f"{v:.{digits}g}"
-    if abs(v) >= 10**digits:
-        return f"{v:,.0f}"
-    return f"{v:.{digits}g}"
 
 
 def scales(lo, hi, prior_sigma, x) -> np.ndarray:
@@ -126,50 +84,37 @@ def _rref_basis(N: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return (A / np.max(np.abs(A), axis=1, keepdims=True)).T
 
 
-def describe_direction(paths, v_scaled: np.ndarray, scale: np.ndarray, prior_paths: list[str]) -> str:
-    """Words for a null direction v (in scaled units) of the unknowns at ``paths``: which move together, by how
-    much."""
-    d = v_scaled * scale  # SI
-    big = np.abs(v_scaled) >= INVOLVED * np.max(np.abs(v_scaled))
-    idx = [j for j in range(len(paths)) if big[j]]  # in the user's order; the first is the reference
-    names = [paths[j] for j in idx]
-    if len(idx) == 1:
-        text = (f"{names[0]} is not determined by the evidence: changing it changes none of the evidence "
-                "(to first order)")
-    else:
-        ref = idx[0]
-        kind = input_kind(paths[ref])
-        _, unit_si, step = DISPLAY.get(kind, ("", 1.0, 1.0))
-        factor = step * unit_si / abs(d[ref])
-        parts = []
-        for j in idx:
-            amount = d[j] * factor * np.sign(d[ref])
-            verb = "raising" if amount > 0 else "lowering"
-            parts.append(f"{verb} {paths[j]} by {fmt(abs(amount), input_kind(paths[j]), 3)}")
-        listing = ", ".join(names[:-1]) + f" and {names[-1]}"
-        text = (f"{listing} are not determined separately: {parts[0]} while " + ", ".join(parts[1:])
-                + " changes none of the evidence (to first order); the evidence fixes only a combination of them")
-    if prior_paths:
-        text += f". Only the prior on {', '.join(prior_paths)} fixes this"
-    return text
+@dataclass
+class Analysis:
+    """What the linearisation at the optimum says of B fits of the same n unknowns (``analyse_batch``): cov
+    (B, n, n) (inf rows and columns for undetermined unknowns), std (B, n), corr (B, n, n) (NaN where undefined),
+    singular (B, n) (singular values of the scaled evidence Jacobian), undetermined (B, n) (no standard error),
+    poorly (B, n) (a standard error wider than a uniform guess within the bounds); and per fit the statements of
+    what the evidence does not determine and of the unknowns at a bound (lists of str)."""
+
+    cov: np.ndarray
+    std: np.ndarray
+    corr: np.ndarray
+    singular: np.ndarray
+    undetermined: np.ndarray
+    poorly: np.ndarray
+    statements: list
+    at_bound: list
+
+    def row(self, i: int) -> Analysis:
+        """Fit ``i``'s analysis (arrays are views: editing them edits the batch's)."""
+        return Analysis(self.cov[i], self.std[i], self.corr[i], self.singular[i], self.undetermined[i],
+                        self.poorly[i], self.statements[i], self.at_bound[i])
 
 
-def one(info: dict, i: int) -> dict:
-    """Row ``i`` of ``analyse_batch``'s dict (arrays are views: editing them edits the batch's)."""
-    return {k: v[i] for k, v in info.items()}
-
-
-def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: float) -> dict:
+def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: float) -> Analysis:
     """Covariance and identifiability at the optimum of B fits of the same unknowns, in NumPy's batched
     linear algebra (one decomposition call for all rows, not one per fit).
 
     paths: the n unknowns' input paths; x (B, n) SI; J (B, m + n, n): d(whitened residuals)/dx; m: number of
     evidence rows; lo, hi (B, n): the unknowns' bounds (SI, +-inf for none); prior_sigma (B, n) (NaN where
-    none); prior_weight (B, n): 1/prior sigma or 0; rtol: relative singular-value threshold. Returns a dict
-    with cov (B, n, n) (inf rows/cols for undetermined unknowns), std (B, n), corr (B, n, n) (nan where
-    undefined), singular (B, n) (singular values of the scaled evidence Jacobian), undetermined (B, n) bool,
-    poorly (B, n) bool (a standard error wider than a uniform guess within the bounds), and per row lists of
-    str: statements, at_bound.
+    none); prior_weight (B, n): 1/prior sigma or 0; rtol: relative singular-value threshold. Returns their
+    ``Analysis``.
     """
     x, J, lo, hi, ps, pw = (np.asarray(a, np.float64) for a in (x, J, lo, hi, prior_sigma, prior_weight))
     B, n = x.shape
@@ -209,29 +154,61 @@ def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: 
         poorly = ~undetermined & np.isfinite(lo) & np.isfinite(hi) & (std > (hi - lo) / math.sqrt(12.0))
 
     statements, at_bound = [[] for _ in range(B)], [[] for _ in range(B)]
-    kinds = [input_kind(path) for path in paths]
     for i in np.flatnonzero(null.any(axis=1) & ~bad):
         basis = _rref_basis(Vt[i].T[:, null[i]])
         for v in basis.T:
             involved = np.abs(v) >= INVOLVED * np.max(np.abs(v))
             fixed_by_prior = not any(undetermined[i][involved])
             priors = [paths[j] for j in np.flatnonzero(involved) if pw[i, j] > 0] if fixed_by_prior else []
-            statements[i].append(describe_direction(paths, v, s_j[i], priors))
+            statements[i].append(direction_statement(paths, v * s_j[i], np.flatnonzero(involved).tolist(), priors))
     for i in np.flatnonzero((at_lo | at_hi | poorly).any(axis=1) & ~bad):
-        for j, (path, kind) in enumerate(zip(paths, kinds)):
+        for j, path in enumerate(paths):
             for side, b, at in (("lower", lo[i, j], at_lo[i, j]), ("upper", hi[i, j], at_hi[i, j])):
                 if at:
-                    at_bound[i].append(f"{path} is at its {side} bound {fmt(b, kind)}: the bound, not the evidence, "
-                                       "sets it (its standard error ignores the bound)")
+                    at_bound[i].append(at_bound_statement(path, side, b))
             if poorly[i, j]:
-                statements[i].append(
-                    f"{path} is poorly determined: its standard error {fmt(std[i, j], kind)} is wider than a uniform "
-                    f"guess within its bounds ({fmt((hi[i, j] - lo[i, j]) / math.sqrt(12), kind)})")
+                statements[i].append(poorly_statement(path, std[i, j], (hi[i, j] - lo[i, j]) / math.sqrt(12)))
     if bad.any():
         nan = np.nan
         cov[bad], std[bad], corr[bad], sv_full[bad] = nan, nan, nan, nan
         undetermined[bad], poorly[bad] = True, False
         for i in np.flatnonzero(bad):
-            statements[i] = ["the model has no finite derivatives at the estimate: no uncertainty can be given"]
-    return {"cov": cov, "std": std, "corr": corr, "singular": sv_full, "statements": statements,
-            "undetermined": undetermined, "poorly": poorly, "at_bound": at_bound}
+            statements[i] = [NO_DERIVATIVES]
+    return Analysis(cov, std, corr, sv_full, undetermined, poorly, statements, at_bound)
+
+
+NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
+
+
+def friction_bounded_below(analysis: Analysis, j, x, ok, sliding, stick_ratio, threshold, priors):
+    """The friction rule, for the fits of ``analysis`` whose unknown ``j`` is the contact's friction: where the
+    contact sticks at the estimate (``ok`` and not ``sliding``, (K,)), friction only has to exceed the friction
+    it needs (``stick_ratio`` = |J_t| / J_n); any value above gives the same exchange (to the smoothing), so the
+    evidence sets no estimate of it. Where it slides at ``x`` (K, n) but would stick from ``threshold`` (K,) on,
+    within ``NEAR_STICK`` standard errors, the fit is as flat above that, so the standard error says nothing of
+    how high friction can be: the evidence gives a lower limit only. Such a friction is marked not determined and
+    its statement replaces any other of it; with a prior ((mean, sigma) in ``priors``, else None), the prior alone
+    fixes it: its standard error is the prior's sigma. Edits ``analysis``; call after chi^2's degrees of freedom
+    are counted (the evidence's, as the fit has them)."""
+    mu, sd = np.asarray(x[:, j], np.float64), analysis.std[:, j].copy()
+    sticks = ok & ~sliding
+    with np.errstate(invalid="ignore"):
+        near = ok & ~sticks & np.isfinite(sd) & np.isfinite(threshold) & (mu + NEAR_STICK * sd >= threshold)
+    for k in np.flatnonzero(sticks | near):
+        a, prior = analysis.row(k), priors[k]
+        if sticks[k]:
+            text = friction_statement(float(stick_ratio[k]), prior=prior is not None)
+        else:
+            text = friction_statement(float(threshold[k]), (float(mu[k]), float(sd[k])), NEAR_STICK, prior is not None)
+        a.poorly[j] = False
+        a.corr[j, :] = a.corr[:, j] = np.nan
+        a.cov[j, :] = a.cov[:, j] = np.inf
+        if prior is None:
+            a.std[j] = np.inf
+            a.undetermined[j] = True
+        else:
+            a.std[j] = prior[1]
+            a.cov[j, :] = a.cov[:, j] = 0.0
+            a.cov[j, j] = prior[1] ** 2
+            a.corr[j, j] = 1.0
+        analysis.statements[k] = [s for s in a.statements if not s.startswith(FRICTION_STATEMENT)] + [text]

@@ -21,8 +21,7 @@ import numpy as np
 from fit import reconstruct
 from fit.posterior import sampler as posterior_sampler
 from fit.problem import Problem, apply_unknowns
-from fit.report import text_report
-from fit.uncertainty import DISPLAY
+from fit.report import DISPLAY, text_report
 
 from ..case import input_kind, input_ties, load_cases
 from ..case.errors import CaseError, visible, visible_lines

@@ -13,7 +13,7 @@ import fit
 from fit.problem import PathChecks, check_batch, make_problem, parse_evidence, parse_unknowns
 from fit.rounds import MORE_BLOCKS, more_block
 from fit.starts import START_SPREAD, starts
-from fit.uncertainty import analyse_batch, one
+from fit.uncertainty import analyse_batch
 from ks_jax import backend
 from ks_jax.case import CaseError, load_case
 from samples import CASES
@@ -94,24 +94,25 @@ def test_the_batch_analysis_is_the_closed_form_covariance_and_each_fit_analysed_
     info = analyse_batch(PATHS, x, J, m, lower, upper, prior_sigma, pw, 1e-6)
     for i in range(3):
         cov = np.linalg.inv(J[i, :m].T @ J[i, :m])
-        np.testing.assert_allclose(info["cov"][i], cov, rtol=1e-9)
-        np.testing.assert_allclose(info["std"][i], np.sqrt(np.diag(cov)), rtol=1e-9)
-        np.testing.assert_allclose(info["corr"][i], cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov))),
+        np.testing.assert_allclose(info.cov[i], cov, rtol=1e-9)
+        np.testing.assert_allclose(info.std[i], np.sqrt(np.diag(cov)), rtol=1e-9)
+        np.testing.assert_allclose(info.corr[i], cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov))),
                                    rtol=1e-9, atol=1e-12)
-        assert not info["undetermined"][i].any() and info["statements"][i] == []
-    assert list(info["undetermined"][3]) == [False, False, True, False] and info["std"][3, 2] == INF
-    assert np.isnan(info["corr"][3, 2]).all() and np.isinf(info["cov"][3, :, 2]).all()
-    assert [s for s in info["statements"][3] if s.startswith("contact.restitution is not determined")]
-    assert not info["undetermined"][4].any() and info["std"][4, 2] == pytest.approx(0.05, rel=1e-9)
-    assert any("Only the prior on contact.restitution" in s for s in info["statements"][4])
-    assert np.isnan(info["std"][5]).all() and "no finite derivatives" in info["statements"][5][0]
+        assert not info.undetermined[i].any() and info.statements[i] == []
+    assert list(info.undetermined[3]) == [False, False, True, False] and info.std[3, 2] == INF
+    assert np.isnan(info.corr[3, 2]).all() and np.isinf(info.cov[3, :, 2]).all()
+    assert [s for s in info.statements[3] if s.startswith("contact.restitution is not determined")]
+    assert not info.undetermined[4].any() and info.std[4, 2] == pytest.approx(0.05, rel=1e-9)
+    assert any("Only the prior on contact.restitution" in s for s in info.statements[4])
+    assert np.isnan(info.std[5]).all() and "no finite derivatives" in info.statements[5][0]
     for i in range(B):
-        alone = one(analyse_batch(PATHS, x[i:i + 1], J[i:i + 1], m, lower[i:i + 1], upper[i:i + 1],
-                                  prior_sigma[i:i + 1], pw[i:i + 1], 1e-6), 0)
-        batch = one(info, i)
+        alone = analyse_batch(PATHS, x[i:i + 1], J[i:i + 1], m, lower[i:i + 1], upper[i:i + 1],
+                              prior_sigma[i:i + 1], pw[i:i + 1], 1e-6).row(0)
+        batch = info.row(i)
         for k in ("cov", "std", "corr", "singular", "undetermined", "poorly"):
-            np.testing.assert_allclose(batch[k], alone[k], rtol=1e-12, atol=1e-15, err_msg=f"fit {i}: {k}")
-        assert batch["statements"] == alone["statements"] and batch["at_bound"] == alone["at_bound"]
+            np.testing.assert_allclose(getattr(batch, k), getattr(alone, k), rtol=1e-12, atol=1e-15,
+                                       err_msg=f"fit {i}: {k}")
+        assert batch.statements == alone.statements and batch.at_bound == alone.at_bound
 
 
 def test_the_batch_analysis_says_which_fits_sit_on_a_bound_or_are_poorly_determined():
@@ -125,11 +126,11 @@ def test_the_batch_analysis_says_which_fits_sit_on_a_bound_or_are_poorly_determi
     x = np.array([[0.0, 20.0, 0.3, 0.0], [10.0, 20.0, 0.3, 0.0]])
     none = np.full((2, n), NAN)
     info = analyse_batch(PATHS, x, J, m, lower, upper, none, np.zeros((2, n)), 1e-6)
-    assert list(info["poorly"][0]) == [False, False, False, True] and not info["poorly"][1].any()
-    assert info["std"][0, 3] == pytest.approx(10.0, rel=1e-12) and info["std"][1, 3] == pytest.approx(0.1, rel=1e-12)
-    assert [s for s in info["statements"][0] if s.startswith("contact.point[0] is poorly determined")]
-    assert len(info["at_bound"][0]) == 1 and info["at_bound"][0][0].startswith("vehicles[0].speed is at its lower")
-    assert info["at_bound"][1] == [] and info["statements"][1] == []
+    assert list(info.poorly[0]) == [False, False, False, True] and not info.poorly[1].any()
+    assert info.std[0, 3] == pytest.approx(10.0, rel=1e-12) and info.std[1, 3] == pytest.approx(0.1, rel=1e-12)
+    assert [s for s in info.statements[0] if s.startswith("contact.point[0] is poorly determined")]
+    assert len(info.at_bound[0]) == 1 and info.at_bound[0][0].startswith("vehicles[0].speed is at its lower")
+    assert info.at_bound[1] == [] and info.statements[1] == []
 
 
 def test_a_further_round_is_one_call_on_an_accelerator_and_calls_of_64_cases_on_a_cpu():

@@ -25,6 +25,7 @@ import pytest  # noqa: E402
 import fit  # noqa: E402
 from fit import rows as rc  # noqa: E402
 from fit.problem import Problem, to_x, to_z, wrap  # noqa: E402
+from fit.report import fmt  # noqa: E402
 from fit.rounds import OFF_BOUND, other_side  # noqa: E402
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
 from ks_jax import units as U  # noqa: E402
@@ -604,8 +605,6 @@ def test_missing_bounds_are_the_inputs_own_limits_and_reports_read_plainly():
         fit.reconstruct(case, [fit.Unknown("contact.point[0]", math.inf, -math.inf)], SEED_EVIDENCE)
     with pytest.raises(CaseError, match=re.escape("use vehicles[0].mass, in lb where weights are in lbf")):
         fit.reconstruct(case, {"vehicles[0].weight": {"bounds": ["3000 lbf", "4000 lbf"]}}, SEED_EVIDENCE)
-    from fit.uncertainty import fmt
-
     assert fmt(1.3e-16, "velocity") == "0 mph" and fmt(121750.0, "energy") == "89,798 ft lbf"
     assert fmt(20.0 * U.MPH, "velocity", si=True) == "20 mph (8.941 m/s)"
 
