@@ -1,5 +1,6 @@
 """Pictures (the ``plot`` extra, matplotlib): the top view of a solved contact (``top_view``; a whole figure of
-them, ``top_view_figure``) and a sweep's results over its inputs (``sweep_view``; a figure of several, ``sweep_figure``)."""
+them, ``top_view_figure``), a sweep's results over its inputs (``sweep_view``; a figure of several,
+``sweep_figure``) and a fit's samples (``corner``)."""
 
 from pathlib import Path
 
@@ -25,5 +26,5 @@ def check_picture_path(path, option="--plot"):
     check_output_file(path, option)
 
 
-__all__ = ["PICTURE_TYPES", "check_picture_path", "corner", "save_corner", "save_sweep_view", "save_top_view", "sweep_figure",
-           "sweep_view", "top_view", "top_view_figure"]
+__all__ = ["PICTURE_TYPES", "check_picture_path", "corner", "save_corner", "save_sweep_view", "save_top_view",
+           "sweep_figure", "sweep_view", "top_view", "top_view_figure"]

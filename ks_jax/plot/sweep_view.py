@@ -5,6 +5,7 @@ figure of several outputs says those that do not change over the sweep in one li
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -104,6 +105,187 @@ def circular_view(degrees):
     return shown, True
 
 
+class _Panel(NamedTuple):
+    """One output of a sweep as its panel draws it (``_panel``)."""
+
+    shown: np.ma.MaskedArray  # the values drawn: in the display unit, or a category's index; masked: no result
+    name: str  # the output's path, with its vehicle's name
+    unit: str  # the display unit's label ("" for a dimensionless or a categorical output)
+    categories: tuple  # (codes, their names) of a bool or status output; () for a number
+    circular: bool  # a direction, drawn about its circular mean (``circular_view``)
+    wrapped: bool  # directions spread over more than half the circle: the labels read mod 360
+    flat: bool  # the same everywhere, to rounding
+    span: tuple  # a flat output's scale: whole units about its value
+    axes: list  # (path, SI value of one display unit, unit label, values) of each input drawn over
+    names: tuple  # the vehicles' names, for the inputs' labels
+    note: list  # what the title says under the output's name
+
+    @property
+    def title(self):
+        """The output's name and unit, as an axis, a colour bar or the title says it."""
+        return self.name + _bracket(self.unit)
+
+    def label(self, value):
+        """A value as its axis, colour bar or contour says it: mod 360 where the directions are ``wrapped``."""
+        return f"{value % 360.0:.4g}" if self.wrapped else f"{value:.4g}"
+
+    def input_label(self, k):
+        """The label of the ``k``-th input's axis: its path, vehicle and unit."""
+        path, _, unit, _ = self.axes[k]
+        return named(path, self.names) + _bracket(unit)
+
+
+def _drawable(result, output):
+    """(result, output) as ``sweep_view`` draws them: ``output`` defaulted to the sweep's first and checked
+    to be among its results, the sweep checked to have a picture, and ``result`` thinned to
+    ``sweeps.PLOT_LIMITS`` unless it is already (``SweepResult.thinned``)."""
+    check_kept(result)
+    paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
+    output = (paths[0] if paths else "status") if output is None else output
+    if output not in result.outputs:
+        raise CaseError(f"output '{output}' is not among this sweep's results: {', '.join(result.outputs)}")
+    if result.mode != "zip" and len(result.axes) > 2:
+        raise CaseError(f"a sweep over {len(result.axes)} inputs ({', '.join(result.axes)}) has no picture: "
+                        "draw a grid over one or two inputs (sweep the others one value at a time)")
+    return (result if result.strides else result.thinned()), output
+
+
+def _shown_values(result, output, shown_in):
+    """(values as drawn, unit label, categories) of ``output``: a number in its display unit (``shown_in``);
+    a bool or status output as the index of its category (``_categories``), a flag masked where there was
+    no exchange. Masked: no result."""
+    values, status = np.asarray(result[output]), np.asarray(result["status"])
+    if output == "status" or values.dtype == bool:
+        codes, names_of_codes = _categories(output, values)
+        shown = np.ma.masked_array(np.searchsorted(codes, values.astype(int)).astype(float),
+                                   # a flag means nothing without an exchange (separating, no contact, invalid)
+                                   mask=(status != 0) if output != "status" else np.zeros(values.shape, bool))
+        return shown, "", (codes, names_of_codes)
+    scale, unit = shown_in[output]
+    return np.ma.masked_invalid(values / scale), unit, ()
+
+
+def _one_value_axis(result, shown, axes, names, note):
+    """A grid over two inputs, one of which has a single value, as a line over the other (a map one cell
+    wide draws nothing): (shown, axes) over that one input, the single value said in ``note``."""
+    if result.mode == "zip" or len(axes) != 2 or min(a[3].size for a in axes) != 1:
+        return shown, axes
+    keep = 0 if axes[0][3].size > 1 or axes[1][3].size == 1 else 1
+    path, xs, xunit, x = axes[1 - keep]
+    note.append(f"{named(path, names)} = {float(x[0]) / xs:.6g}{_bracket(xunit)}")
+    return shown.reshape(-1), [axes[keep]]
+
+
+def _panel(result, output, units, typed):
+    """``output`` of ``result`` (thinned already) as its panel draws it (a ``_Panel``), with the notes its
+    title carries: the thinning, an input of one value, the points without a result, a value the same
+    everywhere, and how directions are drawn."""
+    shown_in = display_units(result, units, typed)
+    names = tuple(visible(n) for n in getattr(result, "names", ()))
+    shown, unit, categories = _shown_values(result, output, shown_in)
+    circular = not categories and parse_path(output)[2] in CIRCULAR_OUTPUTS
+    wrapped = False
+    if circular:
+        shown, wrapped = circular_view(shown)
+    missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
+    axes = [(p, *shown_in[p], np.asarray(v)) for p, v in result.axes.items()]
+    thinned = any(k > 1 for k in result.strides)
+    note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
+    shown, axes = _one_value_axis(result, shown, axes, names, note)
+    if missing:
+        how = "left out" if result.mode == "zip" else "gaps" if len(result.axes) == 1 else "grey"
+        note.append(f"{missing} of {shown.size} points without a result ({how})")
+    finite = shown.compressed()
+    flat = not categories and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
+    level = float(np.median(finite)) if flat else 0.0
+    # a value the same everywhere (to rounding) is said, and drawn on a scale of whole units about it, not of
+    # its rounding (which read 0.1 ... 0, 360, 359.9 for a PDOF of 0 deg)
+    span = (level - max(1.0, 0.01 * abs(level)), level + max(1.0, 0.01 * abs(level)))
+    if flat:
+        note.append(" ".join(filter(None, (f"{(level % 360.0) if circular else level:.6g}", unit, "everywhere"))))
+    if circular and not wrapped and finite.size and (finite.min() < 0 or finite.max() > 360):
+        note.append("directions about 0 deg drawn from -180 to 180 deg (-0.4 is 359.6)")
+    elif wrapped:
+        note.append("directions spread over more than half the circle: labels mod 360")
+    return _Panel(shown, named(output, names), unit, categories, circular, wrapped, flat, span, axes, names, note)
+
+
+def _draw_histogram(ax, panel):
+    """Samples (zip): a bar per category, or a histogram with the median and the 5th and 95th
+    percentiles (a direction's reported in [0, 360), and where it is drawn if that differs)."""
+    data = panel.shown.compressed()
+    if panel.categories:
+        codes, names_of_codes = panel.categories
+        counts = np.bincount(data.astype(int), minlength=len(codes))
+        ax.bar(range(len(codes)), counts, color="tab:blue")
+        ax.set_xticks(range(len(codes)), names_of_codes)
+    elif data.size:
+        ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7,
+                range=panel.span if panel.flat else None)
+        for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
+            x = np.percentile(data, q)
+            text = f"{name} {angle_text(x, 2) if panel.circular else f'{x:.4g}'} {panel.unit}".rstrip()
+            if panel.circular and not panel.wrapped and angle_text(x, 2) != f"{x:.2f}":
+                text += f" (drawn at {x:.2f})"
+            ax.axvline(x, color="k", ls=style, lw=1.2, label=text)
+        ax.legend(fontsize=8)
+    ax.set_xlabel(panel.title)
+    if panel.circular:
+        ax.xaxis.set_major_formatter(lambda v, _: panel.label(v))
+    ax.set_ylabel(f"samples (of {panel.shown.size})")
+
+
+def _draw_line(ax, panel):
+    """A grid over one input: the output against it (gaps where a point has no result; steps between
+    categories)."""
+    (_, xs, _, x), = panel.axes
+    ax.plot(x / xs, panel.shown.astype(float).filled(np.nan), "-", marker="o" if x.size <= 60 else None,
+            color="tab:blue", ms=3, drawstyle="steps-mid" if panel.categories else "default")
+    ax.set_xlabel(panel.input_label(0))
+    if panel.categories:
+        codes, names_of_codes = panel.categories
+        ax.set_yticks(range(len(codes)), names_of_codes)
+        ax.set_ylim(-0.5, len(codes) - 0.5)
+    elif panel.flat:
+        ax.set_ylim(*panel.span)
+    ax.set_ylabel(panel.title)
+    if panel.circular:
+        ax.yaxis.set_major_formatter(lambda v, _: panel.label(v))
+    ax.grid(alpha=0.3)
+
+
+def _draw_map(ax, panel, contours):
+    """A grid over two inputs: a colour map over the first (x) and the second (y), points without a result
+    grey; a category per colour, or a number on a colour bar with labelled contour lines (``contours``)."""
+    import matplotlib.pyplot as plt
+
+    (_, xs, _, x), (_, ys, _, y) = panel.axes
+    X, Y = np.meshgrid(x / xs, y / ys, indexing="ij")  # the result's axes: (first path, second path)
+    if panel.categories:
+        from matplotlib.colors import ListedColormap
+
+        codes, names_of_codes = panel.categories
+        cmap = ListedColormap([plt.get_cmap("tab10")(i % 10) for i in range(len(codes))]).with_extremes(bad="0.8")
+        mesh = ax.pcolormesh(X, Y, panel.shown, shading="auto", cmap=cmap, vmin=-0.5, vmax=len(codes) - 0.5)
+        bar = ax.figure.colorbar(mesh, ax=ax, ticks=range(len(codes)))
+        bar.ax.set_yticklabels(names_of_codes)
+        bar.set_label(panel.name)
+    else:
+        cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
+        limits = {"vmin": panel.span[0], "vmax": panel.span[1]} if panel.flat else {}
+        mesh = ax.pcolormesh(X, Y, panel.shown, shading="auto", cmap=cmap, **limits)
+        bar = ax.figure.colorbar(mesh, ax=ax, label=panel.title)
+        if panel.circular:
+            bar.ax.yaxis.set_major_formatter(lambda v, _: panel.label(v))
+        if contours and min(X.shape) >= 2 and panel.shown.compressed().size and not panel.flat:
+            lines = ax.contour(X, Y, panel.shown, levels=8, colors="white", linewidths=0.6,
+                               linestyles="solid" if panel.circular else None)  # -2 deg is no negative value
+            ax.clabel(lines, fontsize=7, fmt=lambda v: panel.label(v) if panel.circular else
+                      f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
+    ax.set_xlabel(panel.input_label(0))
+    ax.set_ylabel(panel.input_label(1))
+
+
 def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=None):
     """Draw one output of a sweep (``ks_jax.sweep``'s ``SweepResult``) on ``ax`` (a new figure if None);
     returns the axes.
@@ -123,123 +305,17 @@ def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=No
     """
     import matplotlib.pyplot as plt
 
-    check_kept(result)
-    paths = tuple(result.output_paths) or tuple(p for p in result.outputs if p != "status")
-    output = (paths[0] if paths else "status") if output is None else output
-    if output not in result.outputs:
-        raise CaseError(f"output '{output}' is not among this sweep's results: {', '.join(result.outputs)}")
-    if result.mode != "zip" and len(result.axes) > 2:
-        raise CaseError(f"a sweep over {len(result.axes)} inputs ({', '.join(result.axes)}) has no picture: "
-                        "draw a grid over one or two inputs (sweep the others one value at a time)")
-    if not result.strides:
-        result = result.thinned()
+    result, output = _drawable(result, output)
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 5))
-    shown_in = display_units(result, units, typed)
-    names = tuple(visible(n) for n in getattr(result, "names", ()))
-    values, status = np.asarray(result[output]), np.asarray(result["status"])
-    categorical = output == "status" or values.dtype == bool
-    if categorical:
-        codes, names_of_codes = _categories(output, values)
-        shown = np.ma.masked_array(np.searchsorted(codes, values.astype(int)).astype(float),
-                                   # a flag means nothing without an exchange (separating, no contact, invalid)
-                                   mask=(status != 0) if output != "status" else np.zeros(values.shape, bool))
-        scale, unit = 1.0, ""
-    else:
-        scale, unit = shown_in[output]
-        shown = np.ma.masked_invalid(values / scale)
-    circular = not categorical and parse_path(output)[2] in CIRCULAR_OUTPUTS
-    wrapped = False
-    if circular:
-        shown, wrapped = circular_view(shown)
-    label_of = (lambda v: f"{v % 360.0:.4g}") if wrapped else (lambda v: f"{v:.4g}")  # noqa: E731
-    missing = int(np.count_nonzero(np.ma.getmaskarray(shown)))
-    axes = [(p, *shown_in[p], np.asarray(v)) for p, v in result.axes.items()]
-    thinned = any(k > 1 for k in result.strides)
-    note = [f"shown: 1 in {' x '.join(map(str, result.strides))} points"] if thinned else []
-    if result.mode != "zip" and len(axes) == 2 and min(a[3].size for a in axes) == 1:
-        # an input with one value is no axis (a map one cell wide draws nothing): a line over the other
-        keep = 0 if axes[0][3].size > 1 or axes[1][3].size == 1 else 1
-        path, xs, xunit, x = axes[1 - keep]
-        note.append(f"{named(path, names)} = {float(x[0]) / xs:.6g}{_bracket(xunit)}")
-        axes = [axes[keep]]
-        shown = shown.reshape(-1)
-    if missing:
-        how = "left out" if result.mode == "zip" else "gaps" if len(result.axes) == 1 else "grey"
-        note.append(f"{missing} of {shown.size} points without a result ({how})")
-    finite = shown.compressed()
-    flat = not categorical and finite.size > 0 and np.ptp(finite) <= 1e-9 * max(1.0, float(np.max(np.abs(finite))))
-    level = float(np.median(finite)) if flat else 0.0
-    # a value the same everywhere (to rounding) is said, and drawn on a scale of whole units about it, not of
-    # its rounding (which read 0.1 ... 0, 360, 359.9 for a PDOF of 0 deg)
-    span = (level - max(1.0, 0.01 * abs(level)), level + max(1.0, 0.01 * abs(level)))
-    if flat:
-        note.append(" ".join(filter(None, (f"{(level % 360.0) if circular else level:.6g}", unit, "everywhere"))))
-    if circular and not wrapped and finite.size and (finite.min() < 0 or finite.max() > 360):
-        note.append("directions about 0 deg drawn from -180 to 180 deg (-0.4 is 359.6)")
-    elif wrapped:
-        note.append("directions spread over more than half the circle: labels mod 360")
-    title = named(output, names) + _bracket(unit)
-
+    panel = _panel(result, output, units, typed)
     if result.mode == "zip":
-        data = shown.compressed()
-        if categorical:
-            counts = np.bincount(data.astype(int), minlength=len(codes))
-            ax.bar(range(len(codes)), counts, color="tab:blue")
-            ax.set_xticks(range(len(codes)), names_of_codes)
-        elif data.size:
-            ax.hist(data, bins=min(60, max(10, int(np.sqrt(data.size)))), color="tab:blue", alpha=0.7,
-                    range=span if flat else None)
-            for q, style, name in ((50, "-", "median"), (5, "--", "5th percentile"), (95, "--", "95th percentile")):
-                x = np.percentile(data, q)
-                text = f"{name} {angle_text(x, 2) if circular else f'{x:.4g}'} {unit}".rstrip()
-                if circular and not wrapped and angle_text(x, 2) != f"{x:.2f}":
-                    text += f" (drawn at {x:.2f})"
-                ax.axvline(x, color="k", ls=style, lw=1.2, label=text)
-            ax.legend(fontsize=8)
-        ax.set_xlabel(title)
-        if circular:
-            ax.xaxis.set_major_formatter(lambda v, _: label_of(v))
-        ax.set_ylabel(f"samples (of {shown.size})")
-    elif len(axes) == 1:
-        (path, xs, xunit, x), = axes
-        ax.plot(x / xs, shown.astype(float).filled(np.nan), "-", marker="o" if x.size <= 60 else None,
-                color="tab:blue", ms=3, drawstyle="steps-mid" if categorical else "default")
-        ax.set_xlabel(named(path, names) + _bracket(xunit))
-        if categorical:
-            ax.set_yticks(range(len(codes)), names_of_codes)
-            ax.set_ylim(-0.5, len(codes) - 0.5)
-        elif flat:
-            ax.set_ylim(*span)
-        ax.set_ylabel(title)
-        if circular:
-            ax.yaxis.set_major_formatter(lambda v, _: label_of(v))
-        ax.grid(alpha=0.3)
+        _draw_histogram(ax, panel)
+    elif len(panel.axes) == 1:
+        _draw_line(ax, panel)
     else:
-        (px, xs, xunit, x), (py, ys, yunit, y) = axes
-        X, Y = np.meshgrid(x / xs, y / ys, indexing="ij")  # the result's axes: (first path, second path)
-        if categorical:
-            from matplotlib.colors import ListedColormap
-
-            cmap = ListedColormap([plt.get_cmap("tab10")(i % 10) for i in range(len(codes))]).with_extremes(bad="0.8")
-            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap, vmin=-0.5, vmax=len(codes) - 0.5)
-            bar = ax.figure.colorbar(mesh, ax=ax, ticks=range(len(codes)))
-            bar.ax.set_yticklabels(names_of_codes)
-            bar.set_label(named(output, names))
-        else:
-            cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
-            mesh = ax.pcolormesh(X, Y, shown, shading="auto", cmap=cmap, **(dict(vmin=span[0], vmax=span[1]) if flat else {}))
-            bar = ax.figure.colorbar(mesh, ax=ax, label=title)
-            if circular:
-                bar.ax.yaxis.set_major_formatter(lambda v, _: label_of(v))
-            if contours and min(X.shape) >= 2 and finite.size and not flat:
-                lines = ax.contour(X, Y, shown, levels=8, colors="white", linewidths=0.6,
-                                   linestyles="solid" if circular else None)  # -2 deg is no negative value
-                ax.clabel(lines, fontsize=7, fmt=lambda v: label_of(v) if circular else
-                          f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}")
-        ax.set_xlabel(named(px, names) + _bracket(xunit))
-        ax.set_ylabel(named(py, names) + _bracket(yunit))
-    ax.set_title("\n".join([title] + ([", ".join(note)] if note else [])), fontsize=9)
+        _draw_map(ax, panel, contours)
+    ax.set_title("\n".join([panel.title] + ([", ".join(panel.note)] if panel.note else [])), fontsize=9)
     return ax
 
 

@@ -35,6 +35,7 @@ Artists a program may look for carry a gid: "rest-path-i" (the CG path of vehicl
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -158,37 +159,41 @@ def _friction_state(ax, c, p, n, mu, j, reach):
         ax.plot([], [], " ", label=f"sticking (inside the cone): |T| / N = {ratio} <= mu = {mu:g}")
 
 
-def top_view(solution, ax=None, evidence=None, sigma=None):
-    """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
-    ``evidence``: None, or a mapping of result path -> measured value (SI) whose rest positions
-    ("vehicles[i].rest_position[0]" and "[1]") are marked; ``sigma``: None, or path -> standard error (SI)
-    of those, drawn about the marks. Other paths are ignored. Returns the axes."""
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Polygon, Wedge
+class _Scene(NamedTuple):
+    """What the parts of one top view share (``_scene``)."""
 
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8, 7))
+    inputs: object  # the case's ``CaseInputs``
+    result: object  # its ``ExchangeResult`` (NumPy arrays)
+    names: list  # the vehicles' names, control characters drawn as their escapes
+    moving: int  # the vehicles drawn moving: 2, or 1 beside a fixed object (drawn once, as what it is)
+    no_contact: bool  # no contact within the search horizon
+    extent: float  # the larger moving vehicle's length or width, m: the scale of the arrows and the contact
+    boxes: list  # each footprint's corners at the exchange (4, 2)
+    cgs: list  # each CG at the exchange (2,)
+
+
+def _title(ax, solution, solved):
+    """The case's name and its status (and, where an impulse was exchanged, whether the contact slides or
+    sticks), wrapped to the axes' width."""
     case, res = solution.case, solution.result
-    names = [visible(n) for n in case.vehicle_names]  # a name's control characters drawn as their escapes
-    solved = not (case.inputs is None or res is None or solution.status.startswith("invalid"))
     friction = ""
     if solved and solution.status != "no_contact" and bool(impulse_exchanged(res)):
         friction = ", sliding (|T| = mu N)" if bool(res.contact.sliding) else ", sticking (inside the cone)"
     width = ax.get_position().width * ax.figure.get_figwidth() * 72.0  # points
-    ax.set_title(wrap_to_width(f"{visible_lines(case.name)}\nstatus: {solution.status}{friction}", width, TITLE_SIZE, indent=""),
-                 fontsize=TITLE_SIZE)
-    if not solved:
-        ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
-        return ax
+    title = f"{visible_lines(case.name)}\nstatus: {solution.status}{friction}"
+    ax.set_title(wrap_to_width(title, width, TITLE_SIZE, indent=""), fontsize=TITLE_SIZE)
+
+
+def _draw_outlines(ax, solution, names):
+    """The footprints at first contact t_i (dashed; automatic contact only) and at the exchange (solid), and
+    a fixed object; returns the ``_Scene`` the other parts draw from."""
+    case, res = solution.case, solution.result
     inputs = case.inputs
     auto = case.auto_point or case.auto_normal
-    c = res.contact
-    t_i = float(c.time)
+    t_i = float(res.contact.time)
     no_contact = solution.status == "no_contact"
     t_x = 0.0 if (no_contact or not auto) else t_i + float(inputs.contact.penetration_time)
-
-    fixed = case.fixed
-    moving = 1 if fixed is not None else 2  # a fixed object is drawn as what it is, once (it does not move)
+    moving = 1 if case.fixed is not None else 2  # a fixed object is drawn as what it is, once (it does not move)
     if auto and not no_contact:
         first, _ = _vehicle_boxes(inputs, t_i)
         for i in range(moving):
@@ -199,84 +204,119 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
             else "at the case state (explicit contact)")
     for i in range(moving):
         _draw_box(ax, boxes[i], COLORS[i], "-", label=f"{names[i]} {when}")
-
     extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:moving])
-    if fixed is not None:
-        _draw_fixed(ax, fixed, names[1], boxes[1], np.asarray(c.point, float)[:2], extent)
-    v_scale = None
-    if not no_contact:
-        other = boxes[1]
-        if fixed is not None and fixed.kind == "pole":  # the disc, not the square about it
-            angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-            other = fixed.position + 0.5 * fixed.diameter * np.stack([np.cos(angle), np.sin(angle)], -1)
-        overlap = clip_polygon(boxes[0], other)
-        if len(overlap) >= 3:
-            ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5,
-                                 label="overlap of the footprints"))
-        p = np.asarray(c.point, float)[:2]
-        n3 = np.asarray(c.normal, float)
-        n = n3[:2] / max(np.linalg.norm(n3[:2]), 1e-12)
-        tang = np.array([-n[1], n[0]])
-        half = 0.45 * extent
-        ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
-        # thin and on top: an impulse arrow along n (an inline impact) shows on both sides of it
-        _arrow(ax, p + 0.4 * extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.2), zorder=5)
-        ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
-        mu = float(inputs.contact.friction)
-        half_angle = math.degrees(math.atan(mu))
-        az = math.degrees(math.atan2(n[1], n[0]))
-        cone = 0.3 * extent
-        ax.add_patch(Wedge(p, cone, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
-                           edgecolor="darkcyan", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
-        j = np.asarray(c.impulse, float)[:2]
-        j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
-        total = float(c.impulse_magnitude)
-        arrow = 0.0  # the impulse arrows' drawn length, m
-        if j_mag > 0:
-            per_m = round_scale(j_mag / (IMPULSE_LENGTH * extent))  # N s per m of arrow
-            arrow = j_mag / per_m
-            shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
-            vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
-            for i, sign in enumerate((1.0, -1.0)[:moving]):
-                _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
-                ax.plot([], [], color=COLORS[i], lw=3.5,
-                        label=f"impulse on {names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
-            ax.plot([], [], " ", label=f"impulse arrows: 1 m = {scale_text(per_m)} N s "
-                                       f"({per_m / U.LBF_S:,.6g} lbf s)")
-        if bool(impulse_exchanged(res)):
-            _friction_state(ax, c, p, n, mu, j, max(cone, arrow))
-        ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
+    if case.fixed is not None:
+        _draw_fixed(ax, case.fixed, names[1], boxes[1], np.asarray(res.contact.point, float)[:2], extent)
+    return _Scene(inputs, res, names, moving, no_contact, extent, boxes, cgs)
 
+
+def _draw_overlap(ax, scene, fixed):
+    """The overlap of the footprints at the exchange (grey): vehicle 1's with vehicle 2's, or with a fixed
+    object's (a pole's disc, not the square about it)."""
+    from matplotlib.patches import Polygon
+
+    other = scene.boxes[1]
+    if fixed is not None and fixed.kind == "pole":  # the disc, not the square about it
+        angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+        other = fixed.position + 0.5 * fixed.diameter * np.stack([np.cos(angle), np.sin(angle)], -1)
+    overlap = clip_polygon(scene.boxes[0], other)
+    if len(overlap) >= 3:
+        ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5,
+                             label="overlap of the footprints"))
+
+
+def _draw_plane_and_cone(ax, scene, p, n, mu):
+    """The contact plane (red line through the centroid ``p``, perpendicular to ``n``), the normal (red
+    arrow) and the friction cone of half-angle atan(``mu``) about it (cyan). Returns the cone's radius, m."""
+    from matplotlib.patches import Wedge
+
+    tang = np.array([-n[1], n[0]])
+    half = 0.45 * scene.extent
+    ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
+    # thin and on top: an impulse arrow along n (an inline impact) shows on both sides of it
+    _arrow(ax, p + 0.4 * scene.extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.2), zorder=5)
+    ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
+    half_angle = math.degrees(math.atan(mu))
+    az = math.degrees(math.atan2(n[1], n[0]))
+    cone = 0.3 * scene.extent
+    ax.add_patch(Wedge(p, cone, az - half_angle, az + half_angle, facecolor="tab:cyan", alpha=0.25,
+                       edgecolor="darkcyan", label=f"friction cone, mu = {mu:g} (half-angle {half_angle:.1f} deg)"))
+    return cone
+
+
+def _draw_impulse(ax, scene, p, j):
+    """The impulse's horizontal part ``j`` on each vehicle at the centroid ``p`` (J on vehicle 1, -J on
+    vehicle 2), on a round scale (``round_scale``) the legend states. Returns the arrows' length, m (0 for
+    no impulse)."""
+    c = scene.result.contact
+    j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
+    total = float(c.impulse_magnitude)
+    if j_mag <= 0:
+        return 0.0
+    per_m = round_scale(j_mag / (IMPULSE_LENGTH * scene.extent))  # N s per m of arrow
+    shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
+    vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
+    for i, sign in enumerate((1.0, -1.0)[:scene.moving]):
+        _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
+        ax.plot([], [], color=COLORS[i], lw=3.5,
+                label=f"impulse on {scene.names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
+    ax.plot([], [], " ", label=f"impulse arrows: 1 m = {scale_text(per_m)} N s "
+                               f"({per_m / U.LBF_S:,.6g} lbf s)")
+    return j_mag / per_m
+
+
+def _draw_contact(ax, scene, fixed):
+    """The contact at the exchange: the overlap, the plane, the normal, the friction cone, the impulse on
+    each vehicle, whether it slides or sticks, and the impulse centroid P (a black x)."""
+    c = scene.result.contact
+    _draw_overlap(ax, scene, fixed)
+    p = np.asarray(c.point, float)[:2]
+    n3 = np.asarray(c.normal, float)
+    n = n3[:2] / max(np.linalg.norm(n3[:2]), 1e-12)
+    mu = float(scene.inputs.contact.friction)
+    cone = _draw_plane_and_cone(ax, scene, p, n, mu)
+    j = np.asarray(c.impulse, float)[:2]
+    arrow = _draw_impulse(ax, scene, p, j)
+    if bool(impulse_exchanged(scene.result)):
+        _friction_state(ax, c, p, n, mu, j, max(cone, arrow))
+    ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
+
+
+def _draw_velocities(ax, scene):
+    """Each moving vehicle's CG velocity before (dotted) and after (solid) the exchange, from its CG at the
+    exchange, on one round scale (``round_scale``) the legend states."""
+    vehicles = scene.inputs.vehicles[:scene.moving]
     speeds = []
-    for i, v in enumerate(inputs.vehicles[:moving]):
+    for i, v in enumerate(vehicles):
         speeds.append(float(v.speed))
-        speeds.append(float(np.linalg.norm(np.asarray(res.vehicles[i].velocity_after, float)[:2])))
+        speeds.append(float(np.linalg.norm(np.asarray(scene.result.vehicles[i].velocity_after, float)[:2])))
     vmax = max(speeds)
-    if vmax > 0:
-        v_per_m = round_scale(vmax / (VELOCITY_LENGTH * extent))  # m/s per m of arrow
-        v_scale = 1.0 / v_per_m  # m per m/s
-        for i, v in enumerate(inputs.vehicles[:moving]):
-            before = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
-            after = np.asarray(res.vehicles[i].velocity_after, float)[:2]
-            for vec, style, side in ((before, ":", 1.0), (after, "-", -1.0)):
-                length = float(np.linalg.norm(vec))
-                if length == 0:
-                    continue
-                # before on the left of the arrow's line, after on its right, so that they never hide
-                # each other or the impulse arrows of an inline impact
-                shift = side * 0.05 * extent * np.array([-vec[1], vec[0]]) / length
-                _arrow(ax, cgs[i] + shift + v_scale * vec, cgs[i] + shift,
-                       dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
-            ax.plot(*cgs[i], "o", color=COLORS[i], ms=4)
-        unit = f"1 m = {scale_text(v_per_m)} m/s = {v_per_m / U.MPH:.2f} mph"
-        ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
-        ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
-    if no_contact:
-        ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
-    if res.rest is not None:
-        _draw_motion_to_rest(ax, solution, moving)
-    _draw_measured_rest(ax, names, evidence, sigma)
+    if vmax <= 0:
+        return
+    v_per_m = round_scale(vmax / (VELOCITY_LENGTH * scene.extent))  # m/s per m of arrow
+    v_scale = 1.0 / v_per_m  # m per m/s
+    for i, v in enumerate(vehicles):
+        before = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
+        after = np.asarray(scene.result.vehicles[i].velocity_after, float)[:2]
+        cg = scene.cgs[i]
+        for vec, style, side in ((before, ":", 1.0), (after, "-", -1.0)):
+            length = float(np.linalg.norm(vec))
+            if length == 0:
+                continue
+            # before on the left of the arrow's line, after on its right, so that they never hide
+            # each other or the impulse arrows of an inline impact
+            shift = side * 0.05 * scene.extent * np.array([-vec[1], vec[0]]) / length
+            _arrow(ax, cg + shift + v_scale * vec, cg + shift,
+                   dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
+        ax.plot(*cg, "o", color=COLORS[i], ms=4)
+    unit = f"1 m = {scale_text(v_per_m)} m/s = {v_per_m / U.MPH:.2f} mph"
+    ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
+    ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
 
+
+def _finish_axes(ax):
+    """Limits that take in everything drawn (the arrows' ends too), equal scales, the axes in metres with a
+    second pair in feet, a grid, and the legend below."""
     ax.autoscale_view()  # with the arrows' ends in the data limits
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
@@ -288,6 +328,34 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     sec.set_ylabel("y (ft)", fontsize=8)
     # below the x label whatever the axes' height: a fixed offset in points, not in axes fractions
     _legend(ax, 34)
+
+
+def top_view(solution, ax=None, evidence=None, sigma=None):
+    """Draw one solved case (a ``Solution`` from ``ks_jax.solve``) on ``ax`` (a new figure if None).
+    ``evidence``: None, or a mapping of result path -> measured value (SI) whose rest positions
+    ("vehicles[i].rest_position[0]" and "[1]") are marked; ``sigma``: None, or path -> standard error (SI)
+    of those, drawn about the marks. Other paths are ignored. Returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 7))
+    case = solution.case
+    names = [visible(n) for n in case.vehicle_names]  # a name's control characters drawn as their escapes
+    solved = not (case.inputs is None or solution.result is None or solution.status.startswith("invalid"))
+    _title(ax, solution, solved)
+    if not solved:
+        ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
+        return ax
+    scene = _draw_outlines(ax, solution, names)
+    if not scene.no_contact:
+        _draw_contact(ax, scene, case.fixed)
+    _draw_velocities(ax, scene)
+    if scene.no_contact:
+        ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
+    if solution.result.rest is not None:
+        _draw_motion_to_rest(ax, solution, scene.moving)
+    _draw_measured_rest(ax, names, evidence, sigma)
+    _finish_axes(ax)
     return ax
 
 
