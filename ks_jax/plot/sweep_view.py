@@ -35,7 +35,10 @@ def _categories(output, values):
 
 
 def named(path, names=()):
-    """A path with the vehicle it is about: ``vehicles[1].speed (Kia K5)``; other paths as they are."""
+    """A path with the vehicle it is about: ``vehicles[1].speed (Kia K5)``; other paths as they are
+    (``"status"``, about no vehicle and no input or output path, too)."""
+    if path == "status":
+        return path
     group, index = parse_path(path)[:2]
     return f"{path} ({names[index]})" if group == "vehicles" and index is not None and index < len(names) else path
 

@@ -218,6 +218,27 @@ def test_separating_points_have_no_stick_or_slide(case):
 
 
 @pytest.mark.slow
+def test_status_is_drawn_by_its_texts(case):
+    """``"status"`` drawn as an output: each point's status in words (ks_jax.status_text of its code), on the
+    colour bar of a map and on the axis of a line (the grid of test_separating_points_have_no_stick_or_slide,
+    separating where the Kia is the slower)."""
+    r = sweep(case, {"vehicles[1].speed": np.array([0.0, 1.0, 5.0, 9.0]), "contact.restitution": np.array([0.1, 0.9])},
+              outputs=GRID_OUTPUTS)
+    codes = np.unique(r["status"])
+    texts = [ks_jax.status_text(int(c)) for c in codes]
+    assert texts == ["ok", "separating"]
+    ax = draw(r, "status")
+    np.testing.assert_array_equal(mesh_of(ax).get_array(), np.searchsorted(codes, r["status"]))
+    (bar,) = [a for a in ax.figure.axes if a is not ax]
+    assert [t.get_text() for t in bar.get_yticklabels()] == texts
+    assert ax.get_title() == "status"
+    line = sweep(case, {"vehicles[1].speed": np.array([0.0, 1.0, 5.0])}, outputs=[DV1])
+    ax = draw(line, "status")
+    assert [t.get_text() for t in ax.get_yticklabels()] == texts
+    np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), [1, 1, 0])
+
+
+@pytest.mark.slow
 def test_directions_are_drawn_on_the_circle(case):
     """A PDOF spread about 0 deg (the Kia's, with the Lucid's heading drawn about 0): the histogram is one
     hump unwrapped about the circular mean, not two bars at 0 and 360, on an axis that reads as plain
