@@ -3,7 +3,7 @@
 ``oblique_case(rng)`` draws a case dict (vehicle 2's front into vehicle 1's right side; SI, angles
 in degrees, rates in deg/s); ``UNKNOWNS`` are the six inputs a check recovers and ``EVIDENCE`` the
 ten outputs it fits, each with its standard deviation. benchmarks/bench_fit.py and
-tests/test_fit.py draw their cases from here.
+tests/fit/test_reconstruction.py draw their cases from here.
 """
 
 from __future__ import annotations

@@ -294,7 +294,7 @@ def assert_matches(eng, refb, rtol, cases, fields=None):
 
 
 def _status_code(text):
-    """The reference's status words -> the engine's status code (``ks_jax.types``)."""
+    """The reference's status words -> the engine's status code (``ks_jax.model.types``)."""
     table = {
         "ok": kt.OK, "separating": kt.SEPARATING, "invalid: nonfinite": kt.INVALID_NONFINITE,
         "invalid: mass 1": kt.INVALID_MASS_1, "invalid: mass 2": kt.INVALID_MASS_2,
