@@ -40,8 +40,9 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import units as U
-from ..case import impulse_exchanged, visible, visible_lines
+from ..case import CaseInputs, impulse_exchanged, visible, visible_lines
 from ..case.paths import canonical_path
+from ..model.types import ExchangeResult
 from ..solve import motion_paths
 from .text import wrap_to_width
 
@@ -160,10 +161,11 @@ def _friction_state(ax, c, p, n, mu, j, reach):
 
 
 class _Scene(NamedTuple):
-    """What the parts of one top view share (``_scene``)."""
+    """What the parts of one top view share: the case, the vehicles drawn, and where they are at the exchange
+    (``_draw_outlines`` makes it)."""
 
-    inputs: object  # the case's ``CaseInputs``
-    result: object  # its ``ExchangeResult`` (NumPy arrays)
+    inputs: CaseInputs  # the case's inputs
+    result: ExchangeResult  # its results (NumPy arrays)
     names: list  # the vehicles' names, control characters drawn as their escapes
     moving: int  # the vehicles drawn moving: 2, or 1 beside a fixed object (drawn once, as what it is)
     no_contact: bool  # no contact within the search horizon
