@@ -1,5 +1,6 @@
-"""The notebooks: each runs top to bottom on a fresh kernel, is what ``notebooks/build.py`` makes of its cells,
-and is committed executed (outputs and figures kept, so that a reader browsing the repository sees them)."""
+"""The notebooks: each runs top to bottom on a fresh kernel, has the cells of its source (the percent file
+beside it, which ``notebooks/build.py`` builds it from), and is committed executed (outputs and figures kept, so
+that a reader browsing the repository sees them)."""
 
 import base64
 import importlib.util
@@ -14,7 +15,7 @@ HERE = Path(__file__).resolve().parents[1] / "notebooks"
 NOTEBOOKS = sorted(HERE.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
 
-IMAGE_LIMIT = 150_000      # bytes of one decoded PNG (build.py draws at 80 dpi: the largest is about 125 KB)
+IMAGE_LIMIT = 150_000      # bytes of one decoded PNG (build.py draws at 110 dpi: the largest is about 145 KB)
 NOTEBOOK_LIMIT = 1_000_000  # bytes of one .ipynb file
 # a code cell that calls one of these draws a figure, which an executed notebook shows as a PNG
 DRAWS = re.compile(r"\b(plt\.subplots|plt\.figure|top_view|sweep_view)\(")
@@ -25,6 +26,7 @@ def build():
     """notebooks/build.py as a module (it is a script, not part of the package)."""
     pytest.importorskip("nbformat")
     pytest.importorskip("nbclient")
+    pytest.importorskip("jupytext")
     spec = importlib.util.spec_from_file_location("build_notebooks", HERE / "build.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -34,29 +36,30 @@ def build():
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
 def test_notebook_runs(path, build, monkeypatch):
-    """The committed notebook runs on a fresh kernel as ``build.py`` runs it; a failing cell fails here
-    with the notebook, the cell index and the cell's error."""
-    nbformat = pytest.importorskip("nbformat")
+    """The notebook's source runs on a fresh kernel as ``build.py`` runs it; a failing cell fails here with the
+    notebook, the cell index and the cell's error."""
     # the kernel (a subprocess) compiles into the run's shared compile cache (tests/conftest.py): the
     # notebooks build several of the same programs
     monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", os.environ["KS_JAX_TEST_COMPILE_CACHE"])
     monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
-    nb = nbformat.read(path, as_version=4)
     try:
-        build.execute(nb, path.name)
+        build.execute(build.build(path.name), path.name)
     except build.NotebookError as e:
         pytest.fail(str(e), pytrace=False)
 
 
-def test_notebooks_are_built_from_build_py(build):
-    """The committed notebooks are what ``notebooks/build.py`` makes of its cells (edit build.py, then
-    run it): a cell edited in one place only fails here. Outputs are not compared."""
+def test_notebooks_are_built_from_their_sources():
+    """Each committed notebook's cells (types and sources) are those of its percent file (edit the .py, then run
+    ``python notebooks/build.py NAME``): a cell edited in one place only fails here. Outputs are not compared."""
     nbformat = pytest.importorskip("nbformat")
-    assert sorted(build.NOTEBOOKS) == [p.name for p in NOTEBOOKS]
-    for path in NOTEBOOKS:
-        committed, built = nbformat.read(path, as_version=4), build.build(path.name)
-        cells = [[(c.cell_type, c.source) for c in nb.cells] for nb in (committed, built)]
-        assert cells[0] == cells[1], path.name
+    jupytext = pytest.importorskip("jupytext")
+    sources = sorted(HERE.glob("[0-9][0-9]_*.py"))
+    assert [p.stem for p in sources] == IDS
+    for path, src in zip(NOTEBOOKS, sources):
+        committed, source = nbformat.read(path, as_version=4), jupytext.read(src, fmt="py:percent")
+        cells = [[(c.cell_type, c.source) for c in nb.cells] for nb in (committed, source)]
+        assert cells[0] == cells[1], \
+            f"{path.name} is not built from {src.name}: run python notebooks/build.py {path.stem}"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
