@@ -265,6 +265,32 @@ def _collector_paused():
             gc.enable()
 
 
+def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo):
+    """Each case's (unknowns, evidence, Problem), checked (CaseError), and the batch's one Problem: every case must
+    have the same; and the rows the fit and its refits hold at once checked against the memory there is."""
+    specs_u = [None] * len(cases) if unknowns is None else list(unknowns)
+    specs_e = [None] * len(cases) if evidence is None else list(evidence)
+    if len(specs_u) != len(cases) or len(specs_e) != len(cases):
+        raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
+    checks = PathChecks()
+    prepared = [p or _prepare(c, u, e, checks)
+                for p, c, u, e in zip(check_batch(cases, specs_u, specs_e, checks), cases, specs_u, specs_e)]
+    problem = prepared[0][2]
+    for c, (_, _, p) in zip(cases, prepared):
+        if p != problem:
+            raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
+                            f"in every case (differs from case '{cases[0].name}')")
+    # every start of every case is a row held at once (its inputs, Jacobian and state), as is every start of
+    # the Monte Carlo refits drawn at once: refused up front where that cannot fit in memory
+    m, n = len(problem.evidence), len(problem.unknowns)
+    row_bytes = 8 * (3 * (m + n) * (n + 1) + 8 * n) + 2048
+    check_memory(len(cases) * starts * row_bytes, f"{len(cases)} case(s) x {starts} starts",
+                 "give fewer starts (--starts) or fit fewer cases at once")
+    check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
+                 "give fewer refits")
+    return prepared, problem
+
+
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None, devices=None,
@@ -327,26 +353,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     dtype = dtype or jnp.result_type(float)
     rtol = default_rtol(dtype) if rtol is None else rtol
     max_iter = max_iter or {"lm": 50, "lbfgs": 200, "adam": 2000}[solver]
-    specs_u = [None] * len(cases) if unknowns is None else list(unknowns)
-    specs_e = [None] * len(cases) if evidence is None else list(evidence)
-    if len(specs_u) != len(cases) or len(specs_e) != len(cases):
-        raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
-    checks = PathChecks()
-    prepared = [p or _prepare(c, u, e, checks)
-                for p, c, u, e in zip(check_batch(cases, specs_u, specs_e, checks), cases, specs_u, specs_e)]
-    problem = prepared[0][2]
-    for c, (_, _, p) in zip(cases, prepared):
-        if p != problem:
-            raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
-                            f"in every case (differs from case '{cases[0].name}')")
-    # every start of every case is a row held at once (its inputs, Jacobian and state), as is every start of
-    # the Monte Carlo refits drawn at once: refused up front where that cannot fit in memory
-    m, n = len(problem.evidence), len(problem.unknowns)
-    row_bytes = 8 * (3 * (m + n) * (n + 1) + 8 * n) + 2048
-    check_memory(len(cases) * starts * row_bytes, f"{len(cases)} case(s) x {starts} starts",
-                 "give fewer starts (--starts) or fit fewer cases at once")
-    check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
-                 "give fewer refits")
+    prepared, problem = _prepared_batch(cases, unknowns, evidence, starts, monte_carlo)
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
     x0 = first_starts(problem.unknowns, arrays, starts, rng)
