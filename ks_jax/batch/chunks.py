@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from ..backend import CPU_CHUNK_ROWS, on_cpu
-from .stages import run
+from .stages import run, run_row
 
 CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
 
@@ -54,7 +54,7 @@ def _row_structs(args, in_axes):
 def _row_shapes(stages, row):
     """The shapes and dtypes of the pipeline's result for one row: those of a chunk's rows, known without
     tracing the stages once more for every batch of the same row shapes."""
-    return jax.eval_shape(lambda *a: run(stages, a, None, fenced=False), *row)
+    return jax.eval_shape(lambda *a: run_row(stages, a), *row)
 
 
 def batched_in_chunks(fn, stages):

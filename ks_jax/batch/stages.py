@@ -21,23 +21,28 @@ def run(stages, args, in_axes=0, fenced=True):
     """The result of the pipeline ``stages`` over a batch of rows.
 
     args: a tuple of pytrees; in_axes: 0 (every leaf has the rows first), or a tuple of the same
-    structure as ``args`` holding 0 or None per leaf (None: the same for every row). None in place of
-    the whole ``in_axes``: one row, unbatched. fenced: True, each stage in a fence of its own on a CPU
-    (``fence``); a number k, the first k stages only; False, none (one program that XLA may fuse freely,
-    as it is everywhere but on a CPU). A fence costs tracing time under transformations (a fit's
+    structure as ``args`` holding 0 or None per leaf (None: the same for every row); one row, unbatched:
+    ``run_row``. fenced: True, each stage in a fence of its own on a CPU (``fence``); a number k, the first k
+    stages only; False, none (one program that XLA may fuse freely, as it is everywhere but on a CPU). A fence costs tracing time under transformations (a fit's
     ``jax.jacfwd`` traces each conditional's branches again), so a caller that differentiates a few rows
     fences only what pays for itself."""
     count = len(stages) if fenced is True else int(fenced)
     outs = ()
     for k, stage in enumerate(stages):
-        if in_axes is None:
-            fn = stage
-        else:
-            axes = (in_axes,) * len(args) if in_axes == 0 else tuple(in_axes)
-            fn = jax.vmap(stage, in_axes=axes + (0,) * len(outs))
-            if getattr(stage, "block_rows", 0) and on_cpu():
-                fn = in_blocks(fn, stage.block_rows, axes + (0,) * len(outs))
+        axes = (in_axes,) * len(args) if in_axes == 0 else tuple(in_axes)
+        fn = jax.vmap(stage, in_axes=axes + (0,) * len(outs))
+        if getattr(stage, "block_rows", 0) and on_cpu():
+            fn = in_blocks(fn, stage.block_rows, axes + (0,) * len(outs))
         outs += (fence(fn, *args, *outs) if k < count else fn(*args, *outs),)
+    return outs[-1]
+
+
+def run_row(stages, args, fenced=0):
+    """The result of the pipeline ``stages`` on one unbatched row (``args``: a tuple of pytrees), its first
+    ``fenced`` stages each fenced off from the later ones (``fence``): what ``run`` does for a batch."""
+    outs = ()
+    for k, stage in enumerate(stages):
+        outs += (fence(stage, *args, *outs) if k < fenced else stage(*args, *outs),)
     return outs[-1]
 
 

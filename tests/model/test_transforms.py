@@ -126,7 +126,7 @@ def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit
     the seed chapter (explicit contact), its staging with automatic contact and its motion to rest, solved as a
     file of two cases (the case and the same one with the bullet car 3 mph faster), every result of every
     stage."""
-    sv = importlib.import_module("ks_jax.solve")  # the module (ks_jax.solve is the function)
+    sv = importlib.import_module("ks_jax.solve.cases")  # the module of ks_jax.solve (the function)
     case = load_case(os.path.join(os.path.dirname(ks_jax.__file__), "cases", name))
     faster = ks_jax.set_input(case.inputs, "vehicles[1].speed", ks_jax.get_input(case.inputs, "vehicles[1].speed")
                               + 3 * ks_jax.units.MPH)

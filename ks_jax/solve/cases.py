@@ -1,0 +1,83 @@
+"""``solve``: the cases of a file solved at once, grouped by what their pipeline is made of, each group in one
+compiled call; and ``motion_paths``, each vehicle's path to rest for a picture."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import numpy as np
+
+from ..batch.stages import run, run_row
+from ..case import Case, as_arrays
+from ..compilation import quick_jit
+from ..model.checks import check_smoothing
+from .origin import about_midpoint, moved_back
+from .pipeline import stages
+from .rules import status_words
+from .solution import Solution
+
+
+def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=None):
+    """``solve_inputs`` of every row of ``inputs``. One row is solved unbatched: XLA compiles a batch of
+    one row to a program several times the size of one unbatched row's."""
+    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion)
+    if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
+        row = run_row(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), fenced=len(pipeline))
+        return jax.tree_util.tree_map(lambda x: x[None], row)
+    return run(pipeline, (inputs,))
+
+
+_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4, 5))  # a file's few cases: compiling is most of the time
+
+
+def solve(cases, smoothing: float = 0.0):
+    """Solve a Case (-> Solution) or a list of cases (-> list of Solution).
+
+    Valid cases are solved together in one vmapped call per contact mode; an invalid case (bad input in
+    a file of several cases) gets status "invalid: <reason>" and no numbers. In float32 (JAX's default) a
+    case more than ``case.scale.FAR_IN_FLOAT32`` (1 km) from the origin is solved about its CGs' midpoint
+    (``case.scale.scene_origin``), and its ``contact.point`` is float64."""
+    single = isinstance(cases, Case)
+    cases = [cases] if single else list(cases) if isinstance(cases, (list, tuple)) else None
+    if cases is None or not all(isinstance(c, Case) for c in cases):
+        raise TypeError("solve takes a Case or a list of them: ks_jax.load_case(path) reads a case file")
+    check_smoothing(smoothing)
+    out: list[Solution | None] = [None] * len(cases)
+    groups: dict[tuple, list[int]] = {}
+    for i, c in enumerate(cases):
+        if c.valid:
+            # a pole is met as a disc by automatic contact only: at a given contact it is any other case
+            groups.setdefault((c.auto_point, c.auto_normal, c.pole and (c.auto_point or c.auto_normal), c.motion,
+                               c.fixed is not None and c.motion is not None), []).append(i)
+        else:
+            out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
+    for (auto_point, auto_normal, pole, motion, _), idx in groups.items():
+        stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
+        stacked, origin = about_midpoint(stacked, auto_point)  # float32 far from the origin: about the CGs' midpoint
+        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole, motion)
+        res = moved_back(jax.tree_util.tree_map(np.asarray, res), origin)
+        for k, i in enumerate(idx):
+            row = jax.tree_util.tree_map(lambda x: x[k], res)
+            out[i] = Solution(cases[i], row, status_words(cases[i], row.contact.status))
+    return out[0] if single else out
+
+
+def motion_paths(solution: Solution):
+    """Each vehicle's path from the exchange to rest, for a picture (the top view): a tuple of (k, 4) NumPy arrays
+    (time s, x m, y m, yaw rad), from the exchange to the step at which it rests (or the time limit), None for a
+    fixed object; None for a case without a road or an invalid one. The case is solved again, keeping every
+    step (``case.Motion.path``)."""
+    case = solution.case
+    if case.motion is None or solution.result is None or solution.status.startswith("invalid"):
+        return None
+    again = solve(dataclasses.replace(case, motion=dataclasses.replace(case.motion, path=True)))
+    paths = []
+    for r in again.result.rest:
+        if r is None:
+            paths.append(None)
+            continue
+        p = np.asarray(r.path, float)
+        end = int(np.argmax(p[:, 0] >= p[-1, 0])) + 1  # the first step at the final time: at rest from there
+        paths.append(p[:end])
+    return tuple(paths)
