@@ -13,7 +13,7 @@ from . import units as U
 from .case import CIRCULAR_OUTPUTS, at_rest_after, defined_output, impulse_exchanged, parse_output_value, parse_path
 from .case.errors import visible
 from .case.fixed import describe
-from .model.first_contact import HORIZON
+from .model.contact import HORIZON
 
 
 def _no_impulse(sol):

@@ -1,6 +1,6 @@
 """Draws the pictures of docs/model.md, "Automatic contact": the contact plane of an offset frontal, a
 rear-end with partial overlap, a T-bone and a corner entering a side, each at its exchange instant as
-automatic contact finds it (``ks_jax.model.automatic.automatic_contact``): the footprints, their overlap,
+automatic contact finds it (``ks_jax.model.contact.automatic_contact``): the footprints, their overlap,
 the two points where the outlines cross and the line through them (dashed), the plane through the
 centroid and the normal, from vehicle 2 into vehicle 1. Where the crossings lie on one side, that line is
 the side, and the plane is parallel to it; where they lie on faces that face each other, it is the
@@ -27,8 +27,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Polygon  # noqa: E402
 
 import ks_jax  # noqa: E402
-from ks_jax.model.automatic import automatic_contact  # noqa: E402
-from ks_jax.model.first_contact import footprint  # noqa: E402
+from ks_jax.model.contact import automatic_contact, footprint  # noqa: E402
 
 HERE = Path(__file__).parent
 COLORS = ("tab:blue", "tab:orange")

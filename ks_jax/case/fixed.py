@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..model.first_contact import HORIZON
+from ..model.contact import HORIZON
 from .inputs import VehicleInputs
 
 KINDS = ("wall", "pole", "barrier")

@@ -9,8 +9,8 @@ In the order a collision is computed:
 - ``cone``: the friction cone;
 - ``collision``: the exchange, a pipeline of three stages (prepare, impulse, results);
 - ``results``: what the exchange derives from its impulse: delta-V, PDOF, crush, EES, energy;
-- ``first_contact``, ``overlap``, ``automatic``: automatic contact (free motion to the first
-  touch, the centroid and plane of the footprints' overlap, the exchange there);
+- ``contact``: automatic contact, a subpackage (free motion to the first touch, the centroid and
+  plane of the footprints' overlap, the exchange there; its interface is in its docstring);
 - ``linalg``: closed-form 3-vector and 3x3 algebra and trigonometry, safe to differentiate.
 
 Callers jit and vmap these functions (``ks_jax.batch`` batches them fast on a CPU). Nothing here

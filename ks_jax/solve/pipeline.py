@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from ..batch.stages import blocked, run_row
 from ..case import CaseInputs, Motion, to_pytrees
 from ..model import collision
-from ..model.automatic import automatic_stage, exchange_at_contact
+from ..model.contact import automatic_stage, exchange_at_contact
 from ..model.checks import input_status
 from ..model.types import OK, ExchangeResult
 from .rest import to_rest
@@ -39,7 +39,7 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
 def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False, motion: Motion | None = None):
     """The case's pipeline, functions of a row's ``CaseInputs`` and the outputs of the stages before
     (``ks_jax.batch.stages.run``): the exchange's own stages (``model.collision.stages``) at a given
-    contact; for automatic contact, the input rules, the contact (``model.automatic.automatic_stage``)
+    contact; for automatic contact, the input rules, the contact (``model.contact.automatic_stage``)
     and the exchange there (``exchange_at_contact``). ``smoothing``: a Python number or an array. With
     ``motion`` (a ``case.Motion``), the last stage moves the vehicles on from the exchange to rest
     (``to_rest``): the result's ``rest``."""

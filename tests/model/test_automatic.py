@@ -22,8 +22,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
-from ks_jax.model import automatic as G  # noqa: E402
-from ks_jax.model import first_contact  # noqa: E402
+from ks_jax.model import contact as G  # noqa: E402
+from ks_jax.model.contact import search  # noqa: E402
 from ks_jax import units as U  # noqa: E402
 from ks_jax.case import as_arrays, load_case, set_input, to_pytrees  # noqa: E402
 from ks_jax.compilation import quick_jit  # noqa: E402
@@ -275,7 +275,7 @@ def test_spinning_car_reaches_a_parked_one(res):
 def test_never_touching(res):
     r = res["never"]
     assert r.contact.status == NO_CONTACT and ks_jax.status_text(r.contact.status) == "no_contact"
-    assert r.contact.time == first_contact.HORIZON
+    assert r.contact.time == G.HORIZON
     assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
     np.testing.assert_array_equal(r.contact.impulse, 0.0)
     for v, s in zip(r.vehicles, (CASES["never"][1], CASES["never"][3])):
@@ -485,7 +485,7 @@ def test_never_touching_case_reads_as_such(tmp_path):
             assert d["contact"]["impulse_magnitude"] == 0.0 and d["contact"]["energy_loss"] == 0.0
             assert [v["crush"] for v in d["vehicles"]] == [0.0, 0.0]
         else:
-            assert f"none within {first_contact.HORIZON:g} s of free motion" in out and "o'clock" not in out
+            assert f"none within {G.HORIZON:g} s of free motion" in out and "o'clock" not in out
             assert out.count("undefined (no impulse)") == 2
             assert [line.split() for line in out.splitlines() if line.strip().startswith("EES")] == [
                 ["EES", "undefined"]] * 2
@@ -608,7 +608,7 @@ def test_spinning_car_reached_late_and_out_of_reach():
     assert 7.0 < want < 10.0
     assert late.contact.status == OK and abs(late.contact.time - want) < 1e-9
     for r in (too_late, beside):
-        assert r.contact.status == NO_CONTACT and r.contact.time == first_contact.HORIZON
+        assert r.contact.status == NO_CONTACT and r.contact.time == G.HORIZON
         assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(r))
 
 
@@ -640,7 +640,7 @@ def test_first_contact_of_turning_vehicles_against_dense_sampling():
     touching one; where they never do, it reports none."""
     rng = np.random.default_rng(11)
     step = 2e-4
-    ts = np.arange(0.0, first_contact.HORIZON + step / 2, step)
+    ts = np.arange(0.0, G.HORIZON + step / 2, step)
     rows, refs = [], []
     for k in range(60):
         dims = [(rng.uniform(3.5, 6.0), rng.uniform(1.5, 2.2)) for _ in range(2)]
@@ -682,10 +682,10 @@ def test_refine_ends_on_the_touching_side_within_its_tolerance():
     roots, slopes = [0.3, 0.4 + 1e-7, 0.25], [1.9, 0.5, None]
     for f, root, slope in zip(fns, roots, slopes):
         lo, hi = jnp.float64(0.0), jnp.float64(0.6)
-        t = float(jax.jit(lambda lo, hi: first_contact._refine(f, lo, hi, f(lo), f(hi), tol, True))(lo, hi))
+        t = float(jax.jit(lambda lo, hi: search._refine(f, lo, hi, f(lo), f(hi), tol, True))(lo, hi))
         assert -tol <= float(f(t)) <= 0.0, (root, t, float(f(t)))
         assert t >= root - 1e-15 and (slope is None or t - root <= tol / slope + 1e-15), (root, t)
-        assert float(first_contact._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
+        assert float(search._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
 
 
 def test_a_scene_far_from_the_origin_gives_the_same_contact():

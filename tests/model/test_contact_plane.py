@@ -20,8 +20,8 @@ import pytest  # noqa: E402
 
 import ks_jax  # noqa: E402
 from ks_jax.compilation import quick_jit  # noqa: E402
-from ks_jax.model import automatic as G  # noqa: E402
-from ks_jax.model.overlap import contact_geometry  # noqa: E402
+from ks_jax.model import contact as G  # noqa: E402
+from ks_jax.model.contact import contact_geometry  # noqa: E402
 from ks_jax.model.types import OK  # noqa: E402
 
 BATCH = 32

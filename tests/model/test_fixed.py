@@ -19,7 +19,7 @@ import fit  # noqa: E402
 import ks_jax  # noqa: E402
 from ks_jax.case import CaseError, case_from_dict, to_pytrees  # noqa: E402
 from ks_jax.cli import main  # noqa: E402
-from ks_jax.model.automatic import automatic_exchange  # noqa: E402
+from ks_jax.model.contact import automatic_exchange  # noqa: E402
 from ks_jax.report import text_report  # noqa: E402
 from samples import reference_jit  # noqa: E402
 

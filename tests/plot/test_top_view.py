@@ -118,15 +118,15 @@ def test_explicit_contact_drawing_and_two_panels(tmp_path):
 
 def test_clip_polygon_against_the_engine():
     """plot's NumPy clipping and the engine's fixed-size clipping give the same overlap."""
-    from ks_jax.model import overlap
+    from ks_jax.model.contact import overlap_polygon, polygon_area_centroid
 
     a = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 2.0], [0.0, 2.0]])
     c, s = math.cos(0.4), math.sin(0.4)
     b = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) @ np.array([[c, s], [-s, c]]) + [3.5, 1.6]
     mine = clip_polygon(a, b)
     with jax.disable_jit():
-        poly, count = overlap.overlap_polygon(np.asarray(a), np.asarray(b))
-        area, centroid = overlap.polygon_area_centroid(poly, count)
+        poly, count = overlap_polygon(np.asarray(a), np.asarray(b))
+        area, centroid = polygon_area_centroid(poly, count)
     assert int(count) == len(mine)
     assert float(area) == pytest.approx(shoelace(mine), rel=1e-12)
     x, y = mine[:, 0], mine[:, 1]

@@ -1,10 +1,10 @@
 """A pole struck by a vehicle (docs/model.md, "Fixed objects"): automatic contact with a disc instead of a box.
 
 The pole is vehicle 2 of the exchange, at rest, its footprint the disc of diameter ``vehicle2.width`` about its
-position (its box, the square about the disc, only bounds it: ``first_contact.reach``).
+position (its box, the square about the disc, only bounds it: ``geometry.reach``).
 
 - ``disc_gap``: the signed distance from the disc to the vehicle's footprint at a time of free motion (> 0
-  apart, 0 touching, < 0 overlapping): the separation function that ``first_contact`` searches for a root.
+  apart, 0 touching, < 0 overlapping): the separation function that ``search.first_contact`` searches for a root.
 - ``disc_contact``: the contact of a footprint overlapping the disc. The overlap is the disc, as the polygon
   of ``SIDES`` sides inscribed in it (within 0.5 % of its radius, and never past the circle, so that at the
   touch the search finds there is no overlap yet), clipped by the footprint's four sides; the centroid is
@@ -21,8 +21,8 @@ import math
 
 import jax.numpy as jnp
 
-from . import linalg as la
-from .overlap import _clip, is_solid, polygon_area_centroid
+from .. import linalg as la
+from .geometry import clip, is_solid, polygon_area_centroid
 
 SIDES = 32
 CENTRED = 1e-3  # radii: a centroid this near the centre gives no radial direction to speak of
@@ -49,7 +49,7 @@ def _signed_distance(p, box):
 def disc_gap(vehicle1, state1, vehicle2, state2, t):
     """() m: the signed distance from the pole (vehicle 2: the disc of diameter ``vehicle2.width`` about its
     CG) to the footprint of vehicle 1 after free motion for ``t`` s (> 0 apart, <= 0 touching or
-    overlapping): ``first_contact.separation`` for a pole."""
+    overlapping): ``geometry.separation`` for a pole."""
     xy = state1.position[:2] + state1.velocity[:2] * t
     yaw = state1.yaw + state1.angular_velocity[2] * t
     centre = state2.position[:2] + state2.velocity[:2] * t
@@ -65,14 +65,14 @@ def disc_polygon(centre, radius, corners):
     poly = jnp.zeros((SIDES + 4, 2), corners.dtype).at[:SIDES].set(ring)
     count = jnp.int32(SIDES)
     for k in range(4):
-        poly, count = _clip(poly, count, corners[k], corners[(k + 1) % 4])
+        poly, count = clip(poly, count, corners[k], corners[(k + 1) % 4])
     return poly, count
 
 
 def disc_contact(vehicle1, state1, centre, radius, corners1, len_tol, touch_state, touch_centre):
     """(point (2,), normal (2,) from the pole into the vehicle, polygon, count, area, solid) of the footprint
     of ``vehicle1`` in ``state1`` (corners ``corners1``) against the disc; ``len_tol`` (m): below this width
-    the overlap has no area (``overlap.is_solid``). ``touch_state``, ``touch_centre``: the vehicle and
+    the overlap has no area (``geometry.is_solid``). ``touch_state``, ``touch_centre``: the vehicle and
     the pole's centre at the first touch (for a pole wholly inside the footprint: the side it came in by)."""
     poly, count = disc_polygon(centre, radius, corners1)
     area, centroid = polygon_area_centroid(poly, count)

@@ -1,6 +1,6 @@
-"""Automatic contact (docs/model.md, "Automatic contact"): free motion to the first touch
-(``first_contact``), on by the penetration time, the centroid and normal of the overlap there
-(``overlap``), and the exchange at that contact (``collision``).
+"""The automatic stage (docs/model.md, "Automatic contact"): free motion to the first touch
+(``search``), on by the penetration time, the centroid and normal of the overlap there
+(``overlap``; ``pole`` for a pole), and the exchange at that contact (``model.collision``).
 
 - ``time`` (``contact.time``) reports the first-contact time t_i, as the manual's "timing"
   panel does; the exchange itself happens at t_i + penetration_time. For an explicit contact
@@ -23,14 +23,25 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import linalg as la
-from .checks import benign, input_status, is_fixed
-from .collision import exchange
-from .first_contact import HORIZON, advance, edge_normals, first_contact, footprint, penetrations, reach, separation
-from .overlap import Contact2D, _vertical_middle, contact_geometry, growing_overlap, length_tolerance, tilt
+from .. import linalg as la
+from ..checks import benign, input_status, is_fixed
+from ..collision import exchange
+from ..results import mask_invalid
+from ..types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
+from .geometry import (
+    advance,
+    edge_normals,
+    footprint,
+    length_tolerance,
+    penetrations,
+    reach,
+    separation,
+    vertical_middle,
+)
+from .overlap import Contact2D, contact_geometry, growing_overlap, tilt
 from .pole import disc_contact, disc_gap
-from .results import mask_invalid
-from .types import INVALID_PARTED, NO_CONTACT, OK, Contact, ExchangeResult, State, Vehicle
+from .search import HORIZON, first_contact
+
 
 class AutoContact(NamedTuple):
     """Everything automatic contact decides before the exchange (for plots and checks):
@@ -105,13 +116,13 @@ def automatic_contact(vehicle1, state1, vehicle2, state2, contact, normal_pitch,
 
 
 def _pole_geometry(vehicle1, state1, vehicle2, state2, coordinates, touch1, touch2) -> Contact2D:
-    """``overlap.contact_geometry`` where vehicle 2 is a pole (``pole.disc_contact``), with the same length
+    """``contact_geometry`` where vehicle 2 is a pole (``pole.disc_contact``), with the same length
     tolerance; no outline crossings. ``touch1``, ``touch2``: the states at the first touch."""
     corners1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     len_tol = length_tolerance(vehicle1, vehicle2, state1.position.dtype, coordinates)
     xy, n, poly, count, area, solid = disc_contact(vehicle1, state1, state2.position[:2], 0.5 * vehicle2.width,
                                                    corners1, len_tol, touch1, touch2.position[:2])
-    z = _vertical_middle(vehicle1, state1, vehicle2, state2)
+    z = vertical_middle(vehicle1, state1, vehicle2, state2)
     zero = jnp.zeros((), xy.dtype)
     no = jnp.zeros((), bool)  # no outline crossings: the plane is the tangent at the centroid
     flags = {k: no for k in Contact2D._fields if k in ("crossing_ok", "facing")}

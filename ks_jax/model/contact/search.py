@@ -3,12 +3,8 @@
 Pure and unbatched, built from fixed-size arrays (a footprint is (4, 2)), so it works under
 ``jax.jit``, ``jax.vmap`` and ``jax.grad``.
 
-- Footprint: the bounding box seen from above, x in [cg_to_front - length, cg_to_front],
-  y in [-width/2, width/2] in the body frame, turned by the yaw only (pitch and roll are
-  ignored for the footprint and the vertical overlap).
-- Free motion: the CG moves with its constant velocity (3D, so z too); the body turns about
-  its CG at the constant yaw rate (z component of the global angular velocity). Pitch and roll
-  stay as given; velocities and angular velocities are unchanged.
+- Footprints and free motion as ``geometry`` defines them; s(t) is ``geometry.separation``, or the
+  ``gap`` that ``first_contact`` is given (a pole's: ``pole.disc_gap``).
 - First contact is searched in [0, HORIZON] = [0, 10] s. Where neither vehicle rotates it is
   exact (closed form: the separating-axis test swept along the relative translation is a set
   of 8 linear inequalities in t). Where one rotates, the search keeps to the reach window
@@ -36,84 +32,20 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from . import linalg as la
-from .checks import is_fixed
-from .types import State, Vehicle
+from .. import linalg as la
+from ..checks import is_fixed
+from .geometry import edge_normals, footprint_at, penetrations, reach, separation
 
 HORIZON = 10.0  # s, search horizon for the first contact
 SCAN_STEPS = 2000  # the least step where a vehicle rotates: the reach window / SCAN_STEPS (<= 5 ms)
 REFINE_STEPS = 128  # a cap on ``_refine``: a bracket of 10 s takes ~53 halvings to a few ulps, at most 2 steps each
 
-# ---------------------------------------------------------------------------------------
-# footprints and free motion
-
-
-def footprint(vehicle: Vehicle, xy, yaw):
-    """(4, 2) corners (m) of the footprint with CG at ``xy`` (2,) and ``yaw`` (rad),
-    counter-clockwise: rear-right, front-right, front-left, rear-left."""
-    a = vehicle.cg_to_front - vehicle.length
-    b = vehicle.cg_to_front
-    h = 0.5 * vehicle.width
-    bx = jnp.stack([a, b, b, a])
-    by = jnp.stack([-h, -h, h, h])
-    c, s = jnp.cos(yaw), jnp.sin(yaw)
-    return jnp.stack([xy[0] + c * bx - s * by, xy[1] + s * bx + c * by], -1)
-
-
-def advance(state: State, t) -> State:
-    """The state after free motion for ``t`` s: CG moved by velocity * t, yaw turned by the yaw
-    rate * t; everything else unchanged."""
-    return state._replace(position=state.position + state.velocity * t,
-                          yaw=state.yaw + state.angular_velocity[2] * t)
-
-
-def _footprint_at(vehicle, state, t):
-    return footprint(vehicle, state.position[:2] + state.velocity[:2] * t, state.yaw + state.angular_velocity[2] * t)
-
-
-def edge_normals(yaw1, yaw2):
-    """(4, 2) unit edge normals of both footprints."""
-    c1, s1, c2, s2 = jnp.cos(yaw1), jnp.sin(yaw1), jnp.cos(yaw2), jnp.sin(yaw2)
-    return jnp.stack([jnp.stack([c1, s1]), jnp.stack([-s1, c1]), jnp.stack([c2, s2]), jnp.stack([-s2, c2])])
-
-
-def penetrations(corners1, corners2, axes):
-    """(8,) overlap of the projections on each axis, for vehicle 1 on the + side of vehicle 2
-    (first 4) and on the - side (last 4). All >= 0 iff the footprints touch."""
-    p1 = corners1 @ axes.T  # (4 corners, 4 axes)
-    p2 = corners2 @ axes.T
-    plus = jnp.max(p2, 0) - jnp.min(p1, 0)
-    minus = jnp.max(p1, 0) - jnp.min(p2, 0)
-    return jnp.concatenate([plus, minus])
-
-
-def separation(vehicle1, state1, vehicle2, state2, t):
-    """s(t) () m: the largest gap between the footprints' projections on their edge normals at
-    time t of free motion; > 0 apart, <= 0 touching or overlapping."""
-    c1 = _footprint_at(vehicle1, state1, t)
-    c2 = _footprint_at(vehicle2, state2, t)
-    axes = edge_normals(state1.yaw + state1.angular_velocity[2] * t, state2.yaw + state2.angular_velocity[2] * t)
-    return -jnp.min(penetrations(c1, c2, axes))
-
-
-def least_penetration_normal(corners1, corners2, axes):
-    """(2,) unit axis of least penetration, from vehicle 2 into vehicle 1 (or, when apart, the
-    most separating axis, pointing the same way), and the penetration depth () m."""
-    pen = penetrations(corners1, corners2, axes)
-    k = jnp.argmin(pen)
-    sign = jnp.where(k < 4, 1.0, -1.0)
-    return sign * axes[k % 4], pen[k]
-
-
-# ---------------------------------------------------------------------------------------
-# first contact
-
 
 def _translation_contact(vehicle1, state1, vehicle2, state2):
     """Closed form where neither vehicle rotates: (t_i, found). All 8 penetrations are linear
     in t, f_k(t) = f_k + g_k t, and the footprints touch iff all are >= 0."""
-    c1 = _footprint_at(vehicle1, state1, 0.0)
-    c2 = _footprint_at(vehicle2, state2, 0.0)
+    c1 = footprint_at(vehicle1, state1, 0.0)
+    c2 = footprint_at(vehicle2, state2, 0.0)
     axes = edge_normals(state1.yaw, state2.yaw)
     f = penetrations(c1, c2, axes)
     rate = axes @ (state1.velocity[:2] - state2.velocity[:2])  # d/dt of vehicle 1's projections
@@ -127,23 +59,8 @@ def _translation_contact(vehicle1, state1, vehicle2, state2):
     return lo, found
 
 
-def scene_size(vehicle1, vehicle2):
-    """() m: the size the geometry's tolerances are scaled by, sqrt(L_1 W_1 + L_2 W_2), leaving out a fixed
-    object (``checks.is_fixed``): a wall is a box kilometres long (``case.fixed``), whose size would make
-    the tolerances of a float32 scene metres wide, where its edges near the vehicle are as exact as a
-    vehicle's."""
-    area2 = jnp.where(is_fixed(vehicle2), 0.0, vehicle2.length * vehicle2.width)
-    return jnp.sqrt(vehicle1.length * vehicle1.width + area2)
-
-
-def reach(vehicle):
-    """() m: the radius about the CG of the circle that holds the footprint at any yaw."""
-    far = jnp.maximum(jnp.abs(vehicle.cg_to_front), jnp.abs(vehicle.cg_to_front - vehicle.length))
-    return jnp.sqrt(far * far + 0.25 * vehicle.width * vehicle.width)
-
-
 def reach_window(vehicle1, state1, vehicle2, state2):
-    """(t_a, t_b, within): the times t >= 0 at which the footprints' circles of reach (``_reach``
+    """(t_a, t_b, within): the times t >= 0 at which the footprints' circles of reach (``geometry.reach``
     about each CG, moving with the CG) overlap, whatever the vehicles' yaw rates: the footprints
     can touch only then. ``within`` is False where the circles never overlap; t_b is inf where
     they overlap for ever (equal velocities). The circles are 0.1% larger than they need be, so

@@ -53,9 +53,22 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import linalg as la
-from .first_contact import advance, edge_normals, footprint, least_penetration_normal, scene_size, separation
-from .results import crush_depth
+from .. import linalg as la
+from ..results import crush_depth
+from .geometry import (
+    advance,
+    clip,
+    cross2,
+    edge_normals,
+    footprint,
+    is_solid,
+    length_tolerance,
+    penetrations,
+    polygon_area_centroid,
+    scene_size,
+    separation,
+    vertical_middle,
+)
 
 MAX_VERTICES = 8  # two convex quadrilaterals overlap in at most an octagon
 
@@ -84,62 +97,17 @@ class Contact2D(NamedTuple):
 # overlap polygon
 
 
-def _cross2(a, b):
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _next_index(count, size=MAX_VERTICES):
-    idx = jnp.arange(size)
-    return idx, jnp.where(idx + 1 < count, idx + 1, 0)
-
-
-def _clip(poly, count, a, b):
-    """Clip the convex polygon (k, 2) with ``count`` vertices (k of room: 8 for two boxes) by the
-    half-plane left of the directed line a -> b (Sutherland-Hodgman step). Returns (poly, count)."""
-    size = poly.shape[0]
-    idx, nxt = _next_index(count, size)
-    valid = idx < count
-    q = poly[nxt]
-    edge = b - a
-    d0 = _cross2(edge, poly - a)
-    d1 = _cross2(edge, q - a)
-    in0, in1 = d0 >= 0, d1 >= 0
-    crossing = valid & (in0 != in1)
-    s = la.safe_div(d0, d0 - d1)
-    x = poly + s[:, None] * (q - poly)
-    cand = jnp.stack([poly, x], 1).reshape(2 * size, 2)
-    keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * size)
-    pos = jnp.cumsum(keep) - 1
-    onehot = ((pos[:, None] == jnp.arange(size)[None, :]) & keep[:, None]).astype(poly.dtype)
-    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), size).astype(jnp.int32)
-
-
 def overlap_polygon(corners1, corners2):
     """Footprint 1 clipped by footprint 2 (both (4, 2), counter-clockwise): (8, 2) vertices, of
     which the first ``count`` () are used."""
     poly = jnp.zeros((MAX_VERTICES, 2), corners1.dtype).at[:4].set(corners1)
 
     def step(carry, edge):
-        return _clip(*carry, edge[0], edge[1]), None
+        return clip(*carry, edge[0], edge[1]), None
 
     edges = jnp.stack([corners2, jnp.roll(corners2, -1, 0)], 1)  # (4, 2 ends, 2)
     (poly, count), _ = jax.lax.scan(step, (poly, jnp.int32(4)), edges)
     return poly, count
-
-
-def polygon_area_centroid(poly, count):
-    """Area () m^2 and area centroid (2,) m of the polygon's first ``count`` vertices (the
-    vertex mean where the area is 0)."""
-    idx, nxt = _next_index(count, poly.shape[0])
-    valid = idx < count
-    w = jnp.where(valid[:, None], poly, 0.0)
-    origin = jnp.sum(w, 0) / jnp.maximum(count, 1)
-    p = jnp.where(valid[:, None], poly - origin, 0.0)
-    q = p[nxt]
-    cr = jnp.where(valid, _cross2(p, q), 0.0)
-    area = 0.5 * jnp.sum(cr)
-    moment = jnp.sum((p + q) * cr[:, None], 0) / 6.0
-    return area, origin + jnp.stack([la.safe_div(moment[0], area), la.safe_div(moment[1], area)])
 
 
 def outline_crossings(corners1, corners2, tol=0.0):
@@ -154,10 +122,10 @@ def outline_crossings(corners1, corners2, tol=0.0):
     db = jnp.roll(corners2, -1, 0) - corners2
     a, da = a[:, None, :], da[:, None, :]
     b, db = b[None, :, :], db[None, :, :]
-    denom = _cross2(da, db)
+    denom = cross2(da, db)
     ab = b - a
-    s = la.safe_div(_cross2(ab, db), denom)
-    t = la.safe_div(_cross2(ab, da), denom)
+    s = la.safe_div(cross2(ab, db), denom)
+    t = la.safe_div(cross2(ab, da), denom)
     len_a, len_b = la.safe_norm(da), la.safe_norm(db)
     inside = (s * len_a > tol) & ((1 - s) * len_a > tol) & (t * len_b > tol) & ((1 - t) * len_b > tol)
     mask = (jnp.abs(denom) > tol * jnp.maximum(len_a, len_b)) & inside
@@ -241,25 +209,18 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touche
     axis = jnp.where(side < 0, -axis, axis)
     n2 = jnp.where(crossing_ok, axis, n_sat)
 
-    point = jnp.stack([xy[0], xy[1], _vertical_middle(vehicle1, state1, vehicle2, state2)])
+    point = jnp.stack([xy[0], xy[1], vertical_middle(vehicle1, state1, vehicle2, state2)])
     normal = jnp.stack([n2[0], n2[1], jnp.zeros((), dtype)])
     return Contact2D(point, normal, poly, count, area, two, crossing_ok, crossing_ok & facing, solid)
 
 
-def length_tolerance(vehicle1, vehicle2, dtype, coordinates):
-    """() m: ~1e3 machine epsilons of the scene's size (``first_contact.scene_size``) or of its distance from
-    the origin, whichever is larger: the width below which an overlap has no area, and how far apart two
-    features may be and still count as one."""
-    return 1e3 * jnp.finfo(dtype).eps * jnp.maximum(scene_size(vehicle1, vehicle2), coordinates)
-
-
-def is_solid(poly, count, area, len_tol):
-    """() bool: the polygon (its first ``count`` vertices, of area ``area``) is wider than ``len_tol``: its
-    area above the tolerance times half its perimeter (the inradius of a triangle; the area's rounding is
-    about the coordinates' rounding times the perimeter)."""
-    idx, nxt = _next_index(count, poly.shape[0])
-    perimeter = jnp.sum(jnp.where(idx < count, la.safe_norm(poly[nxt] - poly), 0.0))
-    return area > 0.5 * len_tol * perimeter
+def _least_penetration_normal(corners1, corners2, axes):
+    """(2,) unit axis of least penetration, from vehicle 2 into vehicle 1 (or, when apart, the
+    most separating axis, pointing the same way), and the penetration depth () m."""
+    pen = penetrations(corners1, corners2, axes)
+    k = jnp.argmin(pen)
+    sign = jnp.where(k < 4, 1.0, -1.0)
+    return sign * axes[k % 4], pen[k]
 
 
 def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
@@ -270,7 +231,7 @@ def _overlap(vehicle1, state1, vehicle2, state2, coordinates):
     its area and centroid, and the middle of the touching features (``_manifold_point``)."""
     c1 = footprint(vehicle1, state1.position[:2], state1.yaw)
     c2 = footprint(vehicle2, state2.position[:2], state2.yaw)
-    n_sat, _ = least_penetration_normal(c1, c2, edge_normals(state1.yaw, state2.yaw))
+    n_sat, _ = _least_penetration_normal(c1, c2, edge_normals(state1.yaw, state2.yaw))
     len_tol = length_tolerance(vehicle1, vehicle2, state1.position.dtype, coordinates)
     poly, count = overlap_polygon(c1, c2)
     area, centroid = polygon_area_centroid(poly, count)
@@ -314,21 +275,13 @@ def _overlap_growth(vehicle1, state1, vehicle2, state2, t_i, t_x, coordinates, n
     t_probe = t_x + jnp.where(grows, depth / jnp.where(grows, closing, 1.0), 0.0)
     a1, a2 = advance(state1, t_probe), advance(state2, t_probe)
     _, _, n_sat, _, _, _, _, area, centroid, manifold = _overlap(vehicle1, a1, vehicle2, a2, coordinates)
-    point = jnp.concatenate([centroid, _vertical_middle(vehicle1, a1, vehicle2, a2)[None]])
+    point = jnp.concatenate([centroid, vertical_middle(vehicle1, a1, vehicle2, a2)[None]])
     n = tilt(jnp.concatenate([n_sat, jnp.zeros(1, n_sat.dtype)]), normal_pitch)
     crush = jnp.stack([crush_depth(point, sign * n, a.position, la.rotation(a.yaw, a.pitch, a.roll), v)
                        for sign, a, v in ((-1.0, a1, vehicle1), (1.0, a2, vehicle2))])
     since = t_probe - t_i
     ok = grows & (area > 0) & (since > 0)
     return jnp.where(ok, jnp.concatenate([centroid - manifold, crush]) / jnp.where(ok, since, 1.0), 0.0)
-
-
-def _vertical_middle(vehicle1, state1, vehicle2, state2):
-    """() m: the middle of the boxes' vertical overlap (z of the automatic centroid)."""
-    bottom = jnp.maximum(state1.position[2] - vehicle1.cg_height, state2.position[2] - vehicle2.cg_height)
-    top = jnp.minimum(state1.position[2] - vehicle1.cg_height + vehicle1.height,
-                      state2.position[2] - vehicle2.cg_height + vehicle2.height)
-    return 0.5 * (bottom + top)
 
 
 def tilt(normal, pitch):
