@@ -9,6 +9,15 @@ Components. Vectors and matrices are read with ``vec``/``mat`` (one ``unstack``)
 components, the others arrays). Reverse mode is why: the cotangent of each ``v[i]`` is a ``pad``
 into a zero array, and the pads are then added up; batched, those pads and adds were most of
 the backward pass. The transpose of one ``unstack`` is one ``stack``.
+
+Trigonometry, one rule for the whole model: in its programs (jit-compiled and vmapped, the angle an
+array), sin and cos are ``sincos`` (one angle) or ``trig`` (the three angles of a rotation, for
+``rotation``/``rotation_c``), and atan2 is ``safe_atan2``; never ``jnp.sin``, ``jnp.cos`` or
+``jnp.arctan2`` (nor ``jnp.mod``, see ``degrees_0_360``). XLA's CPU backend evaluates those by a scalar libm
+call per value, in loops that are not vectorized; the polynomial forms here vectorize, are within 1-4 ulp of
+NumPy in float64 (the tests hold them to it), and differentiate everywhere (``safe_atan2`` is 0, with
+gradient 0, at the origin). An angle known when the program is traced (a constant) is evaluated once with
+NumPy or ``math``, as is Python-side arithmetic on plain floats (reading case files, writing reports).
 """
 
 from __future__ import annotations
@@ -76,7 +85,7 @@ def cross(a, b):
     return array(cross_c(a, b))
 
 
-def matvec_c(m, v, transpose=False):
+def _matvec_c(m, v, transpose=False):
     """m v, or m^T v with ``transpose``."""
     rows = transpose_c(m) if transpose else mat(m)
     v = vec(v)
@@ -84,17 +93,13 @@ def matvec_c(m, v, transpose=False):
 
 
 def matvec(m, v, transpose=False):
-    return array(matvec_c(m, v, transpose))
+    return array(_matvec_c(m, v, transpose))
 
 
 def matmul_c(a, b, transpose_b=False):
     """a b, or a b^T with ``transpose_b``."""
     cols = mat(b) if transpose_b else transpose_c(b)
     return tuple(tuple(dot(row, col) for col in cols) for row in mat(a))
-
-
-def matmul(a, b, transpose_b=False):
-    return from_rows(matmul_c(a, b, transpose_b))
 
 
 def det3(m):
@@ -160,9 +165,8 @@ def _bitwise_or(count):
     return lambda a, b: tuple(x | y for x, y in zip(a, b))
 
 
-# sin, cos and atan2 written as polynomials in elementwise operations. XLA's CPU backend
-# evaluates jnp.sin, jnp.cos and jnp.arctan2 by scalar libm calls, in loops that are not vectorized;
-# these vectorize, at 1-4 ulp in float64 (the tests hold them to NumPy).
+# sin, cos and atan2 written as polynomials in elementwise operations (the module docstring says
+# where and why).
 
 def _pio2_parts(head_bits, dtype):
     """pi/2 = p1 + p2 + p3 in ``dtype``, p1 and p2 with ``head_bits`` significant bits (so that
@@ -253,18 +257,18 @@ def _atan2_values(y, x):
 
 
 @jax.custom_jvp
-def atan2(y, x):
+def _atan2(y, x):
     """atan2 as a vectorizable polynomial (``_atan2_values``); derivative
     (x dy - y dx) / (x^2 + y^2), 0 at the origin."""
     y, x = jnp.broadcast_arrays(y, x)
     return materialize(_atan2_values(y, x))[0]
 
 
-@atan2.defjvp
+@_atan2.defjvp
 def _atan2_jvp(primals, tangents):
     (y, x), (dy, dx) = primals, tangents
     r2 = x * x + y * y
-    return atan2(y, x), safe_div(x * dy - y * dx, r2)
+    return _atan2(y, x), safe_div(x * dy - y * dx, r2)
 
 
 def trig(yaw, pitch, roll):
@@ -285,14 +289,9 @@ def rotation_c(cz, sz, cy, sy, cx, sx):
     )
 
 
-def rotation_from_trig(cz, sz, cy, sy, cx, sx):
-    """R from ``trig``'s six values."""
-    return from_rows(rotation_c(cz, sz, cy, sy, cx, sx))
-
-
 def rotation(yaw, pitch, roll):
     """R = Rz(yaw) Ry(pitch) Rx(roll): body (ISO 8855) -> global."""
-    return rotation_from_trig(*trig(yaw, pitch, roll))
+    return from_rows(rotation_c(*trig(yaw, pitch, roll)))
 
 
 def safe_norm(v):
@@ -322,27 +321,28 @@ def safe_div(a, b, fallback=0.0):
 
 
 def safe_atan2(y, x):
-    """atan2 with 0 (value and gradient) at the origin."""
+    """atan2(y, x) in (-pi, pi] as a vectorizable polynomial (``_atan2_values``), with 0 (value and
+    gradient) at the origin; derivative (x dy - y dx) / (x^2 + y^2) elsewhere."""
     zero = (x == 0) & (y == 0)
-    return jnp.where(zero, 0.0, atan2(y, jnp.where(zero, 1.0, x)))
+    return jnp.where(zero, 0.0, _atan2(y, jnp.where(zero, 1.0, x)))
 
 
 def degrees_0_360(rad):
-    """Radians in [-pi, pi] (an ``atan2``) -> degrees in [0, 360). No jnp.mod: on a CPU it is a
+    """Radians in [-pi, pi] (a ``safe_atan2``) -> degrees in [0, 360). No jnp.mod: on a CPU it is a
     scalar libm call per value. Where a value is put to 0 (-0.0, as a frontal force gives, and a
     tiny negative angle that rounds to 360) its derivative is kept: the angle's rate of turning."""
     d = jnp.degrees(rad)
     d = jnp.where(d < 0.0, d + 360.0, d)
-    return value_with_gradient(jnp.where((d >= 360.0) | (d == 0.0), 0.0, d), d)
+    return _value_with_gradient(jnp.where((d >= 360.0) | (d == 0.0), 0.0, d), d)
 
 
 def plain_zero(x):
     """``x`` with -0.0 written 0.0 (a result that no impulse made is 0, not "-0" in a file); its
     derivative is that of ``x`` everywhere, 0 included."""
-    return value_with_gradient(jnp.where(x == 0.0, 0.0, x), x)
+    return _value_with_gradient(jnp.where(x == 0.0, 0.0, x), x)
 
 
-def value_with_gradient(value, x):
+def _value_with_gradient(value, x):
     """``value`` (equal to ``x`` or a corrected form of it, such as -0.0 -> 0.0) with the derivative of
     ``x``: a ``jnp.where`` alone would make the derivative 0 where it corrects. x - stop_gradient(x) is
     +0.0 for every finite x, so the value is ``value`` exactly."""
