@@ -34,7 +34,7 @@ def footprint(vehicle: Vehicle, xy, yaw):
     h = 0.5 * vehicle.width
     bx = jnp.stack([a, b, b, a])
     by = jnp.stack([-h, -h, h, h])
-    c, s = jnp.cos(yaw), jnp.sin(yaw)
+    s, c = la.sincos(yaw)
     return jnp.stack([xy[0] + c * bx - s * by, xy[1] + s * bx + c * by], -1)
 
 
@@ -52,7 +52,7 @@ def footprint_at(vehicle, state, t):
 
 def edge_normals(yaw1, yaw2):
     """(4, 2) unit edge normals of both footprints."""
-    c1, s1, c2, s2 = jnp.cos(yaw1), jnp.sin(yaw1), jnp.cos(yaw2), jnp.sin(yaw2)
+    (s1, c1), (s2, c2) = la.sincos(yaw1), la.sincos(yaw2)
     return jnp.stack([jnp.stack([c1, s1]), jnp.stack([-s1, c1]), jnp.stack([c2, s2]), jnp.stack([-s2, c2])])
 
 

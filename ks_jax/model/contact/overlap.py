@@ -286,5 +286,5 @@ def _overlap_growth(vehicle1, state1, vehicle2, state2, t_i, t_x, coordinates, n
 
 def tilt(normal, pitch):
     """Horizontal unit normal (3,) tilted up by ``pitch`` (rad): (cos p n_x, cos p n_y, sin p)."""
-    cp = jnp.cos(pitch)
-    return jnp.stack([cp * normal[0], cp * normal[1], jnp.sin(pitch) * jnp.ones_like(normal[0])])
+    sp, cp = la.sincos(jnp.asarray(pitch, jnp.result_type(pitch, normal)))  # a Python pitch: the normal's dtype
+    return jnp.stack([cp * normal[0], cp * normal[1], sp * jnp.ones_like(normal[0])])

@@ -20,17 +20,20 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from .. import linalg as la
 from .geometry import clip, is_solid, polygon_area_centroid
 
 SIDES = 32
 CENTRED = 1e-3  # radii: a centroid this near the centre gives no radial direction to speak of
+_ANGLES = np.arange(SIDES) * (2 * math.pi / SIDES)
+_RING = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], -1)  # (SIDES, 2): the unit circle's polygon, constants
 
 
 def _body(vehicle, xy, yaw, point):
     """``point`` (2,) in the footprint's frame, and the footprint's extent: (p, (a, b, h))."""
-    c, s = jnp.cos(yaw), jnp.sin(yaw)
+    s, c = la.sincos(yaw)
     d = point - xy
     p = jnp.stack([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
     return p, (vehicle.cg_to_front - vehicle.length, vehicle.cg_to_front, 0.5 * vehicle.width)
@@ -60,8 +63,7 @@ def disc_gap(vehicle1, state1, vehicle2, state2, t):
 def disc_polygon(centre, radius, corners):
     """The disc as the regular polygon of ``SIDES`` sides inscribed in it, clipped by the footprint
     (``corners`` (4, 2), counter-clockwise): ((SIDES + 4, 2) vertices, of which the first ``count``)."""
-    angle = jnp.arange(SIDES, dtype=corners.dtype) * (2 * math.pi / SIDES)
-    ring = centre + radius * jnp.stack([jnp.cos(angle), jnp.sin(angle)], -1)
+    ring = centre + radius * jnp.asarray(_RING, corners.dtype)
     poly = jnp.zeros((SIDES + 4, 2), corners.dtype).at[:SIDES].set(ring)
     count = jnp.int32(SIDES)
     for k in range(4):
@@ -80,7 +82,7 @@ def disc_contact(vehicle1, state1, centre, radius, corners1, len_tol, touch_stat
 
     p, box = _body(vehicle1, state1.position[:2], state1.yaw, centre)
     _, nearest = _signed_distance(p, box)
-    c, s = jnp.cos(state1.yaw), jnp.sin(state1.yaw)
+    s, c = la.sincos(state1.yaw)
     to_world = lambda v: jnp.stack([c * v[0] - s * v[1], s * v[0] + c * v[1]])  # noqa: E731
     touch = state1.position[:2] + to_world(nearest)  # the footprint's point nearest the centre
     point = jnp.where(solid, centroid, touch)
