@@ -8,11 +8,12 @@ position (its box, the square about the disc, only bounds it: ``geometry.reach``
 - ``disc_contact``: the contact of a footprint overlapping the disc. The overlap is the disc, as the polygon
   of ``SIDES`` sides inscribed in it (within 0.5 % of its radius, and never past the circle, so that at the
   touch the search finds there is no overlap yet), clipped by the footprint's four sides; the centroid is
-  its area centroid. The normal is radial, from the pole's centre towards that centroid (the contact plane is the
-  tangent there), pointing from the pole into the vehicle. Where the centroid is within ``CENTRED`` radii
-  of the centre (the pole wholly inside the footprint), the normal is that of the side the pole came in
-  through, turned inwards: the footprint's side the centre lay farthest beyond at the first touch. Where the overlap has no area (the
-  instant of touching), the centroid is the footprint's point nearest the centre, and the normal radial.
+  its area centroid. The normal is radial, from the pole's centre towards that centroid (the contact plane is
+  the tangent there), pointing from the pole into the vehicle. Where the centroid is within ``CENTRED``
+  radii of the centre (the pole wholly inside the footprint), the normal is that of the side the pole came in
+  through, turned inwards: the footprint's side the centre lay farthest beyond at the first touch. Where the
+  overlap has no area (the instant of touching), the centroid is the footprint's point nearest the centre,
+  and the normal radial.
 """
 
 from __future__ import annotations
