@@ -7,7 +7,7 @@ I^-1 are 0), whose footprint automatic contact reads as it reads a second vehicl
   box behind it, ``WALL_REACH`` long each way along the face and as deep, so that no vehicle can reach its
   ends within the first-contact search (HORIZON seconds at ``WALL_SPEED``) from where the case puts it.
 - pole: the square about its disc, which automatic contact meets as the disc itself (``Case.pole``,
-  ``model.pole``): first touch of the footprint with the circle, the overlap of footprint and disc, a radial
+  ``model.contact.pole``): first touch of the footprint with the circle, the overlap of footprint and disc, a radial
   normal.
 """
 
@@ -50,7 +50,7 @@ def object_inputs(obj: FixedObject, vehicle: VehicleInputs) -> VehicleInputs:
     if obj.kind == "barrier":
         xy, yaw, length, width, height = obj.position, obj.yaw, obj.length, obj.width, obj.height
         cg_to_front = 0.5 * length
-    elif obj.kind == "pole":  # the square about the disc (automatic contact meets the disc: ``model.pole``)
+    elif obj.kind == "pole":  # the square about the disc (automatic contact meets the disc: ``model.contact.pole``)
         xy, length, width, height = obj.position, obj.diameter, obj.diameter, OBJECT_HEIGHT
         yaw, cg_to_front = 0.0, 0.5 * obj.diameter
     else:  # wall: the box's rear face (body -x) is the wall's face, so the box is turned to face into the wall

@@ -115,7 +115,7 @@ class Case:
 
     @property
     def pole(self) -> bool:
-        """The case strikes a pole: automatic contact meets vehicle 2 as a disc (``model.pole``), not a box."""
+        """The case strikes a pole: automatic contact meets vehicle 2 as a disc (``model.contact.pole``), not a box."""
         return self.fixed is not None and self.fixed.kind == "pole"
 
 def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:

@@ -3,7 +3,7 @@ and, for a case with a road, each vehicle's motion from the exchange to rest.
 
 matplotlib is imported only inside the functions (it is the ``plot`` extra). The contact is drawn in NumPy
 from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints move freely from the case
-state (docs/model.md, "Automatic contact", as ``ks_jax.model.first_contact`` moves them), so a case without a
+state (docs/model.md, "Automatic contact", as ``ks_jax.model.contact`` moves them), so a case without a
 road needs no JAX call. The motion to rest is the one thing the results do not hold step by step: for a case
 with a road, ``ks_jax.solve.motion_paths`` solves the case once more, keeping every step of it.
 
