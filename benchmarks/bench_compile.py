@@ -26,9 +26,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import fit  # noqa: E402
-import fit.rows  # noqa: E402
-import ks_jax  # noqa: E402
+import fit
+import fit.rows
+import ks_jax
 
 CASES = Path(ks_jax.__file__).parent / "cases"
 

@@ -48,12 +48,12 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import bench_fit  # noqa: E402
-from bench_kernel import delta_v, random_batch, streaming_references  # noqa: E402
+import bench_fit
+from bench_kernel import delta_v, random_batch, streaming_references
 
-import fit  # noqa: E402
-import ks_jax  # noqa: E402
-from ks_jax.model import collision  # noqa: E402
+import fit
+import ks_jax
+from ks_jax.model import collision
 
 CASE = Path(ks_jax.__file__).resolve().parent / "cases" / "seed_000_saturn_pontiac.json"
 

@@ -39,13 +39,13 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import fit  # noqa: E402
-from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
-from ks_jax.case import case_from_dict, get_input, get_output  # noqa: E402
-from fit.solvers import SOLVERS  # noqa: E402
-from ks_jax.solve import solve  # noqa: E402
+import fit
+from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case
+from ks_jax.case import case_from_dict, get_input, get_output
+from fit.solvers import SOLVERS
+from ks_jax.solve import solve
 
 SMOOTHING = 1e-3
 

@@ -60,11 +60,11 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy_ks  # noqa: E402
+import numpy_ks
 
-import ks_jax  # noqa: E402
-from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.model import collision  # noqa: E402
+import ks_jax
+from ks_jax.case import as_arrays, to_pytrees
+from ks_jax.model import collision
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 

@@ -37,11 +37,11 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from ks_jax.batch.stages import BLOCK_ROWS, in_blocks  # noqa: E402
-from ks_jax.model import motion as M  # noqa: E402
+from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
+from ks_jax.model import motion as M
 
 
 def vehicles(n, seed=0):

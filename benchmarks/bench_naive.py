@@ -32,11 +32,11 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import bench_kernel as bk  # noqa: E402
-import naive_ks  # noqa: E402
-import numpy_ks  # noqa: E402
+import bench_kernel as bk
+import naive_ks
+import numpy_ks
 
-import ks_jax  # noqa: E402
+import ks_jax
 
 
 def naive_losses():

@@ -28,8 +28,8 @@ jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-import fit  # noqa: E402
-from bench_fit import sliding_cases  # noqa: E402
+import fit
+from bench_fit import sliding_cases
 
 
 def main(argv=None):

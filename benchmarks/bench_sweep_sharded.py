@@ -20,7 +20,7 @@ import jax
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-import ks_jax  # noqa: E402
+import ks_jax
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 

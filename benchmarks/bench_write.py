@@ -18,9 +18,9 @@ import jax
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-import ks_jax  # noqa: E402
-import ks_jax.sweeps.files as files_module  # noqa: E402
-from ks_jax.sweeps import write_results  # noqa: E402
+import ks_jax
+import ks_jax.sweeps.files as files_module
+from ks_jax.sweeps import write_results
 
 CASE = Path(ks_jax.__file__).parent / "cases" / "seed_000_saturn_pontiac.json"
 

@@ -32,9 +32,9 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-import ks_jax  # noqa: E402
-from ks_jax.case import as_arrays, to_pytrees  # noqa: E402
-from ks_jax.solve import solve_inputs, stages  # noqa: E402
+import ks_jax
+from ks_jax.case import as_arrays, to_pytrees
+from ks_jax.solve import solve_inputs, stages
 
 CHUNKS = importlib.import_module("ks_jax.batch.chunks")
 COLLISION = importlib.import_module("ks_jax.model.collision")

@@ -14,9 +14,9 @@ import time
 
 os.environ.setdefault("KS_JAX_CACHE", "off")  # nothing kept between processes: every first run compiles
 
-import jax  # noqa: E402
+import jax
 
-from ks_jax.cli import main  # noqa: E402
+from ks_jax.cli import main
 
 jax.config.update("jax_enable_x64", True)  # as the tests run it
 

@@ -5,6 +5,10 @@ compile cache had it); and, run as a script, a summary of a profiled run.
     PROF_DIR=/tmp/prof PROF_TAG=run1 PYTHONPATH=benchmarks .venv/bin/python -m pytest -q -n auto --dist loadfile \\
         -p suite_profile
     .venv/bin/python benchmarks/suite_profile.py /tmp/prof run1
+    .venv/bin/python benchmarks/suite_profile.py /tmp/prof run1 --durations tests/durations.json
+
+The last writes each test file's wall seconds in the profiled run to ``tests/durations.json``, from which
+tests/conftest.py hands the longest files to the test workers first.
 
 Each process (each pytest-xdist worker) writes PROF_DIR/TAG_<worker>.json. The summary lists per file and per
 test the CPU seconds, the CPU seconds of compiles the cache did not have, their count, and the programs compiled
@@ -104,7 +108,22 @@ def summary(folder, tag, top=40):
         print(f"{cpu:7.1f} {n:5d}  {name}")
 
 
+def write_durations(folder, tag, path):
+    """Each test file's wall seconds in a profiled run, longest first, as JSON at ``path``."""
+    seconds = collections.defaultdict(float)
+    for file in glob.glob(os.path.join(folder, f"{tag}_*.json")):
+        with open(file) as f:
+            for test, wall, _, _ in json.load(f)["tests"]:
+                seconds[test.split("::")[0]] += wall
+    with open(path, "w") as f:
+        json.dump({k: round(v, 1) for k, v in sorted(seconds.items(), key=lambda x: -x[1])}, f, indent=1)
+        f.write("\n")
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: suite_profile.py PROF_DIR TAG")
-    summary(sys.argv[1], sys.argv[2])
+    if len(sys.argv) == 5 and sys.argv[3] == "--durations":
+        write_durations(sys.argv[1], sys.argv[2], sys.argv[4])
+    elif len(sys.argv) == 3:
+        summary(sys.argv[1], sys.argv[2])
+    else:
+        sys.exit("usage: suite_profile.py PROF_DIR TAG [--durations PATH]")

@@ -224,7 +224,7 @@ def parse_quantity(value, kind: str) -> float:
         close = difflib.get_close_matches(unit, COMMON_UNITS.get(kind, ()), n=1, cutoff=0.5)
         hint = f": did you mean '{number} {close[0]}'?" if close else ""
         raise UnitError(f"'{text}': unknown unit ({err}){hint}") from None
-    except Exception as err:  # pint raises several kinds for malformed text
+    except Exception as err:  # noqa: BLE001 (pint raises several kinds for malformed text)
         raise UnitError(f"'{text}' is not a '<number> <unit>' quantity ({err})") from None
     if kind == "dimensionless":
         if not q.unitless:

@@ -30,8 +30,8 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-import fit  # noqa: E402
-import ks_jax  # noqa: E402
+import fit
+import ks_jax
 
 CASES = Path(ks_jax.__file__).parent / "cases"
 SPEEDS = np.linspace(2.0, 30.0, 40)  # vehicles[1].speed, m/s

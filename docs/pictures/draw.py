@@ -18,16 +18,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import matplotlib  # noqa: E402
+import jax.numpy as jnp
+import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Polygon  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Polygon
 
-import ks_jax  # noqa: E402
-from ks_jax.model.contact import automatic_contact, footprint  # noqa: E402
+import ks_jax
+from ks_jax.model.contact import automatic_contact, footprint
 
 HERE = Path(__file__).parent
 COLORS = ("tab:blue", "tab:orange")

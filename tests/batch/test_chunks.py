@@ -16,6 +16,7 @@ import ks_jax
 from ks_jax import backend
 from ks_jax.model import types as t
 from samples import assert_same_leaves, reference_jit, with_bad_rows
+import kit
 
 CHUNKS = importlib.import_module("ks_jax.batch.chunks")
 
@@ -44,7 +45,7 @@ def small_chunks(monkeypatch):
 
 
 @pytest.mark.slow
-def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, small_chunks):
+def test_vmap_of_exchange_in_chunks_equals_single_solves(random_cases, small_chunks):
     cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
     assert "scan" in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*args))  # the loop over chunks, not the whole-batch program
@@ -64,7 +65,7 @@ def test_vmap_of_exchange_in_chunks_equals_single_solves(kit, random_cases, smal
 
 
 @pytest.mark.slow
-def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, random_cases, small_chunks):
+def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(random_cases, small_chunks):
     """Both vehicles the same in every row (unbatched), a smooth cone: the rows of the last chunk, which starts
     at row 66 so as to end at row 130, equal the whole-batch program of those 64 rows."""
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:130])
@@ -76,7 +77,7 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(kit, ran
 
 
 @pytest.mark.slow
-def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
+def test_derivatives_through_a_chunked_batch(random_cases, small_chunks):
     """Reverse and forward mode through a batch whose values run in chunks, with an unbatched input (one
     vehicle 2 in every row: its gradient is the sum over the rows) and rows with invalid inputs (zero
     gradient, nothing NaN): both are the gradients of the rows solved one at a time (``jax.grad`` of one
@@ -115,7 +116,7 @@ def test_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
 
 
 @pytest.mark.slow
-def test_a_batch_of_one_row_is_the_row(kit, random_cases):
+def test_a_batch_of_one_row_is_the_row(random_cases):
     """``jax.vmap(exchange)`` over one row computes the row unbatched: its values are those of ``exchange``
     of the row, and its gradient with one vehicle shared (unbatched) is the row's to rounding, for a valid row
     and for one with invalid inputs."""
@@ -154,7 +155,7 @@ def test_a_batch_of_one_row_is_the_row(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chunks):
+def test_second_derivatives_through_a_chunked_batch(random_cases, small_chunks):
     """Forward over reverse (``jax.hessian``) through a batch whose values run in chunks: the columns of the
     Hessian are central differences of the gradient."""
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
@@ -176,7 +177,7 @@ def test_second_derivatives_through_a_chunked_batch(kit, random_cases, small_chu
 
 
 @pytest.mark.slow
-def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
+def test_float32_inputs_stay_float32_with_x64(random_cases, small_chunks):
     """With 64-bit types enabled (as in these tests, the CLI and the benchmarks), float32 inputs give
     float32 results computed in float32: no float64 constant may promote them (the stand-ins of
     invalid rows once did). Values against the float64 reference at float32 tolerance."""
@@ -185,4 +186,4 @@ def test_float32_inputs_stay_float32_with_x64(kit, random_cases, small_chunks):
     for result in (BATCH(*args), ks_jax.exchange_batch(*args, chunk=64)):
         floats = [x for x in jax.tree_util.tree_leaves(result) if np.asarray(x).dtype.kind == "f"]
         assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
-        kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.rtol_float32, cases)
+        kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.RTOL_FLOAT32, cases)

@@ -14,11 +14,12 @@ from ks_jax import backend
 from ks_jax.cli import main
 from ks_jax.model import types as t
 from samples import assert_same_leaves, with_bad_rows
+import kit
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_exchange_batch_equals_vmap(kit, random_cases, kind):
+def test_exchange_batch_equals_vmap(random_cases, kind):
     cases = random_cases[kind][:150]
     # rows with invalid inputs among them: each keeps its own status, the others are solved
     bad = copy.deepcopy(cases[7])
@@ -48,13 +49,13 @@ def test_exchange_batch_equals_vmap(kit, random_cases, kind):
 
 
 @pytest.mark.slow
-def test_exchange_batch_smoothing_matches_vmap(kit, random_cases):
+def test_exchange_batch_smoothing_matches_vmap(random_cases):
     args = kit.inputs(random_cases["principal"][:40])
     reference = kit.batch_exchange(args, 0.05)
     assert_same_leaves(ks_jax.exchange_batch(*args, smoothing=0.05, chunk=16), reference)
 
 
-def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_cases):
+def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(random_cases):
     args = kit.inputs(random_cases["principal"][:10])
     short = args[4]._replace(friction=args[4].friction[:9])
     with pytest.raises(ValueError, match="same leading batch axis"):
@@ -68,7 +69,7 @@ def test_exchange_batch_rejects_mismatched_batch_and_bad_arguments(kit, random_c
 
 
 @pytest.mark.slow
-def test_exchange_batch_writes_into_out(kit, random_cases):
+def test_exchange_batch_writes_into_out(random_cases):
     """``out``: the results of another batch of the same size are overwritten in place (chunks of 16
     over 40 rows, the last one aligned to the end) and equal a fresh call; a wrong ``out`` is refused,
     naming the field (every call in chunks of 16: one program)."""
@@ -94,7 +95,7 @@ def test_exchange_batch_writes_into_out(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_exchange_batch_of_no_rows(kit, random_cases):
+def test_exchange_batch_of_no_rows(random_cases):
     """An empty batch (a filtered batch may be) gives empty results with the fields, trailing shapes and
     dtypes of a one-row batch's; an ``out`` of that shape is returned as it is."""
     one = kit.inputs(random_cases["principal"][:1])
@@ -110,7 +111,7 @@ def test_exchange_batch_of_no_rows(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_exchange_batch_on_the_accelerator_path(kit, random_cases):
+def test_exchange_batch_on_the_accelerator_path(random_cases):
     """The accelerator's path (``backend.path``, forced on whatever device runs the tests): rows given as
     NumPy arrays go to the device chunk by chunk (64, 64, then a last chunk aligned to the end), results are
     copied to the host while the next chunk runs, or stay on the device (``to_host=False``); device rows in

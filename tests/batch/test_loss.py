@@ -12,6 +12,7 @@ import pytest
 import ks_jax
 from ks_jax import backend
 from samples import reference_jit, with_bad_rows
+import kit
 
 
 def _evidence_row_loss(v1, s1, v2, s2, c, target):
@@ -22,7 +23,7 @@ def _evidence_row_loss(v1, s1, v2, s2, c, target):
 
 
 @pytest.mark.slow
-def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
+def test_sum_over_rows_equals_the_sum_and_per_row_gradients(random_cases):
     """Chunks of 64 rows over 150 (the last chunk padded), a vehicle and an evidence target shared by
     every row, rows with invalid inputs: the value is the plain sum, the gradients are the per-row
     gradients (summed over the rows for the shared inputs), zero and finite in the bad rows, and a
@@ -63,7 +64,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
+def test_sum_over_rows_forward_mode_and_second_derivatives(random_cases):
     """Forward mode against central differences of the plain sum, and the Hessian of the chunked sum
     (forward over reverse) against central differences of its forward mode."""
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
@@ -95,7 +96,7 @@ def test_sum_over_rows_forward_mode_and_second_derivatives(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_sum_over_rows_rejects_bad_arguments(kit, random_cases):
+def test_sum_over_rows_rejects_bad_arguments(random_cases):
     args = kit.inputs(random_cases["principal"][:10])
     with pytest.raises(ValueError, match=r"chunk = 0: chunk must be a positive number of rows"):
         ks_jax.sum_over_rows(_evidence_row_loss, chunk=0)

@@ -12,19 +12,19 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-import fit  # noqa: E402
-from fit.arrays import case_arrays  # noqa: E402
-from fit.posterior import run_chains  # noqa: E402
-from fit.report import text_report  # noqa: E402
-from ks_jax.cli import main  # noqa: E402
-from ks_jax.cli.fit import posterior_path, save_posterior  # noqa: E402
-from ks_jax.case import get_output, load_case, set_input  # noqa: E402
-from ks_jax.solve import solve  # noqa: E402
-from samples import CASES, reference_jit  # noqa: E402
+import fit
+from fit.arrays import case_arrays
+from fit.posterior import run_chains
+from fit.report import text_report
+from ks_jax.cli import main
+from ks_jax.cli.fit import posterior_path, save_posterior
+from ks_jax.case import get_output, load_case, set_input
+from ks_jax.solve import solve
+from samples import CASES, reference_jit
 
 pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles programs of its own
 

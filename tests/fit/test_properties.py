@@ -29,17 +29,17 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-import fit  # noqa: E402
-from fit.report import text_report  # noqa: E402
-from fit.synthetic import oblique_case  # noqa: E402
-from ks_jax.case import case_from_dict, get_input, get_output, output_kind, set_input  # noqa: E402
-from ks_jax.solve import solve  # noqa: E402
-from samples import CASES  # noqa: E402
+import fit
+from fit.report import text_report
+from fit.synthetic import oblique_case
+from ks_jax.case import case_from_dict, get_input, get_output, set_input
+from ks_jax.solve import solve
+from samples import CASES
 
 pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles programs of its own
 

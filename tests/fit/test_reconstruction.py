@@ -18,21 +18,21 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # no-op when tests/conftest.py has done it
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-import fit  # noqa: E402
-from fit import rows as rc  # noqa: E402
-from fit.problem import Problem, to_x, to_z, wrap  # noqa: E402
-from fit.report import fmt  # noqa: E402
-from fit.rounds import OFF_BOUND, other_side  # noqa: E402
-from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case  # noqa: E402
-from ks_jax import units as U  # noqa: E402
-from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input  # noqa: E402
-from ks_jax.model.types import OK  # noqa: E402
-from ks_jax.solve import solve  # noqa: E402
-from samples import CASES  # noqa: E402
+import fit
+from fit import rows as rc
+from fit.problem import Problem, to_x, to_z, wrap
+from fit.report import fmt
+from fit.rounds import OFF_BOUND, other_side
+from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case
+from ks_jax import units as U
+from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input
+from ks_jax.model.types import OK
+from ks_jax.solve import solve
+from samples import CASES
 
 SEED = CASES / "seed_001_lucid_kia.toml"
 FIT_SEED = CASES / "fit_seed_001.json"

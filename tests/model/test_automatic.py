@@ -17,18 +17,18 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-import ks_jax  # noqa: E402
-from ks_jax.model import contact as G  # noqa: E402
-from ks_jax.model.contact import search  # noqa: E402
-from ks_jax import units as U  # noqa: E402
-from ks_jax.case import as_arrays, load_case, set_input, to_pytrees  # noqa: E402
-from ks_jax.compilation import quick_jit  # noqa: E402
-from ks_jax.model.types import NO_CONTACT, OK  # noqa: E402
-from samples import reference_jit  # noqa: E402
+import ks_jax
+from ks_jax.model import contact as G
+from ks_jax.model.contact import search
+from ks_jax import units as U
+from ks_jax.case import as_arrays, load_case, set_input, to_pytrees
+from ks_jax.compilation import quick_jit
+from ks_jax.model.types import NO_CONTACT, OK
+from samples import reference_jit
 
 BATCH = 96
 TIME_TOL = 1e-9  # s: closed form and bisection are both far below the 1e-6 s asked for

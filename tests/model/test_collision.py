@@ -14,6 +14,7 @@ import ks_jax
 import reference as ref
 from ks_jax.model import types as t
 from ks_jax import units as U
+import kit
 
 # Named tolerances (float64 unless said otherwise).
 RTOL_REFERENCE = 1e-9  # engine vs reference, relative to each field's natural scale
@@ -24,7 +25,7 @@ RTOL_ROWS = 1e-12  # a batch row vs the same case solved alone
 
 
 @pytest.fixture(scope="module")
-def random_results(kit, random_cases):
+def random_results(random_cases):
     out = {}
     for kind, cases in random_cases.items():
         out[kind] = (cases, kit.solve(cases), kit.reference_batch(cases))
@@ -34,7 +35,7 @@ def random_results(kit, random_cases):
 # --------------------------------------------------------------------------- reference
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_random_cases_match_reference(kit, random_results, kind):
+def test_random_cases_match_reference(random_results, kind):
     cases, eng, refb = random_results[kind]
     kit.assert_matches(eng, refb, RTOL_REFERENCE, cases)
 
@@ -57,7 +58,7 @@ def test_random_sample_covers_sticking_and_sliding(random_results):
     assert crush_zero >= 10 and pitched >= 100
 
 
-def test_separating_contacts(kit):
+def test_separating_contacts():
     rng = np.random.default_rng(7)
     cases = []
     for k in range(12):
@@ -124,7 +125,7 @@ def test_momentum_conservation(random_results):
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_energy_loss_nonnegative_for_restitution_0_to_1(kit, random_cases, kind):
+def test_energy_loss_nonnegative_for_restitution_0_to_1(random_cases, kind):
     rng = np.random.default_rng(11)
     cases = copy.deepcopy(random_cases[kind])
     eps = np.concatenate([[0.0, 1.0, 0.0, 1.0], rng.uniform(0, 1, len(cases) - 4)])
@@ -160,7 +161,7 @@ def test_stick_and_slide_identities(random_results):
     assert n_stick >= 30 and n_slide >= 30
 
 
-def test_impulse_scales_with_one_plus_eps(kit, random_cases):
+def test_impulse_scales_with_one_plus_eps(random_cases):
     """J = (1 + eps) J_c(s*): the restitution scales the whole vector, sticking or sliding."""
     base = [c for c in random_cases["full"][:60]]
     cases = []
@@ -175,7 +176,7 @@ def test_impulse_scales_with_one_plus_eps(kit, random_cases):
                                atol=RTOL_INVARIANT * np.abs(j).max())
 
 
-def test_swap_symmetry(kit, random_results):
+def test_swap_symmetry(random_results):
     for cases, eng, _ in random_results.values():
         swapped = kit.solve([ref.swap(c) for c in cases])
         jscale = np.linalg.norm(eng["contact"]["impulse"], axis=-1, keepdims=True)
@@ -192,7 +193,7 @@ def test_swap_symmetry(kit, random_results):
 
 
 # --------------------------------------------------------------------------- Brach
-def test_planar_sliding_is_brach(kit):
+def test_planar_sliding_is_brach():
     """Where Brach's model applies (compressive normal impulse: N_c > 0 and P_n0 > 0). In the
     KS branch N_c <= 0 docs/model.md puts the friction impulse along T_c, while Brach's sign rule
     (mu takes the sign of P_t0 / P_n0) would put it against T_c: those cases are skipped."""
@@ -337,7 +338,7 @@ def _bad_rows(base, rng):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_bad_rows_in_a_batch(kit, random_cases, kind):
+def test_bad_rows_in_a_batch(random_cases, kind):
     rng = np.random.default_rng(13)
     cases, codes = _bad_rows(random_cases[kind][0], rng)
     eng = kit.solve(cases)
@@ -378,11 +379,11 @@ def test_bad_rows_in_a_batch(kit, random_cases, kind):
 
 
 @pytest.mark.slow
-def test_bad_rows_do_not_poison_gradients(kit, random_cases):
+def test_bad_rows_do_not_poison_gradients(random_cases):
     rng = np.random.default_rng(17)
     cases, codes = _bad_rows(random_cases["principal"][1], rng)
-    weights = rng.normal(size=(len(cases), kit.n_outputs))
-    weights[:, kit.output_slices["ees_1"]] = weights[:, kit.output_slices["ees_2"]] = 0.0
+    weights = rng.normal(size=(len(cases), kit.N_OUTPUTS))
+    weights[:, kit.OUTPUT_SLICES["ees_1"]] = weights[:, kit.OUTPUT_SLICES["ees_2"]] = 0.0
     values, grads = kit.value_and_grad(kit.inputs(cases), weights, 0.0)
     bad = codes >= 10
     assert np.all(np.isnan(values[bad])) and np.all(np.isfinite(values[~bad]))
@@ -395,7 +396,7 @@ def test_bad_rows_do_not_poison_gradients(kit, random_cases):
 
 
 # --------------------------------------------------------------------------- float32
-def _float32_worst(kit, cases, eng32, refb):
+def _float32_worst(cases, eng32, refb):
     """The largest error of any float32 result, relative to the same natural scales as
     ``assert_matches``, found by bisection on the tolerance it passes."""
     lo, hi = 0.0, 1.0
@@ -422,7 +423,7 @@ def _case_dict(args):
 
 
 @pytest.mark.slow
-def test_float32_agrees_with_float64(kit, random_cases):
+def test_float32_agrees_with_float64(random_cases):
     m1 = 3183.475 * U.LBF / U.G0
     m2 = 3496.531 * U.LBF / U.G0
     seed = _case_dict(_inline_case(m1, m2, 5.0, 21.0, 11.61333, -3.224, 4.0, (15.87, 6.86067, 5.71),
@@ -436,20 +437,20 @@ def test_float32_agrees_with_float64(kit, random_cases):
     with jax.enable_x64(False):
         eng32 = kit.engine_dict(kit.batch_exchange(kit.inputs(cases, np.float32)))
     assert eng32["contact"]["impulse"].dtype == np.float32
-    kit.assert_matches(eng32, refb, kit.rtol_float32, cases)
-    worst = _float32_worst(kit, cases, eng32, refb)
+    kit.assert_matches(eng32, refb, kit.RTOL_FLOAT32, cases)
+    worst = _float32_worst(cases, eng32, refb)
     print(f"\nfloat32 worst relative error over 50 random cases and seed 000: {worst:.3g}")
     assert worst < 1e-5  # the README quotes the worst it has measured (4.7e-6) and this bound
     # the seed chapter's figures survive float32
     con, (a, b) = eng32["contact"], eng32["vehicles"]
-    assert float(con["impulse_magnitude"][-1]) == pytest.approx(5946.847, rel=kit.rtol_float32)
-    assert float(con["energy_loss"][-1]) == pytest.approx(19141.047, rel=kit.rtol_float32)
-    assert float(a["crush"][-1]) / U.FT == pytest.approx(1.396, rel=kit.rtol_float32)
+    assert float(con["impulse_magnitude"][-1]) == pytest.approx(5946.847, rel=kit.RTOL_FLOAT32)
+    assert float(con["energy_loss"][-1]) == pytest.approx(19141.047, rel=kit.RTOL_FLOAT32)
+    assert float(a["crush"][-1]) / U.FT == pytest.approx(1.396, rel=kit.RTOL_FLOAT32)
     assert float(b["ees"][-1]) / U.MPH == pytest.approx(2.213, rel=1e-3)
 
 
 @pytest.mark.slow
-def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
+def test_smoothing_out_of_range_is_refused_or_flagged(random_cases):
     """A Python number out of [0, 1) is refused; an array one (traced under jit) flags the row with
     INVALID_SMOOTHING and NaN results; an array one in range gives the Python number's results."""
     args = kit.inputs(random_cases["principal"][5])
@@ -471,7 +472,7 @@ def test_smoothing_out_of_range_is_refused_or_flagged(kit, random_cases):
     np.testing.assert_allclose(np.asarray(good.contact.impulse), np.asarray(want.contact.impulse), rtol=1e-12)
 
 
-def test_results_that_overflow_get_a_status(kit, random_cases):
+def test_results_that_overflow_get_a_status(random_cases):
     """Finite inputs far too large for float64 (1e300 m/s): INVALID_OVERFLOW in that row, never a NaN
     under "ok" or "separating"; the other rows of the batch are untouched."""
     cases = [copy.deepcopy(c) for c in random_cases["principal"][:3]]

@@ -14,15 +14,15 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+import pytest
 
-import ks_jax  # noqa: E402
-from ks_jax.compilation import quick_jit  # noqa: E402
-from ks_jax.model import contact as G  # noqa: E402
-from ks_jax.model.contact import contact_geometry  # noqa: E402
-from ks_jax.model.types import OK  # noqa: E402
+import ks_jax
+from ks_jax.compilation import quick_jit
+from ks_jax.model import contact as G
+from ks_jax.model.contact import contact_geometry
+from ks_jax.model.types import OK
 
 BATCH = 32
 NORMAL_TOL = 1e-9

@@ -12,16 +12,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
-import fit  # noqa: E402
-import ks_jax  # noqa: E402
-from ks_jax.case import CaseError, case_from_dict, to_pytrees  # noqa: E402
-from ks_jax.cli import main  # noqa: E402
-from ks_jax.model.contact import automatic_exchange  # noqa: E402
-from ks_jax.report import text_report  # noqa: E402
-from samples import reference_jit  # noqa: E402
+import fit
+import ks_jax
+from ks_jax.case import CaseError, case_from_dict, to_pytrees
+from ks_jax.cli import main
+from ks_jax.model.contact import automatic_exchange
+from ks_jax.report import text_report
+from samples import reference_jit
 
 M, IZZ, V = 1500.0, 2700.0, 15.0  # kg, kg m^2, m/s
 CAR = {"name": "Sedan", "mass": M, "inertia": [500, 2500, IZZ], "length": 4.5, "width": 1.8, "height": 1.4,

@@ -21,6 +21,7 @@ import ks_jax
 import reference as ref
 from ks_jax.compilation import quick_jit
 from samples import reference_jit
+import kit
 
 TAU = 0.05  # the smoothing used for "smooth mode"
 MODES = (0.0, TAU)
@@ -51,22 +52,22 @@ def _labels(args):
     return out
 
 
-def _outputs(kit, case, smoothing=0.0):
+def _outputs(case, smoothing=0.0):
     """(N_OUTPUTS,) the differentiated result scalars of one case."""
     res = kit.batch_exchange(kit.inputs([case]), smoothing)
     return np.asarray(kit.output_vector(jax.tree_util.tree_map(lambda x: x[0], res)))
 
 
-def _weights(kit, case, rng, skip=()):
+def _weights(case, rng, skip=()):
     """Random weights, each output normalised by its size in this case (so F is O(1) per output). An
     output that is 0 up to rounding (below 1e-12 of the largest; the tangential impulse head-on, where
     XLA's roundings leave ~1e-13 N s in some compiled programs and exactly 0 in others) is not: its
     rounding would be weighted by 1e12."""
-    y = _outputs(kit, case)
-    w = np.zeros(kit.n_outputs)
+    y = _outputs(case)
+    w = np.zeros(kit.N_OUTPUTS)
     floor = 1e-12 * np.nanmax(np.abs(y))
-    for name, _, _ in kit.outputs:
-        sl = kit.output_slices[name]
+    for name, _, _ in kit.OUTPUTS:
+        sl = kit.OUTPUT_SLICES[name]
         if name in skip:
             continue
         scale = np.linalg.norm(y[sl])
@@ -74,7 +75,7 @@ def _weights(kit, case, rng, skip=()):
     return np.where(np.isfinite(y), w, 0.0)
 
 
-def fd_check(kit, case, smoothing, rng, forward=(), skip_outputs=()):
+def fd_check(case, smoothing, rng, forward=(), skip_outputs=()):
     """Compare AD with finite differences in every scalar input of ``case``; central differences,
     or second-order one-sided ones for the inputs named in ``forward`` (at a bound of their
     domain). Returns the worst |AD - FD| / tolerance."""
@@ -82,7 +83,7 @@ def fd_check(kit, case, smoothing, rng, forward=(), skip_outputs=()):
     leaves, treedef = jax.tree_util.tree_flatten(args)
     leaves = [np.asarray(x) for x in leaves]
     labels = _labels(args)
-    w = _weights(kit, case, rng, skip_outputs)
+    w = _weights(case, rng, skip_outputs)
     rows = [leaves]
     plan = []
     for label, li, k in labels:
@@ -105,7 +106,7 @@ def fd_check(kit, case, smoothing, rng, forward=(), skip_outputs=()):
     for g in ad_leaves:
         assert np.all(np.isfinite(g))
     # size of the weighted sum, for the absolute part of the tolerance
-    y = _outputs(kit, case, smoothing)
+    y = _outputs(case, smoothing)
     f_scale = float(np.sum(np.abs(np.where(w != 0, w * np.nan_to_num(y), 0.0)))) + 1.0
     worst = 0.0
     for label, li, k, x, h, idx, fwd in plan:
@@ -181,66 +182,66 @@ def generic_cases(random_cases):
 
 @pytest.mark.parametrize("smoothing", MODES)
 @pytest.mark.parametrize("branch", ["stick", "slide", "pull"])
-def test_gradients_match_finite_differences(kit, generic_cases, branch, smoothing):
+def test_gradients_match_finite_differences(generic_cases, branch, smoothing):
     rng = np.random.default_rng({"stick": 1, "slide": 2, "pull": 3}[branch])
-    fd_check(kit, generic_cases[branch], smoothing, rng)
+    fd_check(generic_cases[branch], smoothing, rng)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("smoothing", MODES)
-def test_gradients_match_finite_differences_inertia_tensor(kit, random_cases, smoothing):
+def test_gradients_match_finite_differences_inertia_tensor(random_cases, smoothing):
     """A full 3x3 body inertia tensor: every one of its nine entries is an input."""
     case = next(c for c in random_cases["full"] if ref.solve(c)["contact"]["sliding"] and _margin(c) > 1e-2)
-    fd_check(kit, case, smoothing, np.random.default_rng(9))
+    fd_check(case, smoothing, np.random.default_rng(9))
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_gradients_at_head_on(kit, smoothing):
-    fd_check(kit, head_on(), smoothing, np.random.default_rng(4))
+def test_gradients_at_head_on(smoothing):
+    fd_check(head_on(), smoothing, np.random.default_rng(4))
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_gradients_at_separating_contact(kit, random_cases, smoothing):
+def test_gradients_at_separating_contact(random_cases, smoothing):
     case = copy.deepcopy(random_cases["principal"][3])
     s = ref.stick_split(case)
     case["vehicles"][1]["velocity"] = case["vehicles"][1]["velocity"] + (s["n"] @ s["u"] - 2.0) * s["n"]
     assert ref.solve(case)["contact"]["status"] == "separating"
-    fd_check(kit, case, smoothing, np.random.default_rng(5))
+    fd_check(case, smoothing, np.random.default_rng(5))
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_gradients_at_zero_friction(kit, random_cases, smoothing):
+def test_gradients_at_zero_friction(random_cases, smoothing):
     """mu = 0 is the edge of its domain: one-sided differences in mu. |J_t| = 0 there, and its
     derivative in mu is the one-sided slope (1 + eps) N, not a norm's 0 at zero."""
     case = copy.deepcopy(random_cases["principal"][5])
     case["contact"]["friction"] = 0.0
     assert np.linalg.norm(ref.stick_split(case)["t_c"]) > 0  # sliding at mu = 0, so |J_t| grows with mu
-    fd_check(kit, case, smoothing, np.random.default_rng(6), forward=("contact.friction",))
+    fd_check(case, smoothing, np.random.default_rng(6), forward=("contact.friction",))
 
 
-def test_gradients_on_the_cone_boundary_smooth_mode(kit):
+def test_gradients_on_the_cone_boundary_smooth_mode():
     """The smooth mode is C1 across the boundary, so finite differences apply there."""
-    fd_check(kit, exact_cone_boundary(), TAU, np.random.default_rng(7))
+    fd_check(exact_cone_boundary(), TAU, np.random.default_rng(7))
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_gradients_where_the_smooth_minimum_blends(kit, random_cases, kind):
+def test_gradients_where_the_smooth_minimum_blends(random_cases, kind):
     """mu 2 % above the cone boundary: with p = 1/tau = 20 the smooth minimum differs from the
     hard one by a factor (1 + 0.98^20)^(1/20), so both of its arguments carry gradient."""
     case = copy.deepcopy(next(c for c in random_cases[kind] if ref.stick_split(c)["n_c"] > 0))
     s = ref.stick_split(case)
     case["contact"]["friction"] = 1.02 * float(np.linalg.norm(s["t_c"]) / s["n_c"])
-    fd_check(kit, case, TAU, np.random.default_rng(10))
+    fd_check(case, TAU, np.random.default_rng(10))
 
 
-def _all_output_grads(kit, cases, smoothing):
+def _all_output_grads(cases, smoothing):
     rng = np.random.default_rng(8)
-    weights = rng.normal(size=(len(cases), kit.n_outputs))
+    weights = rng.normal(size=(len(cases), kit.N_OUTPUTS))
     return kit.value_and_grad(kit.inputs(cases), weights, smoothing)
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_gradients_finite_at_singular_points(kit, random_cases, smoothing):
+def test_gradients_finite_at_singular_points(random_cases, smoothing):
     """Every output (norms, EES included), every input: head-on (T_c = 0), head-on with mu = 0,
     mu = 0, exactly on the cone boundary, eps = -1 (J = 0), a separating contact, u_n = 0."""
     cases = [head_on(), head_on(mu=0.0), exact_cone_boundary()]
@@ -256,19 +257,19 @@ def test_gradients_finite_at_singular_points(kit, random_cases, smoothing):
     assert ref.stick_split(sep)["u"][0] == 0.0
     cases.append(sep)
     cases.append(head_on(speed2=-12.0))  # separating
-    values, grads = _all_output_grads(kit, cases, smoothing)
+    values, grads = _all_output_grads(cases, smoothing)
     assert np.all(np.isfinite(values))
     for g in jax.tree_util.tree_leaves(grads):
         assert np.all(np.isfinite(np.asarray(g))), g
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_head_on_delta_v_derivative_is_analytic(kit, smoothing):
+def test_head_on_delta_v_derivative_is_analytic(smoothing):
     """|dv1| = (1 + eps) m2 / (m1 + m2) (v1 + s2) head-on, so d|dv1|/d s2 = (1 + eps) m2 / (m1 + m2);
     the speed s2 enters as v2 = s2 (-1, 0, 0) (course = yaw = pi), so the derivative is grad_v2 . (-1, 0, 0)."""
     case = head_on(eps=0.3)
-    w = np.zeros((1, kit.n_outputs))
-    w[0, kit.output_slices["delta_v_magnitude_1"]] = 1.0
+    w = np.zeros((1, kit.N_OUTPUTS))
+    w[0, kit.OUTPUT_SLICES["delta_v_magnitude_1"]] = 1.0
     _, grads = kit.value_and_grad(kit.inputs([case]), w, smoothing)
     d_speed = float(np.asarray(grads[3].velocity)[0] @ np.array([-1.0, 0.0, 0.0]))
     m1, m2 = case["vehicles"][0]["mass"], case["vehicles"][1]["mass"]
@@ -276,7 +277,7 @@ def test_head_on_delta_v_derivative_is_analytic(kit, smoothing):
 
 
 @pytest.mark.parametrize("smoothing", MODES)
-def test_restitution_derivative_at_minus_one(kit, random_cases, smoothing):
+def test_restitution_derivative_at_minus_one(random_cases, smoothing):
     """J = (1 + eps) J_c(s*): at eps = -1, J = 0 and dJ/deps = J_c(s*) (the reference at eps = 0).
     The magnitudes have the one-sided derivatives from eps > -1: d|dv_i|/deps = |J_c| / m_i and
     d|J_t|/deps = |J_c - (n.J_c) n| (a norm of J would give 0 at J = 0)."""
@@ -284,9 +285,9 @@ def test_restitution_derivative_at_minus_one(kit, random_cases, smoothing):
     base["contact"]["restitution"] = -1.0
     outputs = [("impulse", k) for k in range(3)] + [("delta_v_magnitude_1", 0), ("delta_v_magnitude_2", 0),
                                                      ("impulse_tangential", 0)]
-    w = np.zeros((len(outputs), kit.n_outputs))
+    w = np.zeros((len(outputs), kit.N_OUTPUTS))
     for row, (name, k) in enumerate(outputs):
-        w[row, kit.output_slices[name].start + k] = 1.0
+        w[row, kit.OUTPUT_SLICES[name].start + k] = 1.0
     values, grads = kit.value_and_grad(kit.inputs([base] * len(outputs)), w, smoothing)
     np.testing.assert_array_equal(values, 0.0)
     zero = copy.deepcopy(base)
@@ -327,7 +328,7 @@ def _on_the_cone(cases):
     return out
 
 
-def _smoothing_ratios(kit, cases):
+def _smoothing_ratios(cases):
     """(len(TAUS), B): |J_tau - J_0| / (tau |J_0|)."""
     args = kit.inputs(cases)
     j0 = kit.batch_exchange(args, 0.0).contact.impulse
@@ -337,12 +338,12 @@ def _smoothing_ratios(kit, cases):
 
 
 @pytest.fixture(scope="module")
-def smoothing_ratios(kit, random_cases):
+def smoothing_ratios(random_cases):
     out = {}
     for kind, cases in random_cases.items():
-        out[kind] = _smoothing_ratios(kit, cases), [c["contact"]["friction"] for c in cases]
+        out[kind] = _smoothing_ratios(cases), [c["contact"]["friction"] for c in cases]
         cone = _on_the_cone(cases)
-        out[kind + "-cone"] = _smoothing_ratios(kit, cone), [c["contact"]["friction"] for c in cone]
+        out[kind + "-cone"] = _smoothing_ratios(cone), [c["contact"]["friction"] for c in cone]
     return out
 
 
@@ -359,7 +360,7 @@ def test_smooth_converges_to_exact_at_rate_tau(smoothing_ratios, kind):
 
 
 @pytest.mark.slow
-def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
+def test_jacfwd_of_one_exchange_matches_central_differences(random_cases):
     """``jax.jacfwd`` of one unbatched exchange (only the tangents are batched, by jacfwd's vmap):
     the Jacobian of every output listed in conftest ``OUTPUTS`` with respect to vehicle 2's
     velocity and the contact point, against central differences of the values."""
@@ -390,7 +391,7 @@ def test_jacfwd_of_one_exchange_matches_central_differences(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_angle_derivatives_where_the_angle_is_exactly_zero(kit):
+def test_angle_derivatives_where_the_angle_is_exactly_zero():
     """In the inline head-on the force on vehicle 2 is exactly frontal (pdof 0.0) and the impulse
     azimuth is exactly 180 deg (vehicle 1 is pushed straight back). Turning vehicle 2's velocity a
     little sideways turns every angle: their derivatives with respect to v_y at exactly that point

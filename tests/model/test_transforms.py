@@ -17,6 +17,7 @@ import ks_jax
 from ks_jax.case import load_case
 import reference as ref
 from samples import reference_jit
+import kit
 
 RTOL_JIT = 1e-13  # jit vs eager, vmap vs single: the same arithmetic, fused differently
 RTOL_COVARIANCE = 1e-10  # rotated / translated scene vs the original, relative to each field's scale
@@ -59,7 +60,7 @@ def few_cases(random_cases):
 
 
 @pytest.mark.slow
-def test_jit_equals_eager(kit, few_cases):
+def test_jit_equals_eager(few_cases):
     for c in few_cases[:3]:
         args = kit.inputs(c)
         eager = ks_jax.exchange(*args)
@@ -67,7 +68,7 @@ def test_jit_equals_eager(kit, few_cases):
         assert_trees_close(jitted, eager, RTOL_JIT, "jit vs eager: ")
 
 
-def test_eager_smooth_equals_jit_vmap_row(kit, random_cases):
+def test_eager_smooth_equals_jit_vmap_row(random_cases):
     """The static Python-float smoothing (eager) equals the traced one (jitted batch)."""
     c = random_cases["principal"][7]
     eager = ks_jax.exchange(*kit.inputs(c), smoothing=0.05)
@@ -76,7 +77,7 @@ def test_eager_smooth_equals_jit_vmap_row(kit, random_cases):
 
 
 @pytest.mark.slow
-def test_vmap_equals_stacked_single_calls(kit, random_cases):
+def test_vmap_equals_stacked_single_calls(random_cases):
     cases = random_cases["principal"][:20]
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
     stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
@@ -88,19 +89,19 @@ def test_vmap_equals_stacked_single_calls(kit, random_cases):
     assert_trees_close(plain, jax.tree_util.tree_map(lambda x: x[:5], stacked), RTOL_JIT, "jax.vmap: ")
 
 
-def test_no_recompilation_for_new_values(kit, few_cases):
+def test_no_recompilation_for_new_values(few_cases):
     kit.exchange(*kit.inputs(few_cases[0]))  # compiled (at most once) here or earlier
     kit.batch_exchange(kit.inputs(few_cases[:2]), 0.0)
-    single, batch = kit.traces["single"], kit.traces["batch"]
-    single_cache = kit.jitted["single"]._cache_size()
-    batch_cache = kit.jitted["batch"]._cache_size()
+    single, batch = kit.TRACES["single"], kit.TRACES["batch"]
+    single_cache = kit.JITTED["single"]._cache_size()
+    batch_cache = kit.JITTED["batch"]._cache_size()
     for c in few_cases[1:]:
         kit.exchange(*kit.inputs(c))
     for tau in (0.0, 0.02, 0.3):  # a new smoothing value is a new value, not a new program
         kit.batch_exchange(kit.inputs(few_cases[2:]), tau)
-    assert kit.traces["single"] == single and kit.traces["batch"] == batch
-    assert kit.jitted["single"]._cache_size() == single_cache
-    assert kit.jitted["batch"]._cache_size() == batch_cache
+    assert kit.TRACES["single"] == single and kit.TRACES["batch"] == batch
+    assert kit.JITTED["single"]._cache_size() == single_cache
+    assert kit.JITTED["batch"]._cache_size() == batch_cache
     assert single >= 1 and batch >= 1  # the counters do count
 
 
@@ -120,7 +121,7 @@ RTOL_QUICK, ATOL_QUICK = 1e-12, 1e-12
 @pytest.mark.slow
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
 @pytest.mark.parametrize("name", ["seed_000_saturn_pontiac.json", "auto_seed_000.json", "rest_seed_000.json"])
-def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(kit, name):
+def test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values(name):
     """``ks_jax.solve``'s program (a file's few cases) is compiled with ``ks_jax.compilation.QUICK_CPU``, not
     with XLA's defaults (another program), and give the values of the programs compiled at XLA's defaults:
     the seed chapter (explicit contact), its staging with automatic contact and its motion to rest, solved as a
@@ -187,7 +188,7 @@ def _compare(got, want, rtol):
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_rotation_about_z_and_translation(kit, random_cases, kind):
+def test_rotation_about_z_and_translation(random_cases, kind):
     rng = np.random.default_rng(21)
     cases = random_cases[kind]
     alpha = rng.uniform(-math.pi, math.pi)
@@ -216,7 +217,7 @@ def _random_rotation(rng):
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
-def test_general_rotation_is_covariant(kit, random_cases, kind):
+def test_general_rotation_is_covariant(random_cases, kind):
     """A general 3D rotation of the whole scene (orientations become Q R, re-expressed as yaw,
     pitch, roll): impulse, delta-V, velocities and angular velocities rotate; energy, |J|, the
     normal/tangential split, body-frame delta-V, PDOF, crush and EES do not change."""

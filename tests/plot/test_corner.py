@@ -8,9 +8,9 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.figure import Figure
 
-from ks_jax.plot import corner, save_corner  # noqa: E402
+from ks_jax.plot import corner, save_corner
 
 MEAN = np.array([20.0, 0.3, -2.0])
 COV = np.array([[0.25, 0.004, 0.05], [0.004, 0.0004, 0.0], [0.05, 0.0, 0.09]])

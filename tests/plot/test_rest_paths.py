@@ -10,20 +10,20 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
 pytest.importorskip("matplotlib")
 
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Ellipse  # noqa: E402
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
 
-import ks_jax  # noqa: E402
-from ks_jax import plot  # noqa: E402
-from ks_jax import units as U  # noqa: E402
-from ks_jax.cli.fit import case_at_estimate  # noqa: E402
-from ks_jax.plot.top_view import _draw_measured_rest  # noqa: E402
-from ks_jax.solve import motion_paths  # noqa: E402
+import ks_jax
+from ks_jax import plot
+from ks_jax import units as U
+from ks_jax.cli.fit import case_at_estimate
+from ks_jax.plot.top_view import _draw_measured_rest
+from ks_jax.solve import motion_paths
 
 # measured rest positions (the reconstruction case's evidence, fit_rest_positions.json), away from the solved
 # ones so that a mark drawn at the solved rest position instead would fail

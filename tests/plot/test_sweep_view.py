@@ -11,19 +11,19 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
 pytest.importorskip("matplotlib")
 
-from matplotlib.collections import QuadMesh  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.collections import QuadMesh
+from matplotlib.figure import Figure
 
-import ks_jax  # noqa: E402
-from ks_jax import plot  # noqa: E402
-from ks_jax.case import CaseError  # noqa: E402
-from ks_jax.cli import main  # noqa: E402
-from ks_jax.sweeps import SweepSample, sweep  # noqa: E402
+import ks_jax
+from ks_jax import plot
+from ks_jax.case import CaseError
+from ks_jax.cli import main
+from ks_jax.sweeps import SweepSample, sweep
 
 SEED1 = Path(ks_jax.__file__).parent / "cases" / "seed_001_lucid_kia.toml"
 MPH = 1609.344 / 3600  # m/s per mph, written out here (ks_jax.units is what is tested)

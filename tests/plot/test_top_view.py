@@ -13,22 +13,22 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
 pytest.importorskip("matplotlib")
 
-import matplotlib.text  # noqa: E402
-from matplotlib.colors import to_rgba  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Polygon, Wedge  # noqa: E402
+import matplotlib.text
+from matplotlib.colors import to_rgba
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon, Wedge
 
-import ks_jax  # noqa: E402
-from ks_jax import plot  # noqa: E402
-from ks_jax.plot.top_view import clip_polygon, top_view_figure  # noqa: E402
-from ks_jax import units as U  # noqa: E402
-from ks_jax.cli import main  # noqa: E402
-from samples import SEED0  # noqa: E402
+import ks_jax
+from ks_jax import plot
+from ks_jax.plot.top_view import clip_polygon, top_view_figure
+from ks_jax import units as U
+from ks_jax.cli import main
+from samples import SEED0
 
 FT2 = U.FT**2
 

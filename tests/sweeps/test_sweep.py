@@ -170,7 +170,7 @@ def test_a_sweep_of_another_size_runs_the_programs_already_compiled(case, monkey
 
 @pytest.mark.slow
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA's CPU settings")
-def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, monkeypatch, kit):
+def test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults(case, monkeypatch):
     """A sweep of at most ``QUICK_POINTS`` points compiles with ``ks_jax.compilation.QUICK_CPU``, a larger one with
     XLA's defaults; the small sweep's values, every output of an 18-point grid over speed, yaw and friction
     (sliding and sticking), are those of the same sweep compiled at XLA's defaults, to rounding."""
