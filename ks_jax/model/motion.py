@@ -557,5 +557,5 @@ def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, st
             final = steps(final, rest)
     end = final.state
     turned = end.yaw - start.yaw
-    return RestResult(end.position, la.degrees_0_360(jnp.arctan2(jnp.sin(end.yaw), jnp.cos(end.yaw))),
+    return RestResult(end.position, la.degrees_0_360(la.safe_atan2(*la.sincos(end.yaw))),
                       jnp.degrees(turned), final.time, final.distance, final.moving < 1.0, samples)
