@@ -29,8 +29,12 @@ that the force changes in one step (``REGULARIZATION``), so that forces, rest po
 gradients are smooth and finite. The tyre's slip angle is regularized over the speed at which its
 lateral stiffness would overshoot in one step (k g dt), which makes the explicit step stable.
 
-Reverse mode: the steps of ``to_rest(reverse=True)`` carry a hand-written adjoint (``_step_bwd``) that reads
-back the step's costly values instead of JAX's own adjoint of the step, which costs several steps more.
+Derivatives: forward mode (``jax.jvp``, ``jax.jacfwd``, as the fit and the posterior take them) goes through
+the steps by JAX's own rules, in the while loop that stops at rest. Reverse mode needs the scan that runs every
+step (``to_rest(reverse=True)``); its steps carry a hand-written adjoint (``_step_bwd``) that reads back the
+step's costly values. ``_advance`` names those values (``checkpoint_name``), so that JAX's adjoint of the step
+under ``jax.checkpoint`` with ``save_only_these_names`` can be set beside it: that costs two to three times the
+hand adjoint's time, whichever values it saves (``_step_reverse``).
 
 Everything here is pure and unbatched: jit, vmap and differentiate at the edge.
 """
@@ -43,6 +47,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.ad_checkpoint import checkpoint_name
 
 from ..units import G0
 from . import linalg as la
@@ -220,16 +225,16 @@ def _tyres(b: Body, ul, ut, fz) -> _Forces:
     """The tyre law (the module's docstring) from the wheels' velocities over the road along and across them
     (4,), (4,) and their loads (4,)."""
     speed2 = ul * ul + ut * ut
-    inv_locked = 1.0 / jnp.sqrt(speed2 + b.locked_speed2)
-    inv_rolling = 1.0 / jnp.sqrt(ul * ul + b.rolling_speed2)
-    inv_slip = 1.0 / jnp.sqrt(ul * ul + b.slip_speed2)
+    inv_locked = checkpoint_name(1.0 / jnp.sqrt(speed2 + b.locked_speed2), "motion.inv_locked")
+    inv_rolling = checkpoint_name(1.0 / jnp.sqrt(ul * ul + b.rolling_speed2), "motion.inv_rolling")
+    inv_slip = checkpoint_name(1.0 / jnp.sqrt(ul * ul + b.slip_speed2), "motion.inv_slip")
     slip = ut * inv_slip  # tan of the slip angle: the same at small slip
-    tanh = jnp.tanh(CORNERING * slip / _grip(b)[1])
+    tanh = checkpoint_name(jnp.tanh(CORNERING * slip / _grip(b)[1]), "motion.tanh")
     locked, roll, side = _tyre_terms(b, fz, ul, inv_locked, inv_rolling, tanh)
     free = 1.0 - b.brake
     along = free * roll + b.brake * locked * ul
     across = free * side + b.brake * locked * ut
-    speed = la.safe_sqrt(speed2)
+    speed = checkpoint_name(la.safe_sqrt(speed2), "motion.speed")
     power = free * (b.rolling * fz * jnp.abs(ul) + jnp.abs(side) * jnp.abs(ut)) + b.brake * b.friction * fz * speed
     return _Forces(along, across, power, locked, roll, side, inv_locked, inv_rolling, inv_slip, tanh, speed)
 
@@ -299,35 +304,36 @@ def _advance(b: Body, carry: _Carry, dt):
     """One step of the integration (the module's docstring): the new carry, and what the step's adjoint reads."""
     state = carry.state
     vx, vy, r = state.velocity[0], state.velocity[1], state.yaw_rate
-    s, c = la.sincos(state.yaw)
-    _, _, ul, ut = _wheel_velocities(b, s, c, state.velocity, r)
-    fz, loads, total = _loads(b, carry.accel[0], carry.accel[1])
+    s, c = checkpoint_name(la.sincos(state.yaw), "motion.sincos")
+    _, _, ul, ut = checkpoint_name(_wheel_velocities(b, s, c, state.velocity, r), "motion.wheel_velocities")
+    fz, loads, total = checkpoint_name(_loads(b, carry.accel[0], carry.accel[1]), "motion.loads")
     t = _tyres(b, ul, ut, fz)
     power = jnp.sum(t.power)
-    fx, fy = _steered(b, t.along, t.across)
-    fu, fv, mz = jnp.sum(fx), jnp.sum(fy), jnp.sum(b.x * fy - b.y * fx)
+    fx, fy = _steered(b, *checkpoint_name((t.along, t.across), "motion.tyre_forces"))
+    fu, fv, mz = checkpoint_name((jnp.sum(fx), jnp.sum(fy), jnp.sum(b.x * fy - b.y * fx)), "motion.force")
     q = jnp.stack([vx, vy, r])
     m = jnp.stack([b.mass, b.mass, b.izz])
-    dq = dt * jnp.stack([c * fu - s * fv, s * fu + c * fv, mz]) / m
+    dq = checkpoint_name(dt * jnp.stack([c * fu - s * fv, s * fu + c * fv, mz]) / m, "motion.dq")
     # never more kinetic energy: scale the change back to the least energy along it where it overshoots
-    raw = la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0)
+    raw = checkpoint_name(la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0), "motion.raw")
     scale = jnp.clip(raw, 0.0, 1.0)
     # the fraction of the step during which the vehicle moves: 2 E / (P dt), at most 1
-    energy2 = jnp.sum(m * q * q)
-    reach = power * dt
+    energy2, reach = checkpoint_name((jnp.sum(m * q * q), power * dt), "motion.energy")
     phi = jnp.where(energy2 >= reach, jnp.where(energy2 > 0, 1.0, 0.0), la.safe_div(energy2, reach, 0.0))
+    phi = checkpoint_name(phi, "motion.phi")
     h = phi * dt
     # at rest from the step in which it stops: what the rules above leave is below one step's dissipation, and
     # its creep would only carry derivatives that grow without bound as the speed decays
     stopped = phi < 1.0
-    q_new = jnp.where(stopped, 0.0, q + scale * dq)
-    v_mean = 0.5 * (state.velocity + q_new[:2])
+    q_new = checkpoint_name(jnp.where(stopped, 0.0, q + scale * dq), "motion.q_new")
+    v_mean = checkpoint_name(0.5 * (state.velocity + q_new[:2]), "motion.v_mean")
     new = Planar(state.position + h * v_mean, state.yaw + h * 0.5 * (r + q_new[2]), q_new[:2], q_new[2])
     mean2 = jnp.sum(v_mean * v_mean)
-    travelled = h * la.safe_sqrt(mean2)
+    travelled = h * checkpoint_name(la.safe_sqrt(mean2), "motion.mean_speed")
     accel = jnp.where(stopped, 0.0, scale * jnp.stack([fu, fv]) / b.mass)
     tiny = jnp.finfo(mean2.dtype).tiny
-    inv_v_mean = jnp.where(mean2 > tiny, 1.0 / jnp.sqrt(jnp.maximum(mean2, tiny)), 0.0)
+    inv_v_mean = checkpoint_name(jnp.where(mean2 > tiny, 1.0 / jnp.sqrt(jnp.maximum(mean2, tiny)), 0.0),
+                                 "motion.inv_v_mean")
     saved = _Saved(state.velocity, r, carry.accel, s, c, ul, ut, loads, total, t.along, t.across, t.inv_locked,
                    t.inv_rolling, t.inv_slip, t.tanh, t.speed, jnp.stack([fu, fv, mz]), dq, raw, energy2, reach,
                    phi, q_new[2], v_mean, inv_v_mean)
@@ -343,10 +349,18 @@ def _step(b: Body, carry: _Carry, dt):
 @functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
 def _step_reverse(b: Body, carry: _Carry, dt):
     """``_step``, whose reverse-mode derivative is the hand-written adjoint ``_step_bwd``, which reads back the
-    step's ``_Saved`` values: JAX's own adjoint of the step, with its many stored or recomputed intermediates,
-    costs several forward steps more (docs/performance.md). First-order reverse mode only (``jax.grad``,
-    ``jax.vjp``, ``jax.jacrev``): forward mode cannot pass a custom VJP (it goes through ``_step``, in
-    ``to_rest(reverse=False)``), and the adjoint's stored values (``la.materialize``) have no derivative."""
+    step's ``_Saved`` values. First-order reverse mode only (``jax.grad``, ``jax.vjp``, ``jax.jacrev``): forward
+    mode cannot pass a custom VJP (it goes through ``_step``, in ``to_rest(reverse=False)``), and the adjoint's
+    stored values (``la.materialize``) have no derivative.
+
+    Why by hand, though a change to the tyre law must then be made in ``_advance`` and in ``_step_bwd``: JAX's own
+    adjoint of the step, with its many stored or recomputed intermediates, costs several forward steps more, and
+    under ``jax.checkpoint`` it still costs two to three times the hand adjoint's gradient time, whether its policy
+    (``jax.checkpoint_policies.save_only_these_names``) saves the values ``_advance`` names as costly (its square
+    roots, tanh, sine and cosine), every value the hand adjoint stores, or nothing; the scratch memory is the
+    same in all. The figures and their date: docs/performance.md ("Motion to rest") and
+    benchmarks/bench_motion_adjoint.py, whose command is
+    ``python benchmarks/bench_motion_adjoint.py [--pairs 100000] [--seconds 3] [--repeats 3]``."""
     return _step(b, carry, dt)
 
 
@@ -355,12 +369,12 @@ def _step_fwd(b: Body, carry: _Carry, dt):
     return new, (b, saved)
 
 
-def _step_bwd(dt, residuals, ct: _Carry):
-    """The adjoint of ``_advance``: the cotangents of the body and of the carry from those of the new carry,
-    the forward's operations taken back in reverse order (``a_x`` is the cotangent of x)."""
-    b, sv = residuals
+def _integration_adjoint(b: Body, sv: _Saved, ct: _Carry, dt):
+    """The first half of ``_step_bwd``, the integration's rules taken back: from the cotangents of the new carry,
+    those of the body frame force and yaw moment (fu, fv, mz), of the power, of the state's velocities and yaw
+    rate (3,), of the yaw's cosine and sine, and of the mass and yaw inertia."""
     vx, vy, r = sv.velocity[0], sv.velocity[1], sv.yaw_rate
-    s, c, phi, ul, ut = sv.sin, sv.cos, sv.phi, sv.ul, sv.ut
+    s, c, phi = sv.sin, sv.cos, sv.phi
     scale = jnp.clip(sv.raw, 0.0, 1.0)
     h = phi * dt
     moving = phi >= 1.0  # not stopped: the new velocities and acceleration follow the step
@@ -410,6 +424,19 @@ def _step_bwd(dt, residuals, ct: _Carry):
     a_s = a_g[1] * fu - a_g[0] * fv
     a_mass = a_mass + a_m[0] + a_m[1]
     a_izz = a_m[2]
+    a_q = a_q + jnp.concatenate([a_velocity, a_r[None]])
+    return a_fu, a_fv, a_mz, a_power, a_q, a_c, a_s, a_mass, a_izz
+
+
+def _step_bwd(dt, residuals, ct: _Carry):
+    """The adjoint of ``_advance``: the cotangents of the body and of the carry from those of the new carry,
+    the forward's operations taken back in reverse order (``a_x`` is the cotangent of x). The integration's
+    rules first (``_integration_adjoint``), then the forces' sums, the tyre law, the loads and the wheels'
+    velocities."""
+    b, sv = residuals
+    vx, vy, r = sv.velocity[0], sv.velocity[1], sv.yaw_rate
+    s, c, ul, ut = sv.sin, sv.cos, sv.ul, sv.ut
+    a_fu, a_fv, a_mz, a_power, a_q, a_c, a_s, a_mass, a_izz = _integration_adjoint(b, sv, ct, dt)
     # fu, fv, mz: sums of fx, fy and x fy - y fx; fx, fy: the wheels' forces turned by their steer
     fx, fy = _steered(b, sv.along, sv.across)
     a_fx = a_fu - b.y * a_mz
@@ -459,7 +486,7 @@ def _step_bwd(dt, residuals, ct: _Carry):
     a_friction = a_friction - jnp.sum(a_locked * fz * sv.inv_locked)
     a_inv_locked = -a_locked * b.friction * fz
     # d(1 / sqrt(x)) = -dx / (2 sqrt(x)^3)
-    cube = lambda inv: -0.5 * inv * inv * inv  # noqa: E731
+    cube = lambda inv: -0.5 * inv * inv * inv
     a_x_slip, a_x_rolling, a_x_locked = (a_inv_slip * cube(sv.inv_slip), a_inv_rolling * cube(sv.inv_rolling),
                                          a_inv_locked * cube(sv.inv_locked))
     a_speed2 = a_speed2 + a_x_locked
@@ -478,13 +505,13 @@ def _step_bwd(dt, residuals, ct: _Carry):
     a_cos_steer = a_cos_steer + a_ul * wx + a_ut * wy
     a_sin_steer = a_sin_steer + a_ul * wy - a_ut * wx
     a_u, a_v = jnp.sum(a_wx), jnp.sum(a_wy)
-    a_r = a_r + a_q[2] + jnp.sum(b.x * a_wy - b.y * a_wx)
+    a_r = a_q[2] + jnp.sum(b.x * a_wy - b.y * a_wx)
     a_x = a_x + a_wy * r
     a_y = a_y - a_wx * r
-    a_velocity = a_velocity + a_q[:2] + jnp.stack([c * a_u - s * a_v, s * a_u + c * a_v])
+    a_velocity = a_q[:2] + jnp.stack([c * a_u - s * a_v, s * a_u + c * a_v])
     a_c = a_c + a_u * vx + a_v * vy
     a_s = a_s + a_u * vy - a_v * vx
-    a_state = Planar(ct.state.position, a_yaw + c * a_s - s * a_c, a_velocity, a_r)
+    a_state = Planar(ct.state.position, ct.state.yaw + c * a_s - s * a_c, a_velocity, a_r)
     a_carry = _Carry(a_state, a_accel, ct.time, ct.distance, jnp.zeros_like(ct.moving))
     ax, ay = sv.accel[0], sv.accel[1]
     a_body = Body(a_mass, a_izz, a_x, a_y, a_cos_steer, a_sin_steer, a_l, a_l * ax, a_l * ay, a_weight, a_brake,
