@@ -60,7 +60,10 @@ def chunks(step, seconds):
         b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
         zero = jnp.zeros_like(start.yaw)
         carry = M._Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
-        steps = lambda c, k: jax.lax.scan(lambda c, _: (step(b, c, M.TIME_STEP), None), c, None, length=k)[0]
+
+        def steps(c, k):
+            return jax.lax.scan(lambda c, _: (step(b, c, M.TIME_STEP), None), c, None, length=k)[0]
+
         carry = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=n // chunk)[0]
         return steps(carry, n % chunk).state.position
     return one
@@ -82,8 +85,13 @@ def programs(seconds):
         return jax.grad(f, argnums=(0, 1, 2))
 
     names = jax.checkpoint_policies.save_only_these_names
-    remat = lambda policy: jax.checkpoint(M._step, policy=policy, static_argnums=(2,))
-    forward = lambda speed_scale, yaw_rate, mu, args: blocked(library)(*args)
+
+    def remat(policy):
+        return jax.checkpoint(M._step, policy=policy, static_argnums=(2,))
+
+    def forward(speed_scale, yaw_rate, mu, args):
+        return blocked(library)(*args)
+
     return {
         "forward, every step": forward,
         "hand-written adjoint": total(blocked(library)),

@@ -25,8 +25,6 @@ LONGEST = 120  # lines of one function or method
 
 # "path::qualified name" -> why it is still longer than LONGEST
 LONG_FUNCTIONS = {
-    "ks_jax/model/motion.py::_step_bwd": "the motion step's hand-written backward pass, still to be split into "
-                                         "steps",
 }
 # "importing module -> imported module.name" -> why a module still uses another's private name
 PRIVATE_IMPORTS = {

@@ -485,8 +485,10 @@ def _step_bwd(dt, residuals, ct: _Carry):
     a_inv_rolling = -a_roll * b.rolling * fz * ul
     a_friction = a_friction - jnp.sum(a_locked * fz * sv.inv_locked)
     a_inv_locked = -a_locked * b.friction * fz
-    # d(1 / sqrt(x)) = -dx / (2 sqrt(x)^3)
-    cube = lambda inv: -0.5 * inv * inv * inv
+
+    def cube(inv):  # d(1 / sqrt(x)) = -dx / (2 sqrt(x)^3)
+        return -0.5 * inv * inv * inv
+
     a_x_slip, a_x_rolling, a_x_locked = (a_inv_slip * cube(sv.inv_slip), a_inv_rolling * cube(sv.inv_rolling),
                                          a_inv_locked * cube(sv.inv_locked))
     a_speed2 = a_speed2 + a_x_locked
