@@ -92,9 +92,9 @@ def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samp
             out = run_rows(problem, solver, max_iter, stack([a.inputs] * k), values[rows], sigmas, lo, hi,
                            prior_means[rows], pw, z_starts[s:s + k], smoothing, dtype, z_starts.shape[1], block,
                            devices)
-            best = best_start(out["cost"], out["converged"])
-            xs.append(out["x"][np.arange(k), best])
-            conv.append(out["converged"][np.arange(k), best])
+            best = best_start(out.cost, out.converged)
+            xs.append(out.x[np.arange(k), best])
+            conv.append(out.converged[np.arange(k), best])
             if count and bar is not None:
                 bar.update(k)
         return np.concatenate(xs), np.concatenate(conv)

@@ -160,43 +160,44 @@ def _labels(problem: Problem):
         tuple(not is_out for _, is_out, _ in problem.evidence)
 
 
-def _results(cases, prepared, problem, rows, found, info, fitted, arrays) -> list[FitResult]:
+def _results(cases, prepared, problem, rows, at_best, stick_threshold, found, info, fitted,
+             arrays) -> list[FitResult]:
     """The FitResults of the ``fitted`` cases of a batch (indices; the rows of ``info``, their analysis by
-    ``analyse_batch``, in that order), from each case's best start (``rows``: (B, ...), with ``at_best``, how many
-    starts reached it, and ``stick_threshold``) and its starts (``found``). The analysis is edited here where a
-    fit stalled or its contact sticks; the numbers are converted for all the cases at once, and only the
+    ``analyse_batch``, in that order), from each case's best start (``rows``, ``RowFits`` (B, ...); ``at_best``
+    (B,), how many starts reached it; ``stick_threshold`` (B,)) and its starts (``found``). The analysis is
+    edited here where a fit stalled or its contact sticks; the numbers are converted for all the cases at once, and only the
     results' dicts and words are made case by case."""
     paths = list(problem.unknowns)
     keys, kinds, is_input = _labels(problem)
     m = len(keys)
     F = np.asarray(fitted)
-    status, count, at_best = rows["status"][F], found.count[F], rows["at_best"][F]
-    stalled = rows["stalled"][F].astype(bool)
-    cost = rows["cost"][F].astype(np.float64)
+    status, count, at_best = rows.status[F], found.count[F], at_best[F]
+    stalled = rows.stalled[F].astype(bool)
+    cost = rows.cost[F].astype(np.float64)
     texts = {code: status_text(code) for code in set(status.tolist())}
     for k in np.flatnonzero(stalled):
         i = F[k]
-        reached = int(count[k]) - int(np.count_nonzero(found.table["stalled"][i] & found.table["present"][i]))
+        reached = int(count[k]) - int(np.count_nonzero(found.table.stalled[i] & found.table.present[i]))
         info.statements[k] = [stalled_statement(texts[status[k]], reached, count[k])]
         info.undetermined[k] = True
         info.std[k] = np.inf
     chi2 = 2.0 * cost
     dof = m + np.count_nonzero(arrays.pw[F] > 0, axis=1) - np.count_nonzero(~info.undetermined, axis=1)
     improbable = ~stalled & (dof > 0) & (chi2 > chi2_quantile(np.maximum(dof, 1), CHI2_Z))
-    res = rows["residuals"][F, :m].astype(np.float64)
+    res = rows.residuals[F, :m].astype(np.float64)
     misfit = ~stalled & (np.abs(res) > 3).any(axis=1)
-    unmoved = ~np.any(rows["jacobian"][F, :m] != 0, axis=2) & np.array(is_input, bool)  # (K, m)
+    unmoved = ~np.any(rows.jacobian[F, :m] != 0, axis=2) & np.array(is_input, bool)  # (K, m)
     if "contact.friction" in paths:  # after chi^2's degrees of freedom
         j = paths.index("contact.friction")
-        friction_bounded_below(info, j, rows["x"][F], status == OK, rows["sliding"][F].astype(bool),
-                               rows["stick_ratio"][F], rows["stick_threshold"][F],
+        friction_bounded_below(info, j, rows.x[F], status == OK, rows.sliding[F].astype(bool),
+                               rows.stick_ratio[F], stick_threshold[F],
                                [prepared[i][0][j].prior for i in F])
-    x = (rows["x"][F].astype(np.float64) + arrays.x_offset[F]).tolist()
-    predicted = (rows["predicted"][F].astype(np.float64) + arrays.e_offset[F]).tolist()
+    x = (rows.x[F].astype(np.float64) + arrays.x_offset[F]).tolist()
+    predicted = (rows.predicted[F].astype(np.float64) + arrays.e_offset[F]).tolist()
     std, corr, singular = info.std.tolist(), info.corr.tolist(), info.singular.tolist()
     not_determined = (info.undetermined | info.poorly).tolist()
-    converged, iterations = rows["converged"][F].tolist(), rows["iterations"][F].tolist()
-    converged_starts = np.count_nonzero(found.table["converged"][F] & found.table["present"][F], axis=1).tolist()
+    converged, iterations = rows.converged[F].tolist(), rows.iterations[F].tolist()
+    converged_starts = np.count_nonzero(found.table.converged[F] & found.table.present[F], axis=1).tolist()
     res_list = res.tolist()
     out = []
     for k, i in enumerate(F.tolist()):
@@ -373,11 +374,11 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     probed = np.zeros(len(cases), bool)
     while True:  # more starts where the best fit is not yet reached by several, or its chi^2 is improbable
         room = found.count + starts <= limit
-        todo = np.flatnonzero(room & ~settled(found.table["cost"], dof))
+        todo = np.flatnonzero(room & ~settled(found.table.cost, dof))
         if todo.size:
             x_more = first_starts(problem.unknowns, arrays.take(todo), starts + 1, rng)[:, 1:]
         else:  # settled: once per case, starts where the rounds can stop short (``rounds.other_side``)
-            ask = np.flatnonzero(room & ~probed & np.isfinite(found.table["cost"]).any(axis=1))
+            ask = np.flatnonzero(room & ~probed & np.isfinite(found.table.cost).any(axis=1))
             best = found.best(ask, ("x", "status", "sliding", "stick_ratio"))
             sides, x_more = other_side(best, problem, arrays.lo[ask], arrays.hi[ask], arrays.pw[ask], starts)
             todo = ask[sides]
@@ -390,17 +391,17 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
                                  starts, block or more_block(len(cases), todo.size, starts), devices))
     everyone = np.arange(len(cases))
     rows = found.best(everyone)
-    rows["at_best"] = count_at_best(found.table["cost"])
-    fitted = np.flatnonzero(np.isfinite(found.table["cost"]).any(axis=1))
+    at_best = count_at_best(found.table.cost)
+    fitted = np.flatnonzero(np.isfinite(found.table.cost).any(axis=1))
     # the friction at which a sliding best fit would stick, for all those cases in one call
-    rows["stick_threshold"] = np.full(len(cases), np.nan)
+    stick_threshold = np.full(len(cases), np.nan)
     if "contact.friction" in problem.unknowns:
-        sliding = fitted[(rows["status"][fitted] == OK) & rows["sliding"][fitted].astype(bool)]
+        sliding = fitted[(rows.status[fitted] == OK) & rows.sliding[fitted].astype(bool)]
         if sliding.size:
-            rows["stick_threshold"][sliding] = stick_thresholds(
-                problem, arrays.take(sliding).inputs, rows["x"][sliding], smoothing, dtype)
+            stick_threshold[sliding] = stick_thresholds(problem, arrays.take(sliding).inputs, rows.x[sliding],
+                                                        smoothing, dtype)
     kept = arrays.take(fitted)
-    info = analyse_batch(problem.unknowns, rows["x"][fitted] + kept.x_offset, rows["jacobian"][fitted],
+    info = analyse_batch(problem.unknowns, rows.x[fitted] + kept.x_offset, rows.jacobian[fitted],
                          len(problem.evidence), kept.lower, kept.upper, kept.prior_sigma, kept.pw,
                          rtol)
 
@@ -409,19 +410,20 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
 
     results = [None] * len(cases)
     with _collector_paused():
-        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, found, info, fitted, arrays)):
+        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, at_best, stick_threshold, found,
+                                                          info, fitted, arrays)):
             results[i] = r
     for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
         if results[i] is None:  # no start could even be evaluated
             results[i] = _not_fitted(case, u, e, problem, arrays_of(i), x0[i, 0], smoothing, dtype, int(found.count[i]))
             continue
-        r, z = results[i], rows["z"][i]
+        r, z = results[i], rows.z[i]
         if posterior:
             r.posterior = sample_posterior(problem, arrays_of(i), z, draws=int(posterior), chains=int(chains),
                                            seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
                                            offset=arrays.x_offset[i], progress=progress)
         if monte_carlo:
-            everywhere = several_minima(found.table["cost"][i], found.table["converged"][i])
+            everywhere = several_minima(found.table.cost[i], found.table.converged[i])
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,
                                             smoothing, dtype, progress, chunk, block, devices, everywhere)
             r.notes += linearisation_notes(r)

@@ -4,12 +4,14 @@ stop short"). ``reconstruction.reconstruct_batch`` runs the rounds; each is a ca
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ks_jax.backend import on_cpu
 from ks_jax.model.types import OK
 
-from .rows import best_start, count_at_best
+from .rows import RowFits, best_start, count_at_best
 from .uncertainty import AT_BOUND, CHI2_Z, chi2_quantile
 
 
@@ -31,10 +33,10 @@ SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction
 OFF_BOUND = np.linspace(0.1, 0.9, 8)  # the off-bound starts of an unknown pinned at a bound, in parts of its range
 
 
-def other_side(best, problem, lo, hi, pw, count: int):
+def other_side(best: RowFits, problem, lo, hi, pw, count: int):
     """Starts from kept fits where the rounds of starts can stop short of the best fit: (cases (K,), x (K,
-    ``count``, n)), for the cases (of B) whose best fit (``best``: its "x" (B, n), "status", "sliding",
-    "stick_ratio" (B,), in the fit's coordinates; ``lo``, ``hi``, ``pw`` (B, n)) is in such a place:
+    ``count``, n)), for the cases (of B) whose best fit (``best``: its x (B, n), status, sliding, stick_ratio
+    (B,), in the fit's coordinates; ``lo``, ``hi``, ``pw`` (B, n)) is in such a place:
 
     - The contact sticks (friction an unknown without a prior, needed above its lower bound): the best fit with
       the friction at ``SLIDE_SIDE`` parts of what it needs. A contact that sticks has one cost for every
@@ -45,15 +47,15 @@ def other_side(best, problem, lo, hi, pw, count: int):
       bounds (a restitution that trades against the speeds) can be better.
 
     A best fit without an exchange is in neither."""
-    x0 = np.asarray(best["x"], np.float64)
-    ok = np.asarray(best["status"]) == OK
+    x0 = np.asarray(best.x, np.float64)
+    ok = np.asarray(best.status) == OK
     free = np.asarray(pw) <= 0
     x = np.repeat(x0[:, None], count, axis=1)
     stick = np.zeros(len(x0), bool)
     if "contact.friction" in problem.unknowns:
         j = problem.unknowns.index("contact.friction")
-        needed = np.abs(np.asarray(best["stick_ratio"], np.float64))
-        stick = ok & ~np.asarray(best["sliding"], bool) & free[:, j] & (needed > lo[:, j])
+        needed = np.abs(np.asarray(best.stick_ratio, np.float64))
+        stick = ok & ~np.asarray(best.sliding, bool) & free[:, j] & (needed > lo[:, j])
         x[stick, :, j] = lo[stick, j, None] + np.resize(SLIDE_SIDE, count) * (needed - lo[:, j])[stick, None]
     width = hi - lo
     with np.errstate(invalid="ignore"):  # inf - inf where a bound is missing: not pinned
@@ -87,42 +89,58 @@ def more_block(cases: int, todo: int, starts: int) -> int:
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 
 
+class Table(NamedTuple):
+    """Per start of every case of a batch, (B, S): the few numbers the rounds decide on (``RowFits``' of the same
+    names; cost inf, converged False, ... where a case has no such start), and ``present``: it has."""
+
+    cost: np.ndarray
+    converged: np.ndarray
+    stalled: np.ndarray
+    status: np.ndarray
+    sliding: np.ndarray
+    stick_ratio: np.ndarray
+    present: np.ndarray
+
+
+# each field's value where a case took no start in a round
+ABSENT = Table(cost=np.inf, converged=False, stalled=False, status=-1, sliding=False, stick_ratio=np.nan,
+               present=False)
+
+
 class Starts:
     """Every start a batch's cases have taken, round by round: per start, the few numbers the rounds decide on
-    (``table``: cost (inf where a case has no such start), converged, stalled, status, sliding, stick_ratio,
-    ``present``; (B, S) with S growing by a round's starts), and each round's solver outputs for the cases it
-    fitted, from which ``best`` gathers the best start's whole row."""
+    (``table``, a ``Table`` (B, S) with S growing by a round's starts), and each round's solver outputs for the
+    cases it fitted, from which ``best`` gathers the best start's whole row."""
 
-    SMALL = {"cost": np.inf, "converged": False, "stalled": False, "status": -1, "sliding": False,
-             "stick_ratio": np.nan}
-
-    def __init__(self, out):
-        B, S = out["cost"].shape
+    def __init__(self, out: RowFits):
+        B, S = out.cost.shape
         self.per_round = S
         self.count = np.full(B, S)
-        self.table = {k: np.asarray(out[k]) for k in self.SMALL} | {"present": np.ones((B, S), bool)}
+        self.table = Table(*(np.asarray(getattr(out, k)) for k in Table._fields[:-1]), np.ones((B, S), bool))
         self.rounds = [(np.arange(B), out)]
 
-    def add(self, cases, out):
+    def add(self, cases, out: RowFits):
         """A round's outputs (``run_rows``'s, (T, S, ...)) for ``cases`` (T,)."""
         B = len(self.count)
-        for k, fill in (self.SMALL | {"present": False}).items():
-            column = np.full((B, self.per_round), fill, dtype=self.table[k].dtype)
-            column[cases] = True if k == "present" else out[k]
-            self.table[k] = np.concatenate([self.table[k], column], axis=1)
+        columns = []
+        for k, fill, kept in zip(Table._fields, ABSENT, self.table):
+            column = np.full((B, self.per_round), fill, dtype=kept.dtype)
+            column[cases] = True if k == "present" else getattr(out, k)
+            columns.append(np.concatenate([kept, column], axis=1))
+        self.table = Table(*columns)
         self.count[cases] += self.per_round
         self.rounds.append((cases, out))
 
-    def best(self, cases, keys=None) -> dict:
-        """The best start's outputs (``keys``, default all) of ``cases`` (K,): arrays (K, ...)."""
-        b = best_start(self.table["cost"][cases], self.table["converged"][cases])
+    def best(self, cases, keys=RowFits._fields) -> RowFits:
+        """The best start's outputs (``keys``, default all; the others None) of ``cases`` (K,): arrays (K, ...)."""
+        b = best_start(self.table.cost[cases], self.table.converged[cases])
         r, s = np.divmod(b, self.per_round)
-        keys = self.rounds[0][1].keys() if keys is None else keys
-        out = {k: np.empty((len(cases), *v.shape[2:]), v.dtype) for k, v in self.rounds[0][1].items() if k in keys}
+        first = self.rounds[0][1]
+        out = {k: np.empty((len(cases), *getattr(first, k).shape[2:]), getattr(first, k).dtype) for k in keys}
         for n, (members, o) in enumerate(self.rounds):
             take = np.flatnonzero(r == n)
             if take.size:
                 at = np.searchsorted(members, cases[take])  # a round's cases are in increasing order
                 for k in out:
-                    out[k][take] = o[k][at, s[take]]
-        return out
+                    out[k][take] = getattr(o, k)[at, s[take]]
+        return RowFits(**out)

@@ -44,14 +44,35 @@ def whitened(problem: Problem, z, d: Row, smoothing):
     return jnp.concatenate([dev / d.sigmas, (x - d.pm) * d.pw]), (pred, flags)
 
 
+class RowFits(NamedTuple):
+    """The solver's outputs per row (one start of one case), each with a leading row axis (``fit_rows``), or
+    shaped (cases, starts, ...) (``run_rows``); a selection of them, the others None (``rounds.Starts.best``).
+
+    x, z: the unknowns at the end (n,), physical and unconstrained; cost: half the chi^2 there; converged: the
+    solver's test passed (and the start did not stall); iterations; jacobian (m + n, n): of the whitened
+    residuals with respect to x; residuals (m + n,); predicted (m,): the evidence's values; status, sliding,
+    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking): the exchange's; stalled:
+    the start ended where nothing collides and no unknown moves any evidence."""
+
+    x: object = None
+    z: object = None
+    cost: object = None
+    converged: object = None
+    iterations: object = None
+    jacobian: object = None
+    residuals: object = None
+    predicted: object = None
+    status: object = None
+    sliding: object = None
+    stick_ratio: object = None
+    stalled: object = None
+
+
 @partial(quick_jit, static_argnames=("problem", "solver", "max_iter"))
 def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigmas, lo, hi, prior_mean, prior_weight,
               z0, smoothing):
     """One fit per row (rows = cases x starts, flattened): inputs [R], values/sigmas (R, m),
-    lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns a dict of arrays with a leading R:
-    x (n,), z (n,), cost, converged, iterations, jacobian (m + n, n) of the whitened residuals
-    with respect to the physical x, residuals (m + n,), predicted (m,), status, sliding and
-    stick_ratio (|J_t| / J_n: the least friction that keeps a sticking contact sticking), stalled.
+    lo/hi/prior_mean/prior_weight (R, n), z0 (R, n). Returns their ``RowFits``, each with a leading R.
     A start is "stalled", and not converged, where it ends without an exchange (status not "ok":
     separating, no contact) and no unknown moves any evidence there: its gradient is zero because
     nothing collides, not because it reached a fit."""
@@ -70,9 +91,9 @@ def fit_rows(problem: Problem, solver: str, max_iter: int, inputs, values, sigma
     pred, (status, sliding, stick_ratio) = sol.aux
     m = len(problem.evidence)
     stalled = (status != OK) & jnp.all(jac[:, :m] == 0, axis=(1, 2))
-    return {"x": x, "z": sol.z, "cost": sol.cost, "converged": sol.converged & ~stalled, "iterations": sol.iterations,
-            "jacobian": jac, "residuals": sol.r, "predicted": pred, "status": status, "sliding": sliding,
-            "stick_ratio": stick_ratio, "stalled": stalled}
+    return RowFits(x=x, z=sol.z, cost=sol.cost, converged=sol.converged & ~stalled, iterations=sol.iterations,
+                   jacobian=jac, residuals=sol.r, predicted=pred, status=status, sliding=sliding,
+                   stick_ratio=stick_ratio, stalled=stalled)
 
 
 STICKING_FRICTION = 1e3  # a friction no exchange of cars reaches: the stick impulse
@@ -189,7 +210,7 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
     them all), the last padded: a row's fit does not depend on the others in its call. devices: where the
     rows are solved (default ``jax.local_devices()``, this process's devices): over several, each call's
     rows are split among them (a 1-D mesh; ``block`` rounded up to a multiple of their number). Returns
-    NumPy arrays shaped (B, S, ...)."""
+    ``RowFits`` of NumPy arrays shaped (B, S, ...)."""
     devices = tuple(jax.local_devices() if devices is None else devices)
     B = np.asarray(values).shape[0]
     rows = B * starts
@@ -210,7 +231,6 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
         part = jax.tree_util.tree_map(lambda a: jax.device_put(np.asarray(a[start:start + block], dtype), place.rows),
                                       args)
         out = fit_rows(problem, solver, max_iter, *part, smoothing)
-        parts.append({k: np.asarray(v) for k, v in out.items()})
-    return {k: np.concatenate([p[k] for p in parts])[:rows].reshape(B, starts, *parts[0][k].shape[1:])
-            for k in parts[0]}
+        parts.append(RowFits(*map(np.asarray, out)))
+    return RowFits(*(np.concatenate(part)[:rows].reshape(B, starts, *part[0].shape[1:]) for part in zip(*parts)))
 

@@ -166,7 +166,7 @@ def test_the_starts_from_a_fit_pinned_at_a_bound_move_each_pinned_unknown_inside
     pw = np.zeros((3, 3))
     pw[1, 1] = 10.0
     x = np.array([[0.0, 0.6, 0.3], [12.0, 0.6, 0.3], [12.0, 0.3, 0.3]])
-    best = {"x": x, "status": np.full(3, OK), "sliding": np.ones(3, bool), "stick_ratio": np.full(3, 0.2)}
+    best = rc.RowFits(x=x, status=np.full(3, OK), sliding=np.ones(3, bool), stick_ratio=np.full(3, 0.2))
     cases, starts = other_side(best, problem, lo, hi, pw, 8)
     assert cases.tolist() == [0] and starts.shape == (1, 8, 3)
     for k, start in enumerate(starts[0]):
