@@ -138,7 +138,8 @@ def main() -> None:
     print("\nexchanges/s, medians over rounds:")
     for name in names:
         med = {side: statistics.median(x["rate"][name] for x in results[side]) for side in sides}
-        within = statistics.median(a["rate"][name] / b["rate"][name] for a, b in zip(results["after"], results["before"]))
+        within = statistics.median(a["rate"][name] / b["rate"][name]
+                                   for a, b in zip(results["after"], results["before"]))
         first = {side: statistics.median(x["first"][name] for x in results[side]) for side in sides}
         print(f"  {name:20} before {med['before']:.4g}/s, after {med['after']:.4g}/s: after/before {within:.3f} "
               f"(first call {first['before']:.2f} s before, {first['after']:.2f} s after)")

@@ -86,7 +86,8 @@ def main() -> None:
             for way in order:
                 compiles[way].append(seconds[way])
             ratios.append(seconds["defaults"] / seconds["quick"])
-            print(f"  {name:18s} round {k}: compile quick {seconds['quick']:.2f} s, defaults {seconds['defaults']:.2f} s")
+            print(f"  {name:18s} round {k}: compile quick {seconds['quick']:.2f} s, "
+                  f"defaults {seconds['defaults']:.2f} s")
         for way in ways:
             jitted = ways[way]
             jitted(*args)

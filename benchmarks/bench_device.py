@@ -175,9 +175,11 @@ def main(argv=None):
         host = jax.tree_util.tree_map(np.asarray, batch)
         base = kernel_rate.get("float64")
         t = median_time(lambda: ks_jax.exchange_batch(*host), args.repeats)
-        row("exchange_batch, NumPy in, NumPy out", f"{n / t:.3g} /s", f"{n / t / base:.2f} of the kernel" if base else "")
+        row("exchange_batch, NumPy in, NumPy out", f"{n / t:.3g} /s",
+            f"{n / t / base:.2f} of the kernel" if base else "")
         t = median_time(lambda: ks_jax.exchange_batch(*batch), args.repeats)
-        row("exchange_batch, device in, NumPy out", f"{n / t:.3g} /s", f"{n / t / base:.2f} of the kernel" if base else "")
+        row("exchange_batch, device in, NumPy out", f"{n / t:.3g} /s",
+            f"{n / t / base:.2f} of the kernel" if base else "")
         if "to_host" in inspect.signature(ks_jax.exchange_batch).parameters:
             t = median_time(blocking(ks_jax.exchange_batch, *batch, to_host=False), args.repeats)
             row("exchange_batch, device in, device out", f"{n / t:.3g} /s",
@@ -202,7 +204,8 @@ def main(argv=None):
         ks_jax.sweep(case, small, progress=False)
         wall = time.perf_counter() - t
         m = len(small["vehicles[1].speed"]) ** 2
-        row(f"sweep, {m} points, default outputs kept", f"{m / wall:.3g} /s", f"{wall:.2f} s; statuses {r.status_counts}")
+        row(f"sweep, {m} points, default outputs kept", f"{m / wall:.3g} /s",
+            f"{wall:.2f} s; statuses {r.status_counts}")
     if "grad" in only:
         m = min(n, 1 << 20)
         _, rows = random_batch(m, seed=1)

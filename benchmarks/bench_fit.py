@@ -88,8 +88,9 @@ def score(results, truths, chi2_truth):
     chi2 = np.array([r.chi2 for r in results])
     within = np.abs(est - truths) <= 2 * std
     return {"global": float(np.mean(chi2 <= chi2_truth + 1e-6)), "missed": np.flatnonzero(chi2 > chi2_truth + 1e-6),
-            "chi2_missed": chi2[chi2 > chi2_truth + 1e-6], "starts": float(np.median([r.starts for r in results])), "coverage": float(np.mean(within)),
-            "all2": float(np.mean(np.all(within, 1))), "converged": float(np.mean([r.converged for r in results])),
+            "chi2_missed": chi2[chi2 > chi2_truth + 1e-6], "starts": float(np.median([r.starts for r in results])),
+            "coverage": float(np.mean(within)), "all2": float(np.mean(np.all(within, 1))),
+            "converged": float(np.mean([r.converged for r in results])),
             "iterations": float(np.median([r.iterations for r in results]))}
 
 

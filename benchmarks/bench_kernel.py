@@ -334,7 +334,8 @@ def main():
         np.max(np.abs(np.asarray(out.vehicles[1].delta_v_magnitude[:4096]) - ref_v[1]["delta_v_magnitude"])[valid]
                / np.abs(ref_v[1]["delta_v_magnitude"])[valid]),
     )
-    agree32 = max(float(np.nanmax(np.abs(np.asarray(a, np.float64) - np.asarray(b)) / np.maximum(np.abs(np.asarray(b)), 1.0)))
+    agree32 = max(float(np.nanmax(np.abs(np.asarray(a, np.float64) - np.asarray(b))
+                                  / np.maximum(np.abs(np.asarray(b)), 1.0)))
                   for a, b in ((out32.contact.impulse_magnitude, out.contact.impulse_magnitude),
                                (out32.vehicles[1].delta_v_magnitude, out.vehicles[1].delta_v_magnitude)))
 
@@ -360,8 +361,9 @@ def main():
     print(f"jit(vmap(exchange)) / exchange_batch {q('vmap64', 'batch64'):.2f} (float64), {q('vmap32', 'batch32'):.2f} "
           f"(float32); float32 / float64: jit(vmap) {q('vmap32', 'vmap64'):.2f}, exchange_batch "
           f"{q('batch32', 'batch64'):.2f}; jit(vmap(exchange)) / whole-batch {q('vmap64', 'whole'):.2f}")
-    print(f"largest differences from exchange_batch: jit(vmap(exchange)) {same_vmap:.1e}, whole-batch {same_whole:.1e}; "
-          f"NumPy agrees to {agree:.1e} (relative, valid rows of the first 4096); float32 to float64 {agree32:.1e}")
+    print(f"largest differences from exchange_batch: jit(vmap(exchange)) {same_vmap:.1e}, "
+          f"whole-batch {same_whole:.1e}; NumPy agrees to {agree:.1e} (relative, valid rows of the first 4096); "
+          f"float32 to float64 {agree32:.1e}")
     faults = lambda k: f"{statistics.median(u[1] for u in usage[k]):.0f}"  # noqa: E731
     print(f"page faults per call (medians): exchange_batch {faults('batch64')}, out= {faults('batch64out')}, "
           f"jit(vmap(exchange)) {faults('vmap64')}, whole-batch {faults('whole')}, NumPy {faults('numpy')}, "
@@ -391,7 +393,8 @@ def main():
     gusage = {}
     gt = rounds(gfns, reps, gusage)
     gq = lambda a, b: ratio(gt, a, b)  # noqa: E731
-    print(f"{'gradient, ' + str(n) + ' rows':{w}} {'rows/s':>12}  {'grad/fwd':>8}  forward rows/s, first call of the gradient")
+    print(f"{'gradient, ' + str(n) + ' rows':{w}} {'rows/s':>12}  {'grad/fwd':>8}  "
+          "forward rows/s, first call of the gradient")
     grads = {}
     for name in LOSSES:
         for way in WAYS:
@@ -429,7 +432,8 @@ def main():
     extra = []
     if args.memory_n:
         for keep in ("float32", "none"):
-            extra.append(("sweep memory", run_script("bench_sweep_memory.py", "--n", str(args.memory_n), "--keep", keep)))
+            extra.append(("sweep memory", run_script("bench_sweep_memory.py", "--n", str(args.memory_n),
+                                                     "--keep", keep)))
             print(f"bench_sweep_memory.py --n {args.memory_n} --keep {keep}: {extra[-1][1]}", flush=True)
     if args.sharded_n:
         extra.append(("sharded", run_script("bench_sweep_sharded.py", "--n", str(args.sharded_n),

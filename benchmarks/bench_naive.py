@@ -106,7 +106,8 @@ def main():
     gfns, firsts = {}, {}
     for name, loss in naive_losses().items():
         lib_loss = bk.batched_loss(bk.LOSSES[name], "vmap(exchange)")
-        for who, f, a in (("naive", loss, (dicts,)), ("ks_jax", lambda args, lib_loss=lib_loss: lib_loss(*args), (tuple(first),))):
+        for who, f, a in (("naive", loss, (dicts,)),
+                          ("ks_jax", lambda args, lib_loss=lib_loss: lib_loss(*args), (tuple(first),))):
             fwd, grad = jax.jit(f), jax.jit(jax.value_and_grad(f))
             bk.first_call(lambda: jax.block_until_ready(fwd(*a)))
             first_grad = bk.first_call(lambda: jax.block_until_ready(grad(*a)))
@@ -142,11 +143,12 @@ def main():
               f"{n / tf:.4g}/s; first call {firsts[name]:.2f} s); through ks_jax.exchange {lib:.2f} (gradient "
               f"{n / lg:.4g}/s, forward {n / lf:.4g}/s), its gradient {faster:.2f}x the naive gradient's rate")
     print(f"naive jit(vmap): {q('naive', 'numpy'):.2f}x NumPy, {q('naive', 'stream'):.2f} of streaming into new "
-          f"arrays, {q('naive', 'stream_in_place'):.2f} in place; ks_jax jit(vmap(exchange)) {q('kernel', 'naive'):.2f}x "
-          f"it; naive gradient/forward {grads['delta-V']:.2f} (delta-V), {grads['residuals']:.2f} (residuals); "
-          f"through ks_jax.exchange {lib_grads['delta-V']:.2f} and {lib_grads['residuals']:.2f} (medians, gradient/"
-          f"forward ns per row: {lib_ns['delta-V']} and {lib_ns['residuals']}), its gradients "
-          f"{faster_grads['delta-V']:.2f}x and {faster_grads['residuals']:.2f}x the naive ones' rate")
+          f"arrays, {q('naive', 'stream_in_place'):.2f} in place; ks_jax jit(vmap(exchange)) "
+          f"{q('kernel', 'naive'):.2f}x it; naive gradient/forward {grads['delta-V']:.2f} (delta-V), "
+          f"{grads['residuals']:.2f} (residuals); through ks_jax.exchange {lib_grads['delta-V']:.2f} and "
+          f"{lib_grads['residuals']:.2f} (medians, gradient/forward ns per row: {lib_ns['delta-V']} and "
+          f"{lib_ns['residuals']}), its gradients {faster_grads['delta-V']:.2f}x and {faster_grads['residuals']:.2f}x "
+          "the naive ones' rate")
 
 
 if __name__ == "__main__":

@@ -2,11 +2,11 @@
 
     .venv/bin/python benchmarks/bench_sweep_plot.py [--tree DIR ...] [--rounds 3] [--n 1000]
 
-Runs `ks-jax sweep` on an n x n grid of the manual's Lucid-Kia crash, ks_jax/cases/seed_001_lucid_kia.toml (speed x restitution, the default outputs, written
-to .npz) without and with `--plot`, each in a fresh process, rounds interleaved, after one warm-up run per
-tree (so that every timed run loads its programs from the kept programs). Each `--tree` is a checkout of the
-project (default: this one), run with PYTHONPATH set to it: two trees compare two versions side by side
-(`git worktree add /tmp/before HEAD~1`). Prints per tree the medians of wall time and peak resident memory
+Runs `ks-jax sweep` on an n x n grid of the manual's Lucid-Kia crash, ks_jax/cases/seed_001_lucid_kia.toml (speed x
+restitution, the default outputs, written to .npz) without and with `--plot`, each in a fresh process, rounds
+interleaved, after one warm-up run per tree (so that every timed run loads its programs from the kept programs). Each
+`--tree` is a checkout of the project (default: this one), run with PYTHONPATH set to it: two trees compare two versions
+side by side (`git worktree add /tmp/before HEAD~1`). Prints per tree the medians of wall time and peak resident memory
 (the child's ru_maxrss), and the ratio with / without the picture.
 """
 

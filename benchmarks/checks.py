@@ -94,7 +94,8 @@ def check_batch_of_one_row():
     args = rows(2)
     one = tuple(jax.tree_util.tree_map(lambda x: x[0], args))
     unbatched = instructions(ks_jax.exchange, *one)
-    counts = {n: instructions(jax.vmap(ks_jax.exchange), *jax.tree_util.tree_map(lambda x: x[:n], args)) for n in (1, 2)}
+    counts = {n: instructions(jax.vmap(ks_jax.exchange), *jax.tree_util.tree_map(lambda x: x[:n], args))
+              for n in (1, 2)}
     check("a batch of 1 or 2 rows is about one row's program", max(counts.values()) <= 1.5 * unbatched,
           f"unbatched {unbatched} instructions, 1 row {counts[1]}, 2 rows {counts[2]}")
 

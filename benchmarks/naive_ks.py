@@ -49,9 +49,9 @@ def status(v1, s1, v2, s2, c):
     box = lambda v: ((v["length"] > 0) & (v["width"] > 0) & (v["height"] > 0)  # noqa: E731
                      & (v["cg_to_front"] >= 0) & (v["cg_to_front"] <= v["length"])
                      & (v["cg_height"] >= 0) & (v["cg_height"] <= v["height"]))
-    checks = [finite, v1["mass"] > 0, v2["mass"] > 0, inertia_ok(v1["inertia"], dets[0]), inertia_ok(v2["inertia"], dets[1]), box(v1),
-              box(v2), (c["restitution"] >= -1) & (c["restitution"] <= 1), c["friction"] >= 0,
-              jnp.dot(c["normal"], c["normal"]) > 0, c["penetration_time"] >= 0]
+    checks = [finite, v1["mass"] > 0, v2["mass"] > 0, inertia_ok(v1["inertia"], dets[0]),
+              inertia_ok(v2["inertia"], dets[1]), box(v1), box(v2), (c["restitution"] >= -1) & (c["restitution"] <= 1),
+              c["friction"] >= 0, jnp.dot(c["normal"], c["normal"]) > 0, c["penetration_time"] >= 0]
     code = jnp.int32(0)
     for ok, bad in zip(reversed(checks), reversed(CODES)):
         code = jnp.where(ok, code, bad)
@@ -71,7 +71,8 @@ def exchange(v1, s1, v2, s2, c):
     a1 = rot1 @ inv1 @ rot1.T
     a2 = rot2 @ inv2 @ rot2.T
     r1, r2 = p - s1["position"], p - s2["position"]
-    u = (s1["velocity"] + jnp.cross(s1["angular_velocity"], r1)) - (s2["velocity"] + jnp.cross(s2["angular_velocity"], r2))
+    u = ((s1["velocity"] + jnp.cross(s1["angular_velocity"], r1))
+         - (s2["velocity"] + jnp.cross(s2["angular_velocity"], r2)))
     x1, x2 = skew(r1), skew(r2)
     K = (1 / v1["mass"] + 1 / v2["mass"]) * jnp.eye(3) - x1 @ a1 @ x1 - x2 @ a2 @ x2
     K = jnp.where(ok, K, jnp.eye(3))

@@ -67,7 +67,8 @@ def exchange(v1, s1, v2, s2, c):
         a1 = rot1 @ np.linalg.inv(np.where(ok[:, None, None], v1["inertia"], np.eye(3))) @ np.swapaxes(rot1, 1, 2)
         a2 = rot2 @ np.linalg.inv(np.where(ok[:, None, None], v2["inertia"], np.eye(3))) @ np.swapaxes(rot2, 1, 2)
         r1, r2 = p - s1["position"], p - s2["position"]
-        u = (s1["velocity"] + np.cross(s1["angular_velocity"], r1)) - (s2["velocity"] + np.cross(s2["angular_velocity"], r2))
+        u = ((s1["velocity"] + np.cross(s1["angular_velocity"], r1))
+             - (s2["velocity"] + np.cross(s2["angular_velocity"], r2)))
         x1, x2 = skew(r1), skew(r2)
         K = ((1 / v1["mass"] + 1 / v2["mass"])[:, None, None] * np.eye(3) - x1 @ a1 @ x1 - x2 @ a2 @ x2)
         K = np.where(ok[:, None, None], K, np.eye(3))
@@ -102,8 +103,9 @@ def exchange(v1, s1, v2, s2, c):
             depth = ex.min(-1)
             pdof = deg360(np.arctan2(fb[:, 1], -fb[:, 0]))
             hour = np.mod(np.round(pdof / 30.0), 12.0)
-            veh.append({"delta_v": dv, "delta_v_magnitude": jmag / v["mass"], "delta_v_body": np.einsum("nji,nj->ni", rot, dv),
-                        "delta_yaw_rate": dw[:, 2], "velocity_after": va, "speed_after": np.linalg.norm(va, axis=-1),
+            veh.append({"delta_v": dv, "delta_v_magnitude": jmag / v["mass"],
+                        "delta_v_body": np.einsum("nji,nj->ni", rot, dv), "delta_yaw_rate": dw[:, 2],
+                        "velocity_after": va, "speed_after": np.linalg.norm(va, axis=-1),
                         "course_after": deg360(np.arctan2(va[:, 1], va[:, 0])), "angular_velocity_after": wa,
                         "yaw_rate_after": wa[:, 2], "pdof": pdof, "pdof_clock": np.where(hour == 0, 12.0, hour),
                         "crush": np.where(inside & np.isfinite(depth), depth, 0.0), "_va": va, "_wa": wa})

@@ -289,8 +289,8 @@ def _frontal(b, point, n):
     """Whether an impact into a wall is full frontal: the centroid on the CG's line of travel, the
     velocity along the normal (to rounding: an azimuth of 180 deg has a sine of 1e-16), no yaw rate."""
     r = point - b["x"]
-    return (abs(_cross(r, n)) <= SHOWN_FLOOR * math.hypot(*r) and abs(_cross(b["v"], n)) <= SHOWN_FLOOR * math.hypot(*b["v"])
-            and b["w"] == 0.0)
+    return (abs(_cross(r, n)) <= SHOWN_FLOOR * math.hypot(*r)
+            and abs(_cross(b["v"], n)) <= SHOWN_FLOOR * math.hypot(*b["v"]) and b["w"] == 0.0)
 
 
 def _wall_rows(c, sol, label):

@@ -53,8 +53,9 @@ def linearisation_notes(result) -> list:
 
 def refit_perturbed(problem, solver, max_iter, a, unknowns, z_best, starts, samples, rng, smoothing, dtype, progress,
                     chunk, block, devices=None, everywhere=True):
-    """Refit ``samples`` copies of the evidence of one case (``a``: its ``FitArrays.row``), each perturbed by N(0, sigma^2), and of each Gaussian prior's
-    mean, perturbed by N(0, prior sigma^2). Calls of ``block`` rows, on ``devices`` (``rows.run_rows``).
+    """Refit ``samples`` copies of the evidence of one case (``a``: its ``FitArrays.row``), each perturbed by
+    N(0, sigma^2), and of each Gaussian prior's mean, perturbed by N(0, prior sigma^2). Calls of ``block`` rows, on
+    ``devices`` (``rows.run_rows``).
 
     Where to start each refit: ``everywhere`` (the fit's own starts ended in more than one minimum:
     ``rows.several_minima``), from ``starts`` starts, the first at the estimate and the others drawn as for the

@@ -56,7 +56,8 @@ from ks_jax.solve import solve_inputs
 from .report import fmt
 
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
-NOT_FITTABLE = {"sliding": "a yes/no flag", "at_rest": "a yes/no flag", "pdof_clock": "rounded to whole hours", "status": "a status code"}
+NOT_FITTABLE = {"sliding": "a yes/no flag", "at_rest": "a yes/no flag", "pdof_clock": "rounded to whole hours",
+                "status": "a status code"}
 # inputs that are angles on the circle (radians inside)
 CIRCULAR_INPUTS = {"yaw", "course", "roll", "normal"}
 # physical limits of inputs, checked against the bounds of an unknown: field -> (lo, hi, strict lo)

@@ -314,9 +314,9 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
     "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
-    ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved (default: this process's devices,
-    ``jax.local_devices()``; over several, the rows are split among them: docs/devices.md). Raises CaseError
-    for a bad path, unit, bound or sigma.
+    ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved
+    (default: this process's devices, ``jax.local_devices()``; over several, the rows are split among them:
+    docs/devices.md). Raises CaseError for a bad path, unit, bound or sigma.
     """
     return reconstruct_batch([case], None if unknowns is None else [unknowns],
                              None if evidence is None else [evidence], starts=starts, seed=seed,

@@ -29,7 +29,8 @@ def settled(cost, dof):
     return ~finite.any(axis=1) | ((count_at_best(cost) >= AGREE) & (chi2 <= chi2_quantile(np.maximum(dof, 1), CHI2_Z)))
 
 
-SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)  # the slide-side starts' friction, in parts of the friction needed to stick
+# the slide-side starts' friction, in parts of the friction needed to stick
+SLIDE_SIDE = 1.0 - np.geomspace(0.02, 0.6, 8)
 OFF_BOUND = np.linspace(0.1, 0.9, 8)  # the off-bound starts of an unknown pinned at a bound, in parts of its range
 
 

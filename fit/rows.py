@@ -203,8 +203,8 @@ def rows_per_call(rows: int) -> int:
     return min(rows, ROWS_PER_CALL if on_cpu() else ROWS_PER_CALL_ELSEWHERE)
 
 
-def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts, block=None,
-             devices=None):
+def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts,
+             block=None, devices=None):
     """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw
     (B, n); z0 (B, S, n). The B x S rows go to the solver in calls of ``block`` rows (default: one call of
     them all), the last padded: a row's fit does not depend on the others in its call. devices: where the

@@ -190,9 +190,12 @@ def _vehicle_rows(sol, v1, v2):
             _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
-            _row("course after", "undefined (at rest)" if bool(at_rest_after(v)) else f"{angle_text(v.course_after)} deg"),
-            _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s", f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
-            _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s", f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
+            _row("course after",
+                 "undefined (at rest)" if bool(at_rest_after(v)) else f"{angle_text(v.course_after)} deg"),
+            _row("yaw rate after", f"{_fmt(v.yaw_rate_after)} rad/s",
+                 f"{_fmt(math.degrees(v.yaw_rate_after), 1)} deg/s"),
+            _row("delta yaw rate", f"{_fmt(v.delta_yaw_rate)} rad/s",
+                 f"{_fmt(math.degrees(v.delta_yaw_rate), 1)} deg/s"),
         ]
         if sol.result.rest is not None and sol.result.rest[k] is not None:
             lines += _rest_rows(sol.result.rest[k], sol.case.motion)

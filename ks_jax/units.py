@@ -232,7 +232,8 @@ def parse_quantity(value, kind: str) -> float:
         return float(q.to("").magnitude)
     if kind == "angle" and q.dimensionless:
         if dict(q.to_root_units().unit_items()) != {"radian": 1}:  # a solid angle (sr), a percent, ...
-            raise UnitError(f"'{text}': an angle needs a plane-angle unit (deg, rad, turn, arcmin); '{unit}' is not one")
+            raise UnitError(f"'{text}': an angle needs a plane-angle unit (deg, rad, turn, arcmin); "
+                            f"'{unit}' is not one")
         return float(q.to(SI_UNITS[kind]).magnitude)
     if kind == "angular_velocity" and q.dimensionality == ureg.Quantity(1, "1/s").dimensionality \
             and not _names_an_angle(ureg, q):

@@ -262,7 +262,8 @@ def test_evidence_and_bounds_beyond_computing_are_refused_by_name(where, value, 
 def test_evidence_named_by_something_other_than_a_path_is_refused():
     case = ks_jax.load_case(FIT_CASE)
     for quantity, message in ((0, "a path is a string"), (1.5, "a path is a string"), (None, "needs quantity"),
-                              (["vehicles[0].delta_v_magnitude"], "a path is a string"), ({"a": 1}, "a path is a string")):
+                              (["vehicles[0].delta_v_magnitude"], "a path is a string"),
+                              ({"a": 1}, "a path is a string")):
         evidence = copy.deepcopy(case.raw["evidence"])
         evidence[0]["quantity"] = quantity
         with pytest.raises(CaseError, match=message):
@@ -372,7 +373,8 @@ def test_hostile_files_and_arguments_give_one_clear_error(tmp_path, capsys):
         "none.json": (json.dumps({**base, "vehicles": []}), "vehicles: 0 given; a case needs exactly two vehicles"),
         "word.json": (json.dumps({**base, "vehicles": "two"}), "vehicles = 'two': not a list"),
         "nan.json": (json.dumps(base).replace('"yaw": 0', '"yaw": NaN', 1), "vehicles[0].yaw = nan: must be a finite"),
-        "big.json": (json.dumps(base).replace('"yaw": 0', '"yaw": 1e400', 1), "vehicles[0].yaw = inf: must be a finite"),
+        "big.json": (json.dumps(base).replace('"yaw": 0', '"yaw": 1e400', 1),
+                     "vehicles[0].yaw = inf: must be a finite"),
         "lone.json": ('{"name": "\\udcff", "vehicles": 3}', "case '\\udcff': vehicles = 3: not a list"),
     }
     for name, (text, message) in files.items():

@@ -1,11 +1,12 @@
 """Every command, run as users run it, on every case the project ships.
 
 The cases are found, not listed: every file in ``ks_jax/cases/``, ``docs/examples/`` and ``docs/validation/``,
-and every whole case written out in a JSON or TOML block of ``docs/*.md``, joins the matrix by being there. Each file is solved (the panel, ``--json``, ``--plot``, ``--units us`` and
-``--units si``); each case with ``unknowns`` is fitted (the report, ``--json``, ``--plot``, ``--monte-carlo``,
-``--posterior``); each case is swept over one of its inputs into every results format and a picture. Every
-run must end with exit status 0 and no traceback, and every ``--json`` must parse, have the one shape every
-command writes (``{"cases": [...]}``) and carry, for each case, the keys that docs/model.md names for it.
+and every whole case written out in a JSON or TOML block of ``docs/*.md``, joins the matrix by being there. Each file is
+solved (the panel, ``--json``, ``--plot``, ``--units us`` and ``--units si``); each case with ``unknowns`` is fitted
+(the report, ``--json``, ``--plot``, ``--monte-carlo``, ``--posterior``); each case is swept over one of its inputs into
+every results format and a picture. Every run must end with exit status 0 and no traceback, and every ``--json`` must
+parse, have the one shape every command writes (``{"cases": [...]}``) and carry, for each case, the keys that
+docs/model.md names for it.
 
 The commands run in this process (``ks_jax.cli.main``), so that the runs share their compiled programs.
 """

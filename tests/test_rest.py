@@ -41,7 +41,8 @@ def test_solve_json_gives_each_skid_its_closed_form(capsys):
 
 @pytest.mark.slow
 def test_a_vehicle_still_moving_at_the_time_limit_is_said_so(capsys):
-    """The pickup rolling free from 35 mph does not stop in 4 s, the sedan does: its at_rest is false, and a note says what to change."""
+    """The pickup rolling free from 35 mph does not stop in 4 s, the sedan does: its at_rest is false, and a note says
+    what to change."""
     raw = json.loads(SPIN_OUT.read_text())
     raw["road"]["time_limit"] = "4.003 s"
     raw["vehicles"][1]["after"] = {"wheels": "free"}
@@ -62,7 +63,8 @@ def test_a_swept_road_friction_scales_the_skids_as_one_over_mu():
                           outputs=["vehicles[0].distance_to_rest", "vehicles[1].distance_to_rest",
                                    "vehicles[0].speed_after"])
     # a friction of 0 or above 10 breaks the road's rule: those rows are invalid, with no numbers
-    assert [ks_jax.status_text(c) for c in result["status"][3:]] == [ks_jax.status_text(ks_jax.model.types.INVALID_MOTION)] * 2
+    assert ([ks_jax.status_text(c) for c in result["status"][3:]]
+            == [ks_jax.status_text(ks_jax.model.types.INVALID_MOTION)] * 2)
     assert np.all(np.isnan(np.asarray(result["vehicles[0].distance_to_rest"][3:], float)))
     result = {k: np.asarray(result[k])[:3] for k in ("vehicles[0].distance_to_rest", "vehicles[1].distance_to_rest",
                                                        "vehicles[0].speed_after")}

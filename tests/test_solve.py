@@ -146,7 +146,8 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     assert code == 1 and "status: invalid: the results overflow" in out and "undefined" not in out
     assert "not solved" in err and (tmp_path / "huge.png").read_bytes()[:4] == b"\x89PNG"
     code, out, _ = run_cli(capsys, "solve", str(path), "--json")
-    status = "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)"
+    status = ("invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of "
+              "1e-300 kg)")
     named = "; the input farthest out of scale: vehicles[1].speed = 1e+300 m/s"
     assert json.loads(out)["cases"][0] == {"name": "units check", "vehicles": [], "contact": {"status": status + named}}
     # the input named is the one out of scale, not survey coordinates: a speed of 1e200 mph is
@@ -162,7 +163,8 @@ def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     code, out, _ = run_cli(capsys, "solve", str(path), "--json")
     far_res, good = json.loads(out)["cases"]
     assert code == 1 and good["contact"]["status"] == "ok"
-    assert far_res["contact"]["status"] == status + "; the input farthest out of scale: vehicles[0].speed = 4.4704e+199 m/s"
+    assert far_res["contact"]["status"] == (status + "; the input farthest out of scale: "
+                                            "vehicles[0].speed = 4.4704e+199 m/s")
 
 
 def test_state_needs_a_height_for_a_2d_position():
@@ -207,8 +209,8 @@ HEAD_ON = {
 
 @pytest.mark.slow
 def test_a_vehicle_brought_to_rest_has_no_course_after(tmp_path, capsys):
-    """Inline head-on, so the stick impulse (docs/model.md, "The impulse exchange", step 6): v' = vc (1 + eps) - eps v with
-    vc = (1500 * 10 - 1800 * 10) / 3300 = -10/11 m/s. Vehicle 2 ends at 0 m/s: at rest, it has no course
+    """Inline head-on, so the stick impulse (docs/model.md, "The impulse exchange", step 6): v' = vc (1 + eps) - eps v
+    with vc = (1500 * 10 - 1800 * 10) / 3300 = -10/11 m/s. Vehicle 2 ends at 0 m/s: at rest, it has no course
     after (null, "undefined (at rest)", NaN in a sweep); vehicle 1 ends at -2 m/s, course 180 deg. At 9 and
     11 m/s vehicle 2 ends at +0.5 and -0.5 m/s: courses 0 and 180. An explicit contact has no first-contact
     time: null in the JSON, and refused as a sweep output."""

@@ -34,7 +34,8 @@ def test_unit_strings_read_one_number_and_its_unit():
         with pytest.raises(U.UnitError, match="one number, then its unit"):
             U.parse_quantity(text, kind)
     # the seed chapter's energy and impulse as its US panel writes them (docs/model.md, "Worked examples")
-    assert U.parse_quantity("14117.71 ft-lbf", "energy") == pytest.approx(14117.71 * 0.3048 * 4.4482216152605, rel=1e-12)
+    assert U.parse_quantity("14117.71 ft-lbf", "energy") == pytest.approx(14117.71 * 0.3048 * 4.4482216152605,
+                                                                          rel=1e-12)
     assert U.parse_quantity("1336.904 lbf-s", "impulse") == pytest.approx(5946.847, abs=2e-3)
     assert U.parse_quantity("2300 lbf-ft-s^2", "inertia") == U.parse_quantity("2300 lbf*ft*s^2", "inertia")
     assert U.parse_quantity("60 rpm", "angular_velocity") == pytest.approx(2 * math.pi)

@@ -105,7 +105,8 @@ def draw(name, title, s1, s2, penetration_time, half):
 
     _scene(near, auto, geo, labels=False)
     t = np.array([-n[1], n[0]])
-    near.plot(*np.stack([p - 2 * half * t, p + 2 * half * t]).T, color="tab:red", lw=1.4, label="contact plane\n(through the centroid)")
+    near.plot(*np.stack([p - 2 * half * t, p + 2 * half * t]).T, color="tab:red", lw=1.4,
+              label="contact plane\n(through the centroid)")
     c = geo.crossings
     d = (c[1] - c[0]) / np.linalg.norm(c[1] - c[0])
     near.plot(*np.stack([c[0] - 2 * half * d, c[1] + 2 * half * d]).T, color="0.2", lw=0.9, ls="--",

@@ -44,7 +44,8 @@ def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):
             raise ValueError(f"sum_over_rows: in_axes = {in_axes!r} has {len(axes)} entries for {len(args)} arguments")
         for k, a in enumerate(axes):
             if a not in (0, None):
-                raise ValueError(f"sum_over_rows: in_axes[{k}] = {a!r}: each entry must be 0 (batched) or None (shared)")
+                raise ValueError(f"sum_over_rows: in_axes[{k}] = {a!r}: "
+                                 "each entry must be 0 (batched) or None (shared)")
         if all(a is None for a in axes):
             raise ValueError("sum_over_rows: no argument is batched (in_axes needs an entry 0)")
         return axes
@@ -65,7 +66,8 @@ def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):
         leaves, treedef = jax.tree_util.tree_flatten(primals)
         batched = [a == 0 for a, arg in zip(axes, primals) for _ in jax.tree_util.tree_leaves(arg)]
         t_leaves = jax.tree_util.tree_leaves(tangents, is_leaf=lambda t: isinstance(t, SymbolicZero))
-        wrt = [not isinstance(t, SymbolicZero) and jnp.issubdtype(x.dtype, jnp.inexact) for x, t in zip(leaves, t_leaves)]
+        wrt = [not isinstance(t, SymbolicZero) and jnp.issubdtype(x.dtype, jnp.inexact)
+               for x, t in zip(leaves, t_leaves)]
         value, grads = _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk)
         dot = jnp.zeros_like(value)
         for g, t in zip(grads, (t for t, w in zip(t_leaves, wrt) if w)):

@@ -23,9 +23,9 @@ def run(stages, args, in_axes=0, fenced=True):
     args: a tuple of pytrees; in_axes: 0 (every leaf has the rows first), or a tuple of the same
     structure as ``args`` holding 0 or None per leaf (None: the same for every row); one row, unbatched:
     ``run_row``. fenced: True, each stage in a fence of its own on a CPU (``fence``); a number k, the first k
-    stages only; False, none (one program that XLA may fuse freely, as it is everywhere but on a CPU). A fence costs tracing time under transformations (a fit's
-    ``jax.jacfwd`` traces each conditional's branches again), so a caller that differentiates a few rows
-    fences only what pays for itself."""
+    stages only; False, none (one program that XLA may fuse freely, as it is everywhere but on a CPU). A fence costs
+    tracing time under transformations (a fit's ``jax.jacfwd`` traces each conditional's branches again), so a caller
+    that differentiates a few rows fences only what pays for itself."""
     count = len(stages) if fenced is True else int(fenced)
     outs = ()
     for k, stage in enumerate(stages):

@@ -23,11 +23,10 @@ from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_k
 from .paths import set_input, without_road
 
 __all__ = [
-    "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs", "CaseWarning", "ContactInputs",
-    "PathError", "VehicleInputs", "as_arrays", "at_rest_after", "automatic_part", "canonical_path",
-    "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input", "get_output",
-    "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases", "on_fixed_object",
-    "output_kind",
-    "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees", "undefined_kind", "visible",
-    "visible_lines", "without_road",
+    "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs",
+    "CaseWarning", "ContactInputs", "PathError", "VehicleInputs", "as_arrays", "at_rest_after", "automatic_part",
+    "canonical_path", "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input",
+    "get_output", "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases",
+    "on_fixed_object", "output_kind", "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees",
+    "undefined_kind", "visible", "visible_lines", "without_road",
 ]

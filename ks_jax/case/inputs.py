@@ -82,8 +82,8 @@ class CaseInputs(NamedTuple):
 class Motion:
     """How a case's motion to rest is integrated (static: each setting compiles a program of its own):
     ``time_step`` and ``time_limit``, s; ``path``: keep each vehicle's state after every step (for a picture:
-    ``ks_jax.solve.motion_paths``); ``reverse``: ready for reverse-mode differentiation (``jax.grad``, first order), which
-    runs every step to the time limit (``model.motion.to_rest``); forward mode (``jax.jacfwd``, as fits use)
+    ``ks_jax.solve.motion_paths``); ``reverse``: ready for reverse-mode differentiation (``jax.grad``, first order),
+    which runs every step to the time limit (``model.motion.to_rest``); forward mode (``jax.jacfwd``, as fits use)
     needs it False."""
 
     time_step: float

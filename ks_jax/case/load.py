@@ -62,7 +62,8 @@ def _inertia(value, path, case_name):
     moments = _vector(value, "inertia", path, case_name, (3,))
     for i, x in enumerate(moments):
         if x <= 0:
-            raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: principal moments of inertia must be positive")
+            raise CaseError(f"{_where(case_name, path)}[{i}] = {value[i]!r}: "
+                            "principal moments of inertia must be positive")
         _at_least(x, MIN_INERTIA, value[i], f"{path}[{i}]", case_name, "kg m^2", "inertia")
     return np.diag(moments)
 
@@ -185,7 +186,8 @@ def _contact_inputs(d, case_name):
             vec = _vector(raw, "dimensionless", "contact.normal", case_name, (2, 3))
             vec = vec + [0.0] * (3 - len(vec))
             if math.hypot(*vec) == 0:
-                raise CaseError(f"{_where(case_name, 'contact.normal')} = {raw!r}: the normal must be a non-zero vector")
+                raise CaseError(f"{_where(case_name, 'contact.normal')} = {raw!r}: "
+                                "the normal must be a non-zero vector")
             azimuth = math.atan2(vec[1], vec[0])
             if "normal_pitch" in d:
                 raise CaseError(f"{_where(case_name, 'contact.normal_pitch')}: give the pitch in the vector "
@@ -266,7 +268,8 @@ def _road(d, vehicles, case_name):
     if limit / dt > MAX_STEPS:
         raise CaseError(f"{_where(case_name, 'road')}: time_limit / time_step = {limit / dt:.4g} steps, more than "
                         f"{MAX_STEPS}: lengthen the step or shorten the limit")
-    after = tuple(_after(d["vehicles"][i], v, i, friction, case_name) for i, v in enumerate(vehicles[:len(d["vehicles"])]))
+    after = tuple(_after(d["vehicles"][i], v, i, friction, case_name)
+                  for i, v in enumerate(vehicles[:len(d["vehicles"])]))
     if len(after) == 1:
         after = (after[0], None)  # a fixed object does not move
     return RoadInputs(friction, after), Motion(float(dt), float(limit))
@@ -298,9 +301,9 @@ def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
         rear_typed = raw["length"] if _typed_scale(raw["length"], "length") else raw["cg_to_front"]
         behind = _both(rear_typed, length - float(v.cg_to_front), "length").replace(", ", " (", 1)
         behind += ")" if "(" in behind else ""
+        ahead = _limit("cg_to_front", raw["cg_to_front"], float(v.cg_to_front), "length")
         raise CaseError(f"{_where(case_name, where)} = {shown}: the axles must lie within the vehicle's length "
-                        f"(front axle at most {_limit('cg_to_front', raw['cg_to_front'], float(v.cg_to_front), 'length')}"
-                        f" ahead of the CG, rear axle at most {behind} behind it)")
+                        f"(front axle at most {ahead} ahead of the CG, rear axle at most {behind} behind it)")
     after = d.get("after", {})
     _check_keys(after, set(AFTER_FIELDS) | TEXT_FIELDS, path + ".after", case_name)
     brake = _wheels(after.get("wheels", "free"), f"{path}.after.wheels", case_name)
@@ -311,7 +314,8 @@ def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
     f = (_number(after["rolling_resistance"], "dimensionless", f"{path}.after.rolling_resistance", case_name)
          if "rolling_resistance" in after else ROLLING_RESISTANCE)
     if not 0 <= f < friction:
-        raise CaseError(f"{_where(case_name, path + '.after.rolling_resistance')} = {_shown(after['rolling_resistance'])}"
+        raise CaseError(f"{_where(case_name, path + '.after.rolling_resistance')} = "
+                        f"{_shown(after['rolling_resistance'])}"
                         f": must be >= 0 and below the road's friction ({friction:.4g})")
     return AfterInputs(wheelbase, track, a, np.array(brake, dtype=float), steer, f)
 

@@ -75,7 +75,8 @@ def input_leaf(path):
             raise PathError(f"path '{path}': the road's one input is road.friction")
         return "road", None, name, idx
     elif name not in ContactInputs._fields:
-        raise PathError(f"path '{path}': '{name}' is not a contact input; inputs are {', '.join(ContactInputs._fields)}")
+        raise PathError(f"path '{path}': '{name}' is not a contact input; "
+                        f"inputs are {', '.join(ContactInputs._fields)}")
     shapes = {"position": 1, "angular_velocity": 1, "point": 1, "inertia": 2}
     if len(idx) != shapes.get(name, 0):
         need = shapes.get(name, 0)

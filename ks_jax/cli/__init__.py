@@ -37,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("solve", help="solve the case(s) in a JSON or TOML file", epilog=EPILOG)
     solve.add_solve_arguments(p)
     p.set_defaults(run=solve.run_solve)
-    p = sub.add_parser("demo", help="solve the two Virtual CRASH manual chapters' examples shipped with the package", epilog=EPILOG)
+    p = sub.add_parser("demo", help="solve the two Virtual CRASH manual chapters' examples shipped with the package",
+                       epilog=EPILOG)
     p.set_defaults(run=solve.run_demo)
     p = sub.add_parser("fit", help="reconstruct unknown inputs from evidence (docs/fit.md)", epilog=EPILOG)
     fit.add_arguments(p)

@@ -86,10 +86,11 @@ def run(args) -> int:
                 raise CaseError(case.error)
             for key in ("unknowns", "evidence"):
                 if key not in case.raw:
-                    raise CaseError(f"case '{visible(case.name)}': {key}: missing field (ks-jax fit needs 'unknowns' and "
-                                    "'evidence', docs/fit.md)")
+                    raise CaseError(f"case '{visible(case.name)}': {key}: missing field "
+                                    "(ks-jax fit needs 'unknowns' and 'evidence', docs/fit.md)")
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
-                                       smoothing=args.smoothing, solver=args.solver, progress=args.monte_carlo > 0 or args.posterior > 0,
+                                       smoothing=args.smoothing, solver=args.solver,
+                                       progress=args.monte_carlo > 0 or args.posterior > 0,
                                        max_starts=args.max_starts, posterior=args.posterior, chains=args.chains))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
@@ -150,7 +151,8 @@ def save_posterior(result, path):
     samples = post.samples.reshape(-1, len(paths)) / scale
     estimate = np.array([result.estimate[p] for p in paths]) / scale
     return save_corner(path, samples, labels, estimate, np.asarray(result.covariance) / np.outer(scale, scale),
-                       title=f"{visible(result.case_name)}: posterior ({post.chains} chains x {post.draws} draws) and Laplace")
+                       title=f"{visible(result.case_name)}: posterior ({post.chains} chains x {post.draws} draws) "
+                             "and Laplace")
 
 
 def case_at_estimate(case, result):

@@ -34,7 +34,8 @@ def add_arguments(parser):
                              "(with --units us a bare number of a kind whose unit differs, a speed or a length, is "
                              "refused: give its unit); unit strings allowed, e.g. vehicles[1].speed=10mph:60mph:51")
     parser.add_argument("--output", action="append", metavar="PATH",
-                        help="a result's path, e.g. 'vehicles[0].delta_v_magnitude' (repeat; default: the main results)")
+                        help="a result's path, e.g. 'vehicles[0].delta_v_magnitude' "
+                             "(repeat; default: the main results)")
     parser.add_argument("--mode", choices=("grid", "zip"), default=None,
                         help="grid: cartesian product (default); zip: the k-th values of every path together "
                              "(the default with random values)")
@@ -42,7 +43,8 @@ def add_arguments(parser):
                         help="number of random values of each PATH=uniform:LO:HI or PATH=normal:MEAN:SD (Monte Carlo)")
     parser.add_argument("--seed", type=seed_option, default=0, help="seed of the random values (default 0)")
     parser.add_argument("--out", required=True, metavar="FILE", help="results file: .csv, .npz or .parquet")
-    parser.add_argument("--case", type=int, default=None, metavar="K", help="the K-th case (0-based) of a multi-case file")
+    parser.add_argument("--case", type=int, default=None, metavar="K",
+                        help="the K-th case (0-based) of a multi-case file")
     parser.add_argument("--chunk-size", type=int, default=None, help="rows per device and chunk (default 16384)")
     parser.add_argument("--smoothing", type=smoothing_option, default=0.0, help="smooth friction cone, tau in [0, 1)")
     parser.add_argument("--float32", action="store_true", help="store the results as float32")

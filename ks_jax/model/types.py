@@ -274,7 +274,8 @@ STATUS_TEXT = {
     INVALID_MOTION: ("invalid: an input of the motion to rest breaks its rule: road.friction in (0, 10], each brake "
                      "fraction in [0, 1], 0 < cg_to_front_axle < wheelbase, track > 0, 0 <= rolling_resistance < "
                      "road.friction"),
-    INVALID_OVERFLOW: "invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a mass of 1e-300 kg)",
+    INVALID_OVERFLOW: ("invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a "
+                       "mass of 1e-300 kg)"),
 }
 
 

@@ -32,8 +32,9 @@ from .columns import invalid_rows
 from .result import SweepResult
 
 
-DEFAULT_REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1) for name in ("rest_position[0]", "rest_position[1]",
-                                                                       "rest_yaw"))  # the default's, with a road
+# the default's, with a road
+DEFAULT_REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1)
+                             for name in ("rest_position[0]", "rest_position[1]", "rest_yaw"))
 DEFAULT_OUTPUTS = (
     "contact.impulse_magnitude",
     "contact.energy_loss",
@@ -209,8 +210,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     Any input path of ``ks_jax.case`` (``vehicles[i].mass``, ``.inertia[k]``, ``.position[k]``,
     ``.yaw``, ``.speed``, ``.course``, ``.yaw_rate``, ``contact.point[k]``, ``contact.normal``
     (azimuth), ``contact.restitution``, ``contact.friction``, ...).
-    outputs: output paths of docs/model.md (components by index, e.g.
-    ``vehicles[0].delta_v[0]``; one path may be a plain string); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
+    outputs: output paths of docs/model.md (components by index, e.g. ``vehicles[0].delta_v[0]``; one path may be a
+    plain string); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
     mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.

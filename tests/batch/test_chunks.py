@@ -48,7 +48,8 @@ def small_chunks(monkeypatch):
 def test_vmap_of_exchange_in_chunks_equals_single_solves(random_cases, small_chunks):
     cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
-    assert "scan" in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*args))  # the loop over chunks, not the whole-batch program
+    # the loop over chunks, not the whole-batch program
+    assert "scan" in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*args))
     batched = BATCH(*args)
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
     stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
@@ -146,8 +147,10 @@ def test_a_batch_of_one_row_is_the_row(random_cases):
         assert_same_leaves(batched, jax.tree_util.tree_map(lambda x: np.asarray(x)[None], kit.exchange(*row)))
         # to rounding: a batch's JVP is jax.vmap's of the row's. Rounding in the loss's units: each derivative
         # times its input (at least 1 SI unit), against the sum of them all
-        triples = [(np.asarray(a), np.reshape(np.asarray(b), np.shape(a)), np.maximum(np.abs(np.reshape(x, np.shape(a))), 1))
-                   for a, b, x in zip(*(jax.tree_util.tree_leaves(t) for t in (grads, reference, (shared, row[1], row[4]))))]
+        triples = [(np.asarray(a), np.reshape(np.asarray(b), np.shape(a)),
+                    np.maximum(np.abs(np.reshape(x, np.shape(a))), 1))
+                   for a, b, x in zip(*(jax.tree_util.tree_leaves(t)
+                                        for t in (grads, reference, (shared, row[1], row[4]))))]
         total = sum(np.sum(np.abs(b) * x) for _, b, x in triples)
         for a, b, x in triples:
             assert np.all(np.abs(a - b) * x <= 1e-12 * total), (a, b)

@@ -74,12 +74,13 @@ def test_parse_over_random_values():
     from ks_jax.cli.sweep import Draws, draw_over
 
     mph = 1609.344 / 3600
-    assert parse_over("vehicles[1].speed=normal:20mph:2mph") == ("vehicles[1].speed",
-                                                                  Draws("vehicles[1].speed", "normal", 20 * mph, 2 * mph))
+    draws = Draws("vehicles[1].speed", "normal", 20 * mph, 2 * mph)
+    assert parse_over("vehicles[1].speed=normal:20mph:2mph") == ("vehicles[1].speed", draws)
     _, d = parse_over("vehicles[0].yaw=uniform:-5:5")  # bare angles are degrees, as everywhere
     assert (d.law, d.a, d.b) == ("uniform", np.radians(-5), np.radians(5))
     for spec, words in (("normal:0.1:-0.02", "SD must be >= 0"), ("uniform:0.3:0.1", "LO must not exceed HI"),
-                        ("uniform:0:nan", "HI = 'nan' must be a finite number"), ("normal:1", "expected normal:MEAN:SD")):
+                        ("uniform:0:nan", "HI = 'nan' must be a finite number"),
+                        ("normal:1", "expected normal:MEAN:SD")):
         with pytest.raises(CaseError, match=words):
             parse_over(f"contact.restitution={spec}")
     specs = [parse_over("contact.restitution=uniform:0:0.3"), parse_over("contact.friction=0.4,0.5,0.6")]

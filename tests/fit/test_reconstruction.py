@@ -473,7 +473,8 @@ def test_cli_fit_json_and_text(capsys, tmp_path):
     assert main(["fit", str(path), "--json"]) == 1
     out = capsys.readouterr()
     cases = json.loads(out.out)["cases"]
-    assert cases[0]["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(d["estimate"]["vehicles[1].speed"] / U.MPH)
+    assert (cases[0]["estimate"]["vehicles[1].speed"] / U.MPH
+            == pytest.approx(d["estimate"]["vehicles[1].speed"] / U.MPH))
     assert cases[1]["name"] == "bad one" and "vehicles[0].delta_v_magnitud" in cases[1]["status"]
     assert "'bad one' not fitted" in out.err
 
@@ -707,8 +708,8 @@ def test_friction_just_below_sticking_is_bounded_below_only():
 def test_float32_fit_far_from_the_origin_equals_the_fit_at_the_origin(oblique):
     """In float32 a position 512 km out keeps ~3 cm: the same oblique fit there once came out 0.7 std off in
     the centroid and 0.2 std in a speed, its Monte Carlo refits stuck at the estimate. The exchange is the
-    same in a translated scene (docs/model.md, "The impulse exchange"), so the fit 512 km out, with the centroid unknown and as
-    evidence, gives the fit at the origin moved by as much: estimates, standard errors, fitted evidence
+    same in a translated scene (docs/model.md, "The impulse exchange"), so the fit 512 km out, with the centroid unknown
+    and as evidence, gives the fit at the origin moved by as much: estimates, standard errors, fitted evidence
     and Monte Carlo percentiles."""
     cases, truths, unknowns, evidence, _ = oblique
     dx, dy = 512064.0, -256032.0

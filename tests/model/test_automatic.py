@@ -689,8 +689,8 @@ def test_refine_ends_on_the_touching_side_within_its_tolerance():
 
 
 def test_a_scene_far_from_the_origin_gives_the_same_contact():
-    """docs/model.md, "The impulse exchange": translating the scene translates the results. Survey coordinates (3e5 m) round
-    at ~6e-11 m, above the geometry's ~1e-12 m tolerances: a corner meeting a turned side at the instant of
+    """docs/model.md, "The impulse exchange": translating the scene translates the results. Survey coordinates (3e5 m)
+    round at ~6e-11 m, above the geometry's ~1e-12 m tolerances: a corner meeting a turned side at the instant of
     touching (penetration_time 0) and an inline rear-end of equal widths (the collinear-edges rule) gave
     another centroid and normal there (|J| 33% and 9% off) until the geometry worked about the CGs' midpoint."""
     def box(mass, xy, yaw, speed, course=None):

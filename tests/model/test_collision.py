@@ -510,7 +510,8 @@ def test_crush_depth_by_hand_for_a_ray_nearly_along_the_sides(tilt, dtype):
     from ks_jax.model import linalg as la
     from ks_jax.model.results import crush_depth
 
-    vehicle = ks_jax.Vehicle(*(np.asarray(x, dtype) for x in (1500.0, [500.0, 2000.0, 2200.0], 4.5, 1.8, 1.4, 2.0, 0.5)))
+    vehicle = ks_jax.Vehicle(*(np.asarray(x, dtype)
+                               for x in (1500.0, [500.0, 2000.0, 2200.0], 4.5, 1.8, 1.4, 2.0, 0.5)))
     position = np.asarray([10.0, 5.0, 0.5], dtype)
     rot = la.rotation(np.asarray(math.pi, dtype), np.asarray(0.0, dtype), np.asarray(0.0, dtype))
     d_body = np.array([1.0, tilt, 0.0]) / math.hypot(1.0, tilt)

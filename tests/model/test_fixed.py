@@ -169,7 +169,8 @@ def test_fixed_objects_in_case_files_say_what_is_wrong():
     bad = {
         "two vehicles and a fixed object": (dict(good, vehicles=[CAR, CAR]), "exactly one vehicle"),
         "unknown kind": (dict(good, fixed={"kind": "tree"}), r"fixed\.kind.*wall, pole, barrier"),
-        "pole without a diameter": (dict(good, fixed={"kind": "pole", "position": [3, 0]}), r"fixed\.diameter: missing"),
+        "pole without a diameter": (dict(good, fixed={"kind": "pole", "position": [3, 0]}),
+                                    r"fixed\.diameter: missing"),
         "negative diameter": (dict(good, fixed={"kind": "pole", "position": [3, 0], "diameter": -0.3}),
                               "diameter must be positive"),
         "wall normal in a unit of length": (dict(good, fixed={"kind": "wall", "point": [3, 0], "normal": "2 m"}),

@@ -311,7 +311,8 @@ def test_restitution_derivative_at_minus_one(random_cases, smoothing):
 
 
 # --------------------------------------------------------------------------- smooth -> exact
-SMOOTHING_RATE_C = 10.0  # |J_tau - J_0| <= C tau |J_0| (docs/model.md 3): C depends on mu and K; measured up to 6.2 (mu = 3.7, on the cone)
+# |J_tau - J_0| <= C tau |J_0| (docs/model.md 3): C depends on mu and K; measured up to 6.2 (mu = 3.7, on the cone)
+SMOOTHING_RATE_C = 10.0
 TAUS = (1e-1, 1e-2, 1e-3, 1e-4)
 
 
@@ -403,7 +404,8 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero():
 
     def angles(vy):
         r = ks_jax.exchange(v1, s1, v2, s2._replace(velocity=s2.velocity.at[1].set(vy)), c, smoothing=TAU)
-        return jnp.stack([r.vehicles[0].pdof, r.vehicles[1].pdof, r.contact.impulse_azimuth, r.vehicles[0].course_after])
+        return jnp.stack([r.vehicles[0].pdof, r.vehicles[1].pdof, r.contact.impulse_azimuth,
+                          r.vehicles[0].course_after])
 
     h = 1e-6
     program = reference_jit(lambda vy: (angles(vy), jax.jacrev(angles)(vy)))  # one compile for both
@@ -425,8 +427,8 @@ def test_angle_derivatives_where_the_angle_is_exactly_zero():
 @pytest.mark.parametrize("file", ["seed_000_saturn_pontiac.json", "auto_tbone.json"])
 def test_a_row_with_a_non_finite_input_leaves_a_shared_gradient_finite(file):
     """A loss over rows that share a parameter (here an angle added to vehicle 2's course, turned
-    0.1 rad from the file's, and to the normal's azimuth), one row with a non-finite speed or normal pitch: that row gets its status and
-    is left out of the loss, and the gradient is the gradient over the good row alone (before the
+    0.1 rad from the file's, and to the normal's azimuth), one row with a non-finite speed or normal pitch: that row
+    gets its status and is left out of the loss, and the gradient is the gradient over the good row alone (before the
     double-where in ``to_pytrees``, inf * cos(course) made it NaN)."""
     from ks_jax.case import as_arrays
 

@@ -126,7 +126,8 @@ def test_axes_take_in_every_path_and_mark(drawn):
     for i in (0, 1):
         rest = sol.result.rest[i]
         box = hand_box(sol.case.inputs.vehicles[i], np.asarray(rest.rest_position), float(rest.rest_yaw))
-        assert (x0 <= box[:, 0]).all() and (box[:, 0] <= x1).all() and (y0 <= box[:, 1]).all() and (box[:, 1] <= y1).all()
+        assert ((x0 <= box[:, 0]).all() and (box[:, 0] <= x1).all()
+                and (y0 <= box[:, 1]).all() and (box[:, 1] <= y1).all())
 
 
 def test_measured_rest_positions_are_marked(drawn):

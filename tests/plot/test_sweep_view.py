@@ -72,7 +72,8 @@ def test_map_shows_the_results_in_mph_with_invalid_points_grey(case):
     assert ax.get_xlim()[0] < 6 < 60 < ax.get_xlim()[1]
     # the energy in ft lbf: 1 ft lbf = 0.3048 m x 4.4482216152605 N
     shown = mesh_of(draw(r, "contact.energy_loss")).get_array()
-    np.testing.assert_allclose(shown[:, ~bad], r["contact.energy_loss"][:, ~bad] / (0.3048 * 4.4482216152605), rtol=1e-12)
+    np.testing.assert_allclose(shown[:, ~bad], r["contact.energy_loss"][:, ~bad] / (0.3048 * 4.4482216152605),
+                               rtol=1e-12)
     # an inline rear impact: the Lucid is struck from behind (PDOF 180 deg) wherever it is struck; a
     # single value is said, not drawn as contours of its rounding
     pdof = sweep(case, {"vehicles[1].speed": speed[:8], "contact.restitution": eps[:3]}, outputs=FIGURE_OUTPUTS)
@@ -170,8 +171,8 @@ def test_sample_keeps_the_lattice_whatever_the_chunks(mode, shape, limit, stride
 
 @pytest.mark.slow
 def test_what_cannot_be_drawn_is_refused(case):
-    r = sweep(case, {"contact.restitution": [0.1, 0.2], "contact.friction": [0.3, 0.5], "vehicles[1].speed": [8.0, 9.0]},
-              outputs=[DV1])
+    r = sweep(case, {"contact.restitution": [0.1, 0.2], "contact.friction": [0.3, 0.5],
+                     "vehicles[1].speed": [8.0, 9.0]}, outputs=[DV1])
     with pytest.raises(CaseError, match="over 3 inputs"):
         draw(r)
     r = sweep(case, {"contact.restitution": [0.1, 0.2]}, outputs=[DV1])

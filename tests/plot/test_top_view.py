@@ -68,7 +68,8 @@ def test_automatic_tbone_drawing():
     j = np.asarray(sol.result.contact.impulse)
     total, horizontal = f"{np.linalg.norm(j):,.0f}", f"{np.linalg.norm(j[:2]):,.0f}"
     assert total != horizontal
-    assert f"impulse on Sedan: {total} N s ({np.linalg.norm(j) / U.LBF_S:,.0f} lbf s), horizontal part {horizontal} N s" in labels
+    assert (f"impulse on Sedan: {total} N s ({np.linalg.norm(j) / U.LBF_S:,.0f} lbf s), "
+            f"horizontal part {horizontal} N s") in labels
     overlap = [p for p in ax.patches if isinstance(p, Polygon) and not isinstance(p, Wedge)]
     assert len(overlap) == 1
     # the pickup's front (6.7 ft wide) 44 ft/s * 0.05 s = 2.2 ft into the sedan's side
