@@ -165,8 +165,8 @@ def _results(cases, prepared, problem, rows, at_best, stick_threshold, found, in
     """The FitResults of the ``fitted`` cases of a batch (indices; the rows of ``info``, their analysis by
     ``analyse_batch``, in that order), from each case's best start (``rows``, ``RowFits`` (B, ...); ``at_best``
     (B,), how many starts reached it; ``stick_threshold`` (B,)) and its starts (``found``). The analysis is
-    edited here where a fit stalled or its contact sticks; the numbers are converted for all the cases at once, and only the
-    results' dicts and words are made case by case."""
+    edited here where a fit stalled or its contact sticks; the numbers are converted for all the cases at once,
+    and only the results' dicts and words are made case by case."""
     paths = list(problem.unknowns)
     keys, kinds, is_input = _labels(problem)
     m = len(keys)
