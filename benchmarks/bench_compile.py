@@ -36,7 +36,7 @@ CASES = Path(ks_jax.__file__).parent / "cases"
 def captured_calls():
     """{name: (quick_jit function, args)} of the three programs, recorded from one solve or fit each."""
     calls = {}
-    solve_module = importlib.import_module("ks_jax.solve")  # the module, not the function it exports
+    solve_module = importlib.import_module("ks_jax.solve.cases")  # the module of ks_jax.solve, the function
     original = solve_module._solve
 
     def recording(name, fun):

@@ -104,7 +104,7 @@ def test_a_solve_read_back_gives_the_same_results(tmp_path, monkeypatch):
     """What the command line runs: ``ks_jax.solve`` of a case with automatic contact, its program stored,
     then read back by a new function object (``quick_jit`` made again): no export the second time, and the
     results of the jitted program, bit for bit."""
-    sv = importlib.import_module("ks_jax.solve")
+    sv = importlib.import_module("ks_jax.solve.cases")
     case = ks_jax.load_case(ks_jax.__path__[0] + "/cases/auto_tbone.json")
     monkeypatch.setattr(compilation, "_FOLDER", None)
     want = ks_jax.solve(case).result
@@ -131,7 +131,7 @@ def test_keep_programs_in_python_keeps_them_in_its_folder(tmp_path, monkeypatch)
     folder = tmp_path / "kept"
     monkeypatch.setattr(compilation.units, "REGISTRY_CACHE", None)
     monkeypatch.setattr(compilation, "_FOLDER", None)
-    sv = importlib.import_module("ks_jax.solve")  # a new function object: its program is traced and stored
+    sv = importlib.import_module("ks_jax.solve.cases")  # a new function object: its program is traced and stored
     monkeypatch.setattr(sv, "_solve", compilation.quick_jit(sv._solve_rows, static_argnums=(1, 2, 3, 4, 5)))
     cache_dir = jax.config.jax_compilation_cache_dir
     try:
