@@ -139,13 +139,18 @@ def best_start(cost, converged):
 AGREE_COST = 1e-6  # starts whose cost is within this fraction of the best (or 1e-9 absolute) reached the best fit
 
 
-def count_at_best(cost):
-    """How many starts (costs (..., S), along the last axis) reached the best cost, to ``AGREE_COST``: an int for
-    one fit's (S,), else an array of the leading shape."""
+def _at_best(cost):
+    """Which starts (costs (..., S), along the last axis) reached the best cost, to ``AGREE_COST``."""
     cost = np.asarray(cost, np.float64)
     finite = np.isfinite(cost)
     best = np.where(finite, cost, np.inf).min(axis=-1, keepdims=True)
-    n = np.sum(finite & (cost <= best + AGREE_COST * np.maximum(best, 1.0) + 1e-9), axis=-1)
+    return finite & (cost <= best + AGREE_COST * np.maximum(best, 1.0) + 1e-9)
+
+
+def count_at_best(cost):
+    """How many starts (costs (..., S), along the last axis) reached the best cost, to ``AGREE_COST``: an int for
+    one fit's (S,), else an array of the leading shape."""
+    n = np.sum(_at_best(cost), axis=-1)
     return int(n) if n.ndim == 0 else n
 
 
@@ -165,9 +170,8 @@ def several_minima(cost, converged):
         return True
     chi2 = 2.0 * cost[ok]
     best = chi2.min()
-    same = chi2 <= best + 2.0 * (AGREE_COST * max(best / 2.0, 1.0) + 1e-9)
     near = chi2 - best < FLIP_Z * 2.0 * (np.sqrt(best) + np.sqrt(chi2))
-    return bool(np.any(near & ~same))
+    return bool(np.any(near & ~_at_best(cost[ok])))
 
 
 def stack(trees):
