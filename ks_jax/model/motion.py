@@ -107,7 +107,7 @@ class RestResult(NamedTuple):
     path: jnp.ndarray | None = None
 
 
-class _Carry(NamedTuple):
+class Carry(NamedTuple):
     state: Planar
     accel: jnp.ndarray  # (2,) the CG's acceleration in the body frame at the last step (load transfer)
     time: jnp.ndarray
@@ -167,7 +167,14 @@ def body(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, dt) -
     step = G0 * dt
     return Body(mass, izz, p[:, 0], p[:, 1], jnp.stack([cs, cs, one, one]), jnp.stack([ss, ss, zero, zero]),
                 static, pitch, lateral, weight, jnp.clip(wheels.brake, 0.0, 1.0), f, friction, grip,
-                (REGULARIZATION * friction * step) ** 2, (REGULARIZATION * f * step) ** 2, (CORNERING * step) ** 2)
+                _regularizing(friction, step), _regularizing(f, step), (CORNERING * step) ** 2)
+
+
+def _regularizing(coefficient, step):
+    """The square of a friction direction's regularizing speed, REGULARIZATION of the speed a force of
+    ``coefficient`` m g changes in one step; 1 (m/s)^2 where the coefficient is 0 (a frictionless road, or no
+    rolling resistance): no force then, whose direction the stand-in keeps finite at rest."""
+    return jnp.where(coefficient > 0, (REGULARIZATION * coefficient * step) ** 2, 1.0)
 
 
 def _loads(b: Body, ax, ay):
@@ -300,7 +307,7 @@ class _Saved(NamedTuple):
     inv_v_mean: jnp.ndarray  # 1 / |v_mean|, 0 where safe_sqrt's gradient is 0
 
 
-def _advance(b: Body, carry: _Carry, dt):
+def _advance(b: Body, carry: Carry, dt):
     """One step of the integration (the module's docstring): the new carry, and what the step's adjoint reads."""
     state = carry.state
     vx, vy, r = state.velocity[0], state.velocity[1], state.yaw_rate
@@ -337,17 +344,17 @@ def _advance(b: Body, carry: _Carry, dt):
     saved = _Saved(state.velocity, r, carry.accel, s, c, ul, ut, loads, total, t.along, t.across, t.inv_locked,
                    t.inv_rolling, t.inv_slip, t.tanh, t.speed, jnp.stack([fu, fv, mz]), dq, raw, energy2, reach,
                    phi, q_new[2], v_mean, inv_v_mean)
-    return _Carry(new, accel, carry.time + h, carry.distance + travelled, phi), saved
+    return Carry(new, accel, carry.time + h, carry.distance + travelled, phi), saved
 
 
-def _step(b: Body, carry: _Carry, dt):
+def _step(b: Body, carry: Carry, dt):
     """One step of the integration (the module's docstring): the new carry. Differentiable both ways by JAX's
     own rules: the forward loop's derivatives (``jax.jvp``) go through this."""
     return _advance(b, carry, dt)[0]
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
-def _step_reverse(b: Body, carry: _Carry, dt):
+def _step_reverse(b: Body, carry: Carry, dt):
     """``_step``, whose reverse-mode derivative is the hand-written adjoint ``_step_bwd``, which reads back the
     step's ``_Saved`` values. First-order reverse mode only (``jax.grad``, ``jax.vjp``, ``jax.jacrev``): forward
     mode cannot pass a custom VJP (it goes through ``_step``, in ``to_rest(reverse=False)``), and the adjoint's
@@ -364,12 +371,12 @@ def _step_reverse(b: Body, carry: _Carry, dt):
     return _step(b, carry, dt)
 
 
-def _step_fwd(b: Body, carry: _Carry, dt):
+def _step_fwd(b: Body, carry: Carry, dt):
     new, saved = _advance(b, carry, dt)
     return new, (b, saved)
 
 
-def _integration_adjoint(b: Body, sv: _Saved, ct: _Carry, dt):
+def _integration_adjoint(b: Body, sv: _Saved, ct: Carry, dt):
     """The first half of ``_step_bwd``, the integration's rules taken back: from the cotangents of the new carry,
     those of the body frame force and yaw moment (fu, fv, mz), of the power, of the state's velocities and yaw
     rate (3,), of the yaw's cosine and sine, and of the mass and yaw inertia."""
@@ -428,7 +435,7 @@ def _integration_adjoint(b: Body, sv: _Saved, ct: _Carry, dt):
     return a_fu, a_fv, a_mz, a_power, a_q, a_c, a_s, a_mass, a_izz
 
 
-def _step_bwd(dt, residuals, ct: _Carry):
+def _step_bwd(dt, residuals, ct: Carry):
     """The adjoint of ``_advance``: the cotangents of the body and of the carry from those of the new carry,
     the forward's operations taken back in reverse order (``a_x`` is the cotangent of x). The integration's
     rules first (``_integration_adjoint``), then the forces' sums, the tyre law, the loads and the wheels'
@@ -514,7 +521,7 @@ def _step_bwd(dt, residuals, ct: _Carry):
     a_c = a_c + a_u * vx + a_v * vy
     a_s = a_s + a_u * vy - a_v * vx
     a_state = Planar(ct.state.position, ct.state.yaw + c * a_s - s * a_c, a_velocity, a_r)
-    a_carry = _Carry(a_state, a_accel, ct.time, ct.distance, jnp.zeros_like(ct.moving))
+    a_carry = Carry(a_state, a_accel, ct.time, ct.distance, jnp.zeros_like(ct.moving))
     ax, ay = sv.accel[0], sv.accel[1]
     a_body = Body(a_mass, a_izz, a_x, a_y, a_cos_steer, a_sin_steer, a_l, a_l * ax, a_l * ay, a_weight, a_brake,
                   a_rolling, a_friction, jnp.where(has_grip, a_grip, 0.0),
@@ -525,7 +532,7 @@ def _step_bwd(dt, residuals, ct: _Carry):
 _step_reverse.defvjp(_step_fwd, _step_bwd)
 
 
-def step(mass, izz, cg_height, chassis, wheels, friction, carry: _Carry, dt):
+def step(mass, izz, cg_height, chassis, wheels, friction, carry: Carry, dt):
     """One step of the integration (the module's docstring) from ``carry``: the new carry."""
     return _step(body(mass, izz, cg_height, chassis, wheels, friction, dt), carry, dt)
 
@@ -536,6 +543,66 @@ def steps_for(time_limit: float, dt: float) -> int:
 
 
 WHILE_CHUNK = 25  # steps between two tests of "all at rest" in the forward-only loop
+
+
+def step_function(reverse: bool = False):
+    """The step (b, carry, dt) -> carry that a loop over steps runs: ``_step``, or where the loop is to be
+    differentiated in reverse mode, ``_step_reverse`` (its hand-written adjoint)."""
+    return _step_reverse if reverse else _step
+
+
+def start_carry(start: Planar) -> Carry:
+    """The integration's carry at ``start``: no acceleration yet, time and distance 0, moving."""
+    zero = jnp.zeros_like(start.yaw)
+    return Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+
+
+def drive(advance, carry, n: int, moving, *, sample=None, reverse: bool = False):
+    """Run ``advance`` (carry -> carry, one step) up to ``n`` times (static) from ``carry``: (the final carry, the
+    stacked ``sample(carry)`` after every step, or None).
+
+    With ``sample``, every step runs (``lax.scan``). Otherwise, with ``reverse`` False, the steps run in a
+    ``lax.while_loop`` that stops once ``moving(carry)`` is False (under ``jax.vmap``: for every row), tested every
+    ``WHILE_CHUNK`` steps, and then runs the steps left to ``n``: ``advance`` must leave a carry that is no longer
+    moving unchanged. ``reverse`` True runs every step in a ``lax.scan`` cut into about sqrt(n) chunks, each
+    recomputed in the backward pass (``jax.checkpoint``)."""
+
+    def one(c, _):
+        c = advance(c)
+        return c, (None if sample is None else sample(c))
+
+    def steps(c, count):
+        return jax.lax.scan(one, c, None, length=count)[0]
+
+    if sample is not None:
+        return jax.lax.scan(one, carry, None, length=n)
+    if not reverse:
+        count, rest = divmod(n, WHILE_CHUNK)
+        _, final = jax.lax.while_loop(lambda kc: (kc[0] < count) & moving(kc[1]),
+                                      lambda kc: (kc[0] + 1, steps(kc[1], WHILE_CHUNK)), (0, carry))
+    else:
+        chunk = max(1, round(math.sqrt(n)))
+        count, rest = divmod(n, chunk)
+        final, _ = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=count)
+    if rest:  # the steps left to the limit (a vehicle at rest stays so)
+        final = steps(final, rest)
+    return final, None
+
+
+def path_sample(c: Carry):
+    """(4,) what a path keeps of a step: time s, x m, y m, yaw rad."""
+    return jnp.stack([c.time, c.state.position[0], c.state.position[1], c.state.yaw])
+
+
+def rest_result(start: Planar, final: Carry, samples=None) -> RestResult:
+    """The ``RestResult`` of a motion from ``start`` that ended with ``final``; ``samples`` (n, 4): the path after
+    every step (``path_sample``), to which the start is prepended, or None."""
+    if samples is not None:
+        first = jnp.stack([jnp.zeros_like(start.yaw), start.position[0], start.position[1], start.yaw])
+        samples = jnp.concatenate([first[None], samples], axis=0)
+    end = final.state
+    return RestResult(end.position, la.degrees_0_360(la.safe_atan2(*la.sincos(end.yaw))),
+                      jnp.degrees(end.yaw - start.yaw), final.time, final.distance, final.moving < 1.0, samples)
 
 
 def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, start: Planar, *,
@@ -552,39 +619,9 @@ def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, st
     steps. Reverse-mode differentiation (``jax.grad``, ``jax.vjp``) cannot pass a while loop: ``reverse`` True
     runs every step to the limit in a ``lax.scan`` cut into chunks, each recomputed in the backward pass
     (``jax.checkpoint``), so that a gradient stores about 2 sqrt(n) states instead of n; its steps carry a
-    hand-written adjoint (``_step_reverse``): first-order reverse mode only."""
-    n = steps_for(time_limit, dt)
-    zero = jnp.zeros_like(start.yaw)
-    carry = _Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+    hand-written adjoint (``_step_reverse``): first-order reverse mode only (``drive``)."""
     b = body(mass, izz, cg_height, chassis, wheels, friction, dt)
-
-    advance = _step_reverse if reverse and not path else _step
-
-    def one(c, _):
-        c = advance(b, c, dt)
-        return c, (jnp.stack([c.time, c.state.position[0], c.state.position[1], c.state.yaw]) if path else None)
-
-    def steps(carry, count):
-        return jax.lax.scan(one, carry, None, length=count)[0]
-
-    samples = None
-    if path:
-        final, samples = jax.lax.scan(one, carry, None, length=n)
-        first = jnp.stack([zero, start.position[0], start.position[1], start.yaw])
-        samples = jnp.concatenate([first[None], samples], axis=0)
-    elif not reverse:
-        count, rest = divmod(n, WHILE_CHUNK)
-        _, final = jax.lax.while_loop(lambda kc: (kc[0] < count) & (kc[1].moving >= 1.0),
-                                      lambda kc: (kc[0] + 1, steps(kc[1], WHILE_CHUNK)), (0, carry))
-        if rest:  # the steps left to the limit (a vehicle at rest stays so)
-            final = steps(final, rest)
-    else:
-        chunk = max(1, round(math.sqrt(n)))
-        count, rest = divmod(n, chunk)
-        final, _ = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=count)
-        if rest:
-            final = steps(final, rest)
-    end = final.state
-    turned = end.yaw - start.yaw
-    return RestResult(end.position, la.degrees_0_360(la.safe_atan2(*la.sincos(end.yaw))),
-                      jnp.degrees(turned), final.time, final.distance, final.moving < 1.0, samples)
+    advance = step_function(reverse and not path)
+    final, samples = drive(lambda c: advance(b, c, dt), start_carry(start), steps_for(time_limit, dt),
+                           lambda c: c.moving >= 1.0, sample=path_sample if path else None, reverse=reverse)
+    return rest_result(start, final, samples)

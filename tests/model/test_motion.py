@@ -138,7 +138,7 @@ def _energies(chassis, wheels, friction, start, n):
         return c, 0.5 * jnp.sum(m * q * q)
 
     zero = jnp.zeros(())
-    carry = M._Carry(start, jnp.zeros(2), zero, zero, jnp.ones(()))
+    carry = M.Carry(start, jnp.zeros(2), zero, zero, jnp.ones(()))
     q0 = jnp.stack([start.velocity[0], start.velocity[1], start.yaw_rate])
     return jnp.concatenate([(0.5 * jnp.sum(m * q0 * q0))[None], jax.lax.scan(one, carry, None, length=n)[1]])
 
@@ -228,7 +228,7 @@ def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
         start = M.Planar(jnp.asarray([1.0, -2.0]), jnp.asarray(0.3), jnp.asarray(velocity, float),
                          jnp.asarray(yaw_rate, float))
         one = jnp.asarray(1.0)
-        return b, M._Carry(start, jnp.asarray(accel, float), 2.0 * one, 5.0 * one, one)
+        return b, M.Carry(start, jnp.asarray(accel, float), 2.0 * one, 5.0 * one, one)
 
     bodies, carries = zip(*(parts(*state) for state in STEP_STATES))
     b, carry = _batch(bodies), _batch(carries)
