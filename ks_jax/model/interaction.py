@@ -41,6 +41,7 @@ import jax.numpy as jnp
 from . import linalg as la
 from . import motion
 from .collision import exchange
+from .results import pdof_degrees
 from .contact import contact_geometry, disc_gap, footprint, separation
 from .contact.geometry import length_tolerance, vertical_middle
 from .contact.pole import disc_contact
@@ -82,9 +83,11 @@ class Interactions(NamedTuple):
     Per vehicle (V, ...): ``delta_v_cumulative`` (V, 3) m/s, over its first interaction, the velocity just after its
     last exchange minus the velocity just before its first (tyre forces between included), zeros for a vehicle in
     none; ``delta_v_impulses`` (V, 3) m/s, the sum of that interaction's impulses on it over its mass;
-    ``first_interaction`` (V,) int32, -1 for none. ``energy_loss_total`` () J over every exchange; ``exhausted`` ()
-    bool, a pair was due for an exchange when every slot was taken; ``overlapping`` (P,) bool, each pair's footprints
-    overlap at the end; ``rest``: a tuple of V ``motion.RestResult``, each vehicle's motion from the first exchange."""
+    ``first_interaction`` (V,) int32, -1 for none; ``delta_v_cumulative_pdof`` (V,) deg, the principal direction of
+    ``delta_v_cumulative`` in the vehicle's frame at the first exchange of that interaction (SAE J224, as ``pdof``).
+    ``energy_loss_total`` () J over every exchange; ``exhausted`` () bool, a pair was due for an exchange when every
+    slot was taken; ``overlapping`` (P,) bool, each pair's footprints overlap at the end; ``rest``: a tuple of V
+    ``motion.RestResult``, each vehicle's motion from the first exchange."""
 
     exchanges: ExchangeResult
     time: jnp.ndarray
@@ -94,6 +97,7 @@ class Interactions(NamedTuple):
     delta_v_cumulative: jnp.ndarray
     delta_v_impulses: jnp.ndarray
     first_interaction: jnp.ndarray
+    delta_v_cumulative_pdof: jnp.ndarray
     energy_loss_total: jnp.ndarray
     exhausted: jnp.ndarray
     overlapping: jnp.ndarray
@@ -116,6 +120,7 @@ class _Loop(NamedTuple):
     before: jnp.ndarray  # (V, 3) velocity before the first exchange of the first interaction
     after: jnp.ndarray  # (V, 3) velocity after its last
     impulses: jnp.ndarray  # (V, 3) its impulses over the mass
+    heading: jnp.ndarray  # (V,) rad, the yaw at the first exchange of the first interaction
     exhausted: jnp.ndarray
 
 
@@ -203,10 +208,11 @@ def _record(loop: _Loop, result: ExchangeResult, when, pair, interaction, do):
                          count=loop.count + do.astype(loop.count.dtype))
 
 
-def _cumulate(loop: _Loop, result: ExchangeResult, pair, interaction, do, vehicles: int):
-    """The vehicles' first-interaction bookkeeping after the exchange ``result`` (between ``pair``, of
-    ``interaction``) where ``do``."""
+def _cumulate(loop: _Loop, result: ExchangeResult, pair, yaws, interaction, do, vehicles: int):
+    """The vehicles' first-interaction bookkeeping after the exchange ``result`` (between ``pair``, whose yaws were
+    ``yaws``, of ``interaction``) where ``do``."""
     first, before, after, impulses = loop.first_interaction, loop.before, loop.after, loop.impulses
+    heading = loop.heading
     for side in range(2):
         b = pair[side]
         is_vehicle = b < vehicles
@@ -215,10 +221,11 @@ def _cumulate(loop: _Loop, result: ExchangeResult, pair, interaction, do, vehicl
         starts = do & is_vehicle & (first[b] < 0)
         adds = do & is_vehicle & ((first[b] < 0) | (first[b] == interaction))
         before = before.at[b].set(jnp.where(starts, vr.velocity_after - vr.delta_v, before[b]))
+        heading = heading.at[b].set(jnp.where(starts, yaws[side], heading[b]))
         after = after.at[b].set(jnp.where(adds, vr.velocity_after, after[b]))
         impulses = impulses.at[b].set(jnp.where(adds, impulses[b] + vr.delta_v, impulses[b]))
         first = first.at[b].set(jnp.where(starts, interaction, first[b]))
-    return loop._replace(first_interaction=first, before=before, after=after, impulses=impulses)
+    return loop._replace(first_interaction=first, before=before, after=after, impulses=impulses, heading=heading)
 
 
 def _step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, advance) -> _Loop:
@@ -252,7 +259,7 @@ def _step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smooth
     when = jnp.clip(engaged[p] + watch.penetration_time[p], time - dt, time)
     lag = time - when
     loop = _record(loop, result, when, jnp.stack([i, j]).astype(jnp.int32), interaction, do)
-    loop = _cumulate(loop, result, (i, j), interaction, do, vehicles)
+    loop = _cumulate(loop, result, (i, j), (states.yaw[i], states.yaw[j]), interaction, do, vehicles)
     # the impulse's planar part on each vehicle of the pair; a vehicle at rest moves again from now
     s = carry.state
     pos, yaw, vel, rate, moving, clock = s.position, s.yaw, s.velocity, s.yaw_rate, carry.moving, carry.time
@@ -307,10 +314,11 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                  jnp.ones((), jnp.int32), slots, jnp.zeros(k, dtype), jnp.zeros((k, 2), jnp.int32),
                  jnp.zeros(k, jnp.int32), jnp.zeros((), jnp.int32), jnp.full((vehicles,), -1, jnp.int32),
                  jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype),
-                 jnp.zeros((), bool))
+                 jnp.zeros(vehicles, dtype), jnp.zeros((), bool))
     exchanged = first.contact.status == OK
     loop = _record(loop, first, jnp.zeros((), dtype), pair0, jnp.zeros((), jnp.int32), jnp.ones((), bool))
-    loop = _cumulate(loop, first, pair0, jnp.zeros((), jnp.int32), exchanged, vehicles)
+    loop = _cumulate(loop, first, pair0, (states.yaw[first_pair[0]], states.yaw[first_pair[1]]),
+                     jnp.zeros((), jnp.int32), exchanged, vehicles)
     advance = motion.step_function(reverse and not path)
     step = lambda lp: _step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
                             smoothing=smoothing, advance=advance)
@@ -324,6 +332,11 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     energy = jnp.sum(jnp.where(used, final.slots.contact.energy_loss, 0.0))
     in_one = final.first_interaction >= 0
     cumulative = jnp.where(in_one[:, None], final.after - final.before, 0.0)
-    overlapping = final.gap < 0
+    # the cumulative delta-V in the vehicle's frame at its first exchange: the direction the force came from
+    sin, cos = la.sincos(final.heading)
+    body = jnp.stack([cos * cumulative[:, 0] + sin * cumulative[:, 1], cos * cumulative[:, 1] - sin * cumulative[:, 0],
+                      cumulative[:, 2]], axis=-1)
+    pdof = jax.vmap(pdof_degrees)(body)
     return Interactions(final.slots, final.slot_time, final.slot_between, final.slot_interaction, final.count,
-                        cumulative, final.impulses, final.first_interaction, energy, final.exhausted, overlapping, rest)
+                        cumulative, final.impulses, final.first_interaction, pdof, energy, final.exhausted,
+                        final.gap < 0, rest)
