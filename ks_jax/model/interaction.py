@@ -14,12 +14,21 @@ given stacked (``Bodies``); the first exchange, between the pair the case names,
    instant its footprints first touched (interpolated within the step) where they did not overlap before the
    step, else now;
 3. an engaged pair whose penetration time has run out, and whose footprints still overlap, exchanges a KS impulse
-   (``collision.exchange``) at the state then, with its restitution and friction (``Watch``); one exchange per step
-   (the pair engaged first). A pair that parts before is no longer engaged. After an exchange the pair is engaged
-   again only once u_n at its P turns approaching again. The exchange's impulse changes both bodies' velocities
-   and yaw rates (the planar part: vertical motion, pitch and roll are dropped, as in the motion to rest); a
-   vehicle that was at rest moves again;
-4. exchanges happen at the steps' instants: a time is known to one step (``dt``).
+   (``collision``) at the state then, at its current P and n, with its restitution and friction (``Watch``); the
+   pairs due at one step exchange one after another, the pair engaged first first. A pair that parts before is no
+   longer engaged. After an exchange the pair is engaged again only once u_n at its P turns approaching again. The
+   impulse changes both bodies' velocities and yaw rates (the planar part: vertical motion, pitch and roll are
+   dropped, as in the motion to rest); a vehicle that was at rest moves again;
+4. an exchange due within a step happens at its due instant (the touch interpolated within the step, plus the
+   penetration time): the pair is taken back to it along its motion, the contact point with it, and carried on
+   from it with its new velocities, so that the positions, and the separations the next step interpolates its
+   touches from, are those of motion that changed at that instant. On a frictionless road, times, impulses and paths
+   are those of the exact sequence of exchanges.
+
+Cost: the close look at a pair (its separation, the overlap's centroid and normal) is taken only where the pair's
+circles of reach meet and one of its vehicles moves, and for a batch (``jax.vmap``) only at the steps where some row
+needs it; an exchange's impulse is computed only at the steps where some row has one due, and its full results
+(``collision.exchange``: crush, EES, PDOF, ...) once per recorded exchange, after the loop.
 
 A contact interaction is a maximal interval in which a pair's footprints overlap; its index is given at its first
 exchange (interaction 0 is the first exchange's). Exchanges are kept in ``max_exchanges`` slots (slot 0 the first
@@ -40,10 +49,11 @@ import jax.numpy as jnp
 
 from . import linalg as la
 from . import motion
-from .collision import exchange
-from .results import pdof_degrees
+from .collision import Prepared, exchange, impulse
+from .results import mask_invalid, pdof_degrees
 from .contact import contact_geometry, disc_gap, footprint, separation
-from .contact.geometry import length_tolerance, vertical_middle
+from .checks import is_fixed
+from .contact.geometry import length_tolerance, reach, vertical_middle
 from .contact.pole import disc_contact
 from .types import OK, Contact, ExchangeResult, State, Vehicle
 
@@ -107,11 +117,16 @@ class Interactions(NamedTuple):
 class _Loop(NamedTuple):
     carry: motion.Carry  # (V, ...) the vehicles' integration
     time: jnp.ndarray  # () s from the first exchange
+    step: jnp.ndarray  # () int32, steps so far
     gap: jnp.ndarray  # (P,) m, each pair's separation at the last step (< 0 overlapping)
+    point: jnp.ndarray  # (P, 3) m, each pair's centroid at the last step
+    normal: jnp.ndarray  # (P, 3) its normal
     engaged: jnp.ndarray  # (P,) s, when the pair was engaged; inf where it is not
+    due: jnp.ndarray  # (P,) bool, engaged for the penetration time: an exchange is due
     current: jnp.ndarray  # (P,) int32, the interaction of the pair's present overlap; -1 for none yet
     interactions: jnp.ndarray  # () int32, interactions so far
-    slots: ExchangeResult  # (K, ...) the exchanges
+    slot_states: State  # (K, 2, ...) each exchange's two bodies just before it
+    slot_contact: Contact  # (K, ...) its contact
     slot_time: jnp.ndarray
     slot_between: jnp.ndarray
     slot_interaction: jnp.ndarray
@@ -148,126 +163,244 @@ def _planes(bodies: Bodies, carry: motion.Carry):
             jnp.concatenate([s.velocity, f.velocity]), jnp.concatenate([s.yaw_rate, f.yaw_rate]))
 
 
+def _centred(s1, s2):
+    """The two states moved so that their CGs' midpoint (on the ground) is the origin, and that midpoint: the
+    geometry is worked there, as automatic contact does, its tolerances grown with the midpoint's distance."""
+    origin = (0.5 * (s1.position + s2.position)).at[2].set(0.0)
+    return s1._replace(position=s1.position - origin), s2._replace(position=s2.position - origin), origin
+
+
+def _pair_gap(v1, s1, v2, s2, pole):
+    """() m: the separation of two bodies as they stand (< 0 overlapping); ``pole`` (static): body 2 is a pole's
+    disc."""
+    n1, n2, _ = _centred(s1, s2)
+    return (disc_gap if pole else separation)(v1, n1, v2, n2, 0.0)
+
+
 def _pair_contact(v1, s1, v2, s2, pole):
     """(separation () m, < 0 overlapping; centroid (3,) m; normal (3,), from body 2 into body 1) of two bodies as they
     stand, worked about their CGs' midpoint (as automatic contact does); ``pole`` (static): body 2 is a pole's
     disc."""
-    origin = (0.5 * (s1.position + s2.position)).at[2].set(0.0)
-    n1, n2 = (s._replace(position=s.position - origin) for s in (s1, s2))
+    n1, n2, origin = _centred(s1, s2)
     far = la.safe_norm(origin)
+    gap = _pair_gap(v1, s1, v2, s2, pole)
     if pole:
-        gap = disc_gap(v1, n1, v2, n2, 0.0)
         tol = length_tolerance(v1, v2, origin.dtype, far)
         xy, n, *_ = disc_contact(v1, n1, n2.position[:2], 0.5 * v2.width, footprint(v1, n1.position[:2], n1.yaw),
                                  tol, n1, n2.position[:2])
         point = jnp.stack([xy[0], xy[1], vertical_middle(v1, n1, v2, n2)])
         normal = jnp.stack([n[0], n[1], jnp.zeros_like(n[0])])
     else:
-        gap = separation(v1, n1, v2, n2, 0.0)
         geo = contact_geometry(v1, n1, v2, n2, far)
         point, normal = geo.point, geo.normal
     return gap, point + origin, normal
 
 
+def _material(point, s):
+    """(3,) m/s: the velocity of the body's material point at ``point``."""
+    return s.velocity + la.cross(s.angular_velocity, point - s.position)
+
+
 def _closing(point, normal, s1, s2):
     """u_n: the relative velocity of body 1 over body 2 at ``point`` along ``normal``."""
-    u = (s1.velocity + la.cross(s1.angular_velocity, point - s1.position)) - (
-        s2.velocity + la.cross(s2.angular_velocity, point - s2.position))
-    return normal @ u
+    return normal @ (_material(point, s1) - _material(point, s2))
 
 
-def _watch_pairs(bodies, states, pairs, poles):
-    """(gap, point, normal, u_n) of every pair, (P,) (P, 3) (P, 3) (P,): the pairs against a box vmapped together,
-    those against a pole together."""
-    out = [None] * len(pairs)
+def _gaps(bodies, states, pairs, poles):
+    """(P,) m: every pair's separation as the bodies stand."""
+    gap = jnp.zeros(len(pairs), states.yaw.dtype)
+    for pole in (False, True):
+        idx = [k for k, (_, j) in enumerate(pairs) if (j in poles) == pole]
+        if idx:
+            i, j = [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
+            g = jax.vmap(lambda a, b, c, d: _pair_gap(a, b, c, d, pole))(
+                _take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j), _take(states, j))
+            gap = gap.at[jnp.asarray(idx)].set(g)
+    return gap
+
+
+@jax.custom_batching.custom_vmap
+def _any_row(flag):
+    """``flag`` (() bool), which under ``jax.vmap`` becomes one unbatched flag: whether it holds in any row of the
+    batch. A ``lax.cond`` on it stays a conditional under ``vmap`` (where a batched predicate would make both branches
+    run for every row): the costly branch runs for the whole batch, and only when some row needs it. Its branches
+    must then agree wherever the cheap one is taken by a row that would not need the costly one."""
+    return flag
+
+
+@_any_row.def_vmap
+def _any_row_batched(axis_size, in_batched, flag):
+    return (jnp.any(flag) if in_batched[0] else flag), False
+
+
+def _take(tree, idx):
+    """The bodies ``idx`` (a static list) of a stacked tree, stacked in that order."""
+    return jax.tree_util.tree_map(lambda x: jnp.stack([x[k] for k in idx]), tree)
+
+
+def _watch_pairs(bodies, states, moving, pairs, poles):
+    """(gap, point, normal, u_n) of every pair, (P,) (P, 3) (P, 3) (P,) (the pairs against a box vmapped together,
+    those against a pole together), for bodies in ``states`` of which the vehicles ``moving`` (V,) bool move.
+
+    A pair is looked at closely only where its circles of reach (``contact.geometry.reach``) meet and one of its
+    vehicles moves: elsewhere it cannot overlap, or cannot approach, and its gap is the distance between the circles
+    (> 0, a lower bound of the separation), its u_n 0. The close look (separation, and the overlap's centroid and
+    normal by automatic contact's rules) runs for every pair, and for a whole batch, only at a step where some pair
+    of some row needs it (``_any_row``)."""
+    dtype = states.yaw.dtype
+    gap, point, normal, un = (jnp.zeros(len(pairs), dtype), jnp.zeros((len(pairs), 3), dtype),
+                              jnp.zeros((len(pairs), 3), dtype), jnp.zeros(len(pairs), dtype))
     for pole in (False, True):
         idx = [k for k, (_, j) in enumerate(pairs) if (j in poles) == pole]
         if not idx:
             continue
-        i = jnp.array([pairs[k][0] for k in idx])
-        j = jnp.array([pairs[k][1] for k in idx])
-        v1, v2, s1, s2 = _pick(bodies.vehicle, i), _pick(bodies.vehicle, j), _pick(states, i), _pick(states, j)
-        gap, point, normal = jax.vmap(lambda a, b, c, d: _pair_contact(a, b, c, d, pole))(v1, s1, v2, s2)
-        un = jax.vmap(_closing)(point, normal, s1, s2)
-        for m, k in enumerate(idx):
-            out[k] = (gap[m], point[m], normal[m], un[m])
-    return tuple(jnp.stack(x) for x in zip(*out))
+        i, j = [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
+        v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
+        apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jnp.where(
+            jax.vmap(is_fixed)(v2), jnp.where(pole, 0.5 * v2.width, 0.0), jax.vmap(reach)(v2))
+        moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
+        close = _any_row(jnp.any((apart < 0) & moves))
+
+        def look(args, pole=pole):
+            a, b, c, d = args
+            g, pt, n = jax.vmap(lambda w, x, y, z: _pair_contact(w, x, y, z, pole))(a, b, c, d)
+            return g, pt, n, jax.vmap(_closing)(pt, n, b, d)
+
+        def glance(args):
+            z = jnp.zeros((len(idx), 3), dtype)
+            return jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0), z, z, jnp.zeros(len(idx), dtype)
+
+        g, pt, n, u = jax.lax.cond(close, look, glance, (v1, s1, v2, s2))
+        # a pair not looked at closely (apart, or at rest): not overlapping as far as the watch is concerned
+        watched = (apart < 0) & moves
+        g = jnp.where(watched, g, jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0))
+        where = jnp.asarray(idx)
+        gap, point, normal, un = gap.at[where].set(g), point.at[where].set(pt), normal.at[where].set(n), un.at[
+            where].set(jnp.where(watched, u, 0.0))
+    return gap, point, normal, un
 
 
-def _record(loop: _Loop, result: ExchangeResult, when, pair, interaction, do):
-    """``loop`` with ``result`` written into the next slot where ``do``."""
+def _record(loop: _Loop, states: State, contact: Contact, when, pair, interaction, do):
+    """``loop`` with an exchange written into the next slot where ``do``: the pair's ``states`` (2, ...) just before
+    it, its ``contact``, time, pair and interaction (its results are derived from these after the loop)."""
     k = jnp.minimum(loop.count, loop.slot_time.shape[0] - 1)
 
     def put(buf, x):
         return buf.at[k].set(jnp.where(do, x, buf[k]))
 
-    slots = jax.tree_util.tree_map(put, loop.slots, result._replace(rest=None))
-    return loop._replace(slots=slots, slot_time=put(loop.slot_time, when),
-                         slot_between=put(loop.slot_between, pair), slot_interaction=put(loop.slot_interaction,
-                                                                                          interaction),
+    return loop._replace(slot_states=jax.tree_util.tree_map(put, loop.slot_states, states),
+                         slot_contact=jax.tree_util.tree_map(put, loop.slot_contact, contact),
+                         slot_time=put(loop.slot_time, when), slot_between=put(loop.slot_between, pair),
+                         slot_interaction=put(loop.slot_interaction, interaction),
                          count=loop.count + do.astype(loop.count.dtype))
 
 
-def _cumulate(loop: _Loop, result: ExchangeResult, pair, yaws, interaction, do, vehicles: int):
-    """The vehicles' first-interaction bookkeeping after the exchange ``result`` (between ``pair``, whose yaws were
-    ``yaws``, of ``interaction``) where ``do``."""
-    first, before, after, impulses = loop.first_interaction, loop.before, loop.after, loop.impulses
+def _cumulate(loop: _Loop, before, after, pair, yaws, interaction, do, vehicles: int):
+    """The vehicles' first-interaction bookkeeping after an exchange between ``pair`` (whose velocities were
+    ``before`` (2, 3) and are ``after`` (2, 3), whose yaws were ``yaws``), of ``interaction``, where ``do``."""
+    first, start, end, impulses = loop.first_interaction, loop.before, loop.after, loop.impulses
     heading = loop.heading
     for side in range(2):
         b = pair[side]
         is_vehicle = b < vehicles
         b = jnp.minimum(b, vehicles - 1)
-        vr = result.vehicles[side]
         starts = do & is_vehicle & (first[b] < 0)
         adds = do & is_vehicle & ((first[b] < 0) | (first[b] == interaction))
-        before = before.at[b].set(jnp.where(starts, vr.velocity_after - vr.delta_v, before[b]))
+        start = start.at[b].set(jnp.where(starts, before[side], start[b]))
         heading = heading.at[b].set(jnp.where(starts, yaws[side], heading[b]))
-        after = after.at[b].set(jnp.where(adds, vr.velocity_after, after[b]))
-        impulses = impulses.at[b].set(jnp.where(adds, impulses[b] + vr.delta_v, impulses[b]))
+        end = end.at[b].set(jnp.where(adds, after[side], end[b]))
+        impulses = impulses.at[b].set(jnp.where(adds, impulses[b] + after[side] - before[side], impulses[b]))
         first = first.at[b].set(jnp.where(starts, interaction, first[b]))
-    return loop._replace(first_interaction=first, before=before, after=after, impulses=impulses, heading=heading)
+    return loop._replace(first_interaction=first, before=start, after=end, impulses=impulses, heading=heading)
 
 
-def _step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, advance) -> _Loop:
-    """One step of the watched motion (the module's docstring, 1-3)."""
-    vehicles = loop.carry.time.shape[0]
+def _impulse(vehicle1, state1, vehicle2, state2, contact, smoothing):
+    """The exchange's impulse and what it does to the two bodies, without the rest of its results (those of the
+    recorded exchanges are derived after the loop, ``collision.exchange``): (whether an impulse was exchanged, the
+    velocities (2, 3) and angular velocities (2, 3) after it)."""
+    # the bodies keep the input rules (the first exchange checked them; the watch's settings are checked where a case
+    # is read); planar states: pitch and roll 0
+    zero = jnp.zeros_like(state1.yaw)
+    prepared = Prepared(jnp.zeros((), jnp.int32), (la.trig(state1.yaw, zero, zero), la.trig(state2.yaw, zero, zero)))
+    found = impulse(vehicle1, state1, vehicle2, state2, contact, prepared, smoothing)
+    j = la.array(found.j)
+    a1, a2 = la.from_rows(found.a1), la.from_rows(found.a2)
+    r1, r2 = la.array(found.r1), la.array(found.r2)
+    v1 = state1.velocity + j / vehicle1.mass
+    v2 = state2.velocity - j / vehicle2.mass  # 1 / inf = 0: a fixed object does not move
+    w1 = state1.angular_velocity + a1 @ la.cross(r1, j)
+    w2 = state2.angular_velocity - a2 @ la.cross(r2, j)
+    ok = found.approaching & jnp.all(jnp.isfinite(j))
+    return ok, jnp.stack([v1, v2]), jnp.stack([w1, w2])
+
+
+def _states(bodies: Bodies, carry: motion.Carry):
+    """Every body's ``State`` (N, ...) from the vehicles' ``carry`` and the fixed objects."""
+    return jax.vmap(_state3)(*_planes(bodies, carry), bodies.z)
+
+
+def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, advance) -> _Loop:
+    """One step of the motion, and every pair watched after it (the module's docstring, 1-2): which pairs overlap,
+    their centroids and normals, which are engaged and which are due for an exchange."""
     carry = jax.vmap(lambda b, c: advance(b, c, dt))(bodies.motion, loop.carry)
     time = loop.time + dt
-    position, yaw, velocity, yaw_rate = _planes(bodies, carry)
-    states = jax.vmap(_state3)(position, yaw, velocity, yaw_rate, bodies.z)
-    gap, point, normal, un = _watch_pairs(bodies, states, pairs, poles)
+    gap, point, normal, un = _watch_pairs(bodies, _states(bodies, carry), carry.moving >= 1.0, pairs, poles)
     overlap = gap < 0
     # engaged: at the first touch within the step where the footprints did not overlap before it, else now
     touch = time - dt * la.safe_div(-gap, loop.gap - gap, 0.0)
     since = jnp.where(loop.gap >= 0, jnp.clip(touch, time - dt, time), time)
     engaged = jnp.where(overlap, jnp.where(jnp.isinf(loop.engaged) & (un < -watch.tolerance), since, loop.engaged),
                         jnp.inf)
-    current = jnp.where(overlap, loop.current, -1)
     due = overlap & (time >= engaged + watch.penetration_time - 1e-9 * dt)
-    p = jnp.argmin(jnp.where(due, engaged, jnp.inf))
-    fire = due[p]
+    return loop._replace(carry=carry, time=time, step=loop.step + 1, gap=gap, engaged=engaged, due=due, point=point,
+                         normal=normal, current=jnp.where(overlap, loop.current, -1))
+
+
+def _fire(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing) -> _Loop:
+    """The exchange of the due pair engaged first, if any (the module's docstring, 3): recorded, its impulse given to
+    the pair's vehicles, the pair no longer engaged. Computed, for a whole batch, only at a step where some row has a
+    pair due (``_any_row``)."""
+    return jax.lax.cond(_any_row(jnp.any(loop.due)),
+                        lambda lp: _exchange_due(bodies, watch, lp, pairs=pairs, poles=poles, dt=dt,
+                                                 smoothing=smoothing),
+                        lambda lp: lp, loop)
+
+
+def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing) -> _Loop:
+    """``_fire``'s exchange (a row with no pair due is returned unchanged)."""
+    vehicles = loop.carry.time.shape[0]
+    time, engaged, current, carry = loop.time, loop.engaged, loop.current, loop.carry
+    p = jnp.argmin(jnp.where(loop.due, engaged, jnp.inf))
+    fire = loop.due[p]
     slots_left = loop.count < loop.slot_time.shape[0]
     i, j = jnp.asarray(pairs)[p, 0], jnp.asarray(pairs)[p, 1]
-    contact = Contact(point[p], normal[p], watch.restitution[p], watch.friction[p], watch.penetration_time[p])
-    result = exchange(_pick(bodies.vehicle, i), _pick(states, i), _pick(bodies.vehicle, j), _pick(states, j),
-                      contact, smoothing)
-    do = fire & slots_left & (result.contact.status == OK)
+    states = _states(bodies, carry)
+    # due within the step: the exchange at its due instant, the bodies carried on from it with their new velocities.
+    # The pair is taken back to that instant along its motion, and the contact point with it (the mean of where each
+    # body's material point at P was then), so that the impulse's lever arms are those of the positions from which
+    # the new velocities run: linear and angular momentum are kept
+    when = jnp.clip(engaged[p] + watch.penetration_time[p], time - dt, time)
+    lag = time - when
+    s1, s2 = _pick(states, i), _pick(states, j)
+    at = loop.point[p] - 0.5 * lag * (_material(loop.point[p], s1) + _material(loop.point[p], s2))
+    s1, s2 = (s._replace(position=s.position - lag * s.velocity, yaw=s.yaw - lag * s.angular_velocity[2])
+              for s in (s1, s2))
+    contact = Contact(at, loop.normal[p], watch.restitution[p], watch.friction[p], watch.penetration_time[p])
+    pair_states = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), s1, s2)
+    ok, velocity, angular = _impulse(_pick(bodies.vehicle, i), s1, _pick(bodies.vehicle, j), s2, contact, smoothing)
+    do = fire & slots_left & ok
     new = current[p] < 0
     interaction = jnp.where(new, loop.interactions, current[p])
     loop = loop._replace(exhausted=loop.exhausted | (fire & ~slots_left))
-    # due within the step: the exchange at its due instant, the bodies carried on from it with their new velocities
-    when = jnp.clip(engaged[p] + watch.penetration_time[p], time - dt, time)
-    lag = time - when
-    loop = _record(loop, result, when, jnp.stack([i, j]).astype(jnp.int32), interaction, do)
-    loop = _cumulate(loop, result, (i, j), (states.yaw[i], states.yaw[j]), interaction, do, vehicles)
+    loop = _record(loop, pair_states, contact, when, jnp.stack([i, j]).astype(jnp.int32), interaction, do)
+    loop = _cumulate(loop, pair_states.velocity, velocity, (i, j), (s1.yaw, s2.yaw), interaction, do, vehicles)
     # the impulse's planar part on each vehicle of the pair; a vehicle at rest moves again from now
     s = carry.state
     pos, yaw, vel, rate, moving, clock = s.position, s.yaw, s.velocity, s.yaw_rate, carry.moving, carry.time
     for side, b in enumerate((i, j)):
         hit = do & (b < vehicles)
         b = jnp.minimum(b, vehicles - 1)
-        vr = result.vehicles[side]
-        new_v, new_r = vr.velocity_after[:2], vr.angular_velocity_after[2]
+        new_v, new_r = velocity[side, :2], angular[side, 2]
         pos = pos.at[b].set(jnp.where(hit, pos[b] + lag * (new_v - vel[b]), pos[b]))
         yaw = yaw.at[b].set(jnp.where(hit, yaw[b] + lag * (new_r - rate[b]), yaw[b]))
         vel = vel.at[b].set(jnp.where(hit, new_v, vel[b]))
@@ -275,11 +408,42 @@ def _step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smooth
         clock = clock.at[b].set(jnp.where(hit & (carry.moving[b] < 1.0), time, clock[b]))
         moving = moving.at[b].set(jnp.where(hit, 1.0, moving[b]))
     carry = carry._replace(state=motion.Planar(pos, yaw, vel, rate), moving=moving, time=clock)
-    cleared = jnp.arange(len(pairs)) == p
-    engaged = jnp.where(cleared & fire, jnp.inf, engaged)
-    current = jnp.where(cleared & do & new, interaction, current)
-    return loop._replace(carry=carry, time=time, gap=gap, engaged=engaged, current=current,
+    cleared = (jnp.arange(len(pairs)) == p) & fire
+    # the separations the next step interpolates its touches from: those of the positions the exchange left
+    gap = jnp.where(do, _gaps(bodies, _states(bodies, carry), pairs, poles), loop.gap)
+    return loop._replace(carry=carry, gap=gap, engaged=jnp.where(cleared, jnp.inf, engaged), due=loop.due & ~cleared,
+                         current=jnp.where(cleared & do & new, interaction, current),
                          interactions=loop.interactions + (do & new).astype(jnp.int32))
+
+
+def _busy(loop: _Loop):
+    """A vehicle still moves, or a pair is engaged: the watched motion goes on."""
+    return jnp.any(loop.carry.moving >= 1.0) | jnp.any(~jnp.isinf(loop.engaged))
+
+
+def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse):
+    """The loop over the steps (``n`` at most, ``motion.drive``): (the final loop, the samples of ``sample`` after
+    every step, or None). Each step watches, then makes the exchanges due: ``pairs`` turns of ``fire``, as many as
+    may be due at once."""
+
+    def step(lp):
+        lp = watch_step(lp)
+        for _ in range(pairs):
+            lp = fire(lp)
+        return lp
+
+    return motion.drive(step, loop, n, _busy, sample=sample, reverse=reverse)
+
+
+def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smoothing) -> ExchangeResult:
+    """Every slot's results (``collision.exchange`` of its recorded states and contact; slot 0 the first exchange's
+    own), NaN in the unused slots."""
+    pair = final.slot_between
+    full = jax.vmap(lambda a, b, s, c: exchange(_pick(bodies.vehicle, a), _pick(s, 0), _pick(bodies.vehicle, b),
+                                                _pick(s, 1), c, smoothing))(
+        pair[:, 0], pair[:, 1], final.slot_states, final.slot_contact)
+    full = jax.tree_util.tree_map(lambda x, f: x.at[0].set(f), full, first._replace(rest=None, interactions=None))
+    return jax.vmap(mask_invalid)(full, used)
 
 
 def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_pair, watch: Watch, *,
@@ -303,33 +467,40 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     carry = jax.vmap(motion.start_carry)(start)
     position, yaw, velocity, yaw_rate = _planes(bodies, carry)
     states = jax.vmap(_state3)(position, yaw, velocity, yaw_rate, bodies.z)
-    gap = _watch_pairs(bodies, states, pairs, tuple(poles))[0]
+    gap, point, normal, _ = _watch_pairs(bodies, states, carry.moving >= 1.0, pairs, tuple(poles))
     k = max_exchanges
-    slots = jax.tree_util.tree_map(lambda x: jnp.zeros((k,) + jnp.shape(x), jnp.result_type(x)),
-                                   first._replace(rest=None))
+    zeros = lambda tree, *lead: jax.tree_util.tree_map(  # noqa: E731
+        lambda x: jnp.zeros(lead + jnp.shape(x), jnp.result_type(x)), tree)
     pair0 = jnp.asarray(first_pair, jnp.int32)
     # the first exchange's interaction lasts while its pair's footprints overlap
     current = jnp.full((len(pairs),), -1, jnp.int32).at[pairs.index(tuple(first_pair))].set(0)
-    loop = _Loop(carry, jnp.zeros((), dtype), gap, jnp.full((len(pairs),), jnp.inf, dtype), current,
-                 jnp.ones((), jnp.int32), slots, jnp.zeros(k, dtype), jnp.zeros((k, 2), jnp.int32),
+    loop = _Loop(carry, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), gap, point, normal,
+                 jnp.full((len(pairs),), jnp.inf, dtype), jnp.zeros(len(pairs), bool), current,
+                 jnp.ones((), jnp.int32), zeros(_pick(states, 0), k, 2),
+                 zeros(Contact(point[0], point[0], *(gap[0],) * 3), k), jnp.zeros(k, dtype),
+                 jnp.zeros((k, 2), jnp.int32),
                  jnp.zeros(k, jnp.int32), jnp.zeros((), jnp.int32), jnp.full((vehicles,), -1, jnp.int32),
                  jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype),
                  jnp.zeros(vehicles, dtype), jnp.zeros((), bool))
     exchanged = first.contact.status == OK
-    loop = _record(loop, first, jnp.zeros((), dtype), pair0, jnp.zeros((), jnp.int32), jnp.ones((), bool))
-    loop = _cumulate(loop, first, pair0, (states.yaw[first_pair[0]], states.yaw[first_pair[1]]),
-                     jnp.zeros((), jnp.int32), exchanged, vehicles)
+    # slot 0 is the first exchange, whose results are given (its states are not needed again)
+    loop = loop._replace(count=jnp.ones((), jnp.int32), slot_between=loop.slot_between.at[0].set(pair0))
+    after = jnp.stack([v.velocity_after for v in first.vehicles])
+    loop = _cumulate(loop, after - jnp.stack([v.delta_v for v in first.vehicles]), after, pair0,
+                     (states.yaw[first_pair[0]], states.yaw[first_pair[1]]), jnp.zeros((), jnp.int32), exchanged,
+                     vehicles)
     advance = motion.step_function(reverse and not path)
-    step = lambda lp: _step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
-                            smoothing=smoothing, advance=advance)
-    busy = lambda lp: jnp.any(lp.carry.moving >= 1.0) | jnp.any(~jnp.isinf(lp.engaged))  # noqa: E731
+    watch_step = lambda lp: _watch_step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
+                                        advance=advance)
+    fire = lambda lp: _fire(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
+                            smoothing=smoothing)
     sample = (lambda lp: jax.vmap(motion.path_sample)(lp.carry)) if path else None
-    final, samples = motion.drive(step, loop, motion.steps_for(time_limit, dt), busy, sample=sample,
-                                  reverse=reverse)
+    final, samples = _run(watch_step, fire, loop, motion.steps_for(time_limit, dt), len(pairs), sample, reverse)
     rest = tuple(motion.rest_result(_pick(start, v), _pick(final.carry, v),
                                     None if samples is None else samples[:, v]) for v in range(vehicles))
     used = jnp.arange(k) < final.count
-    energy = jnp.sum(jnp.where(used, final.slots.contact.energy_loss, 0.0))
+    exchanges = _slot_results(bodies, first, final, used, smoothing)
+    energy = jnp.sum(jnp.where(used, exchanges.contact.energy_loss, 0.0))
     in_one = final.first_interaction >= 0
     cumulative = jnp.where(in_one[:, None], final.after - final.before, 0.0)
     # the cumulative delta-V in the vehicle's frame at its first exchange: the direction the force came from
@@ -337,6 +508,6 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     body = jnp.stack([cos * cumulative[:, 0] + sin * cumulative[:, 1], cos * cumulative[:, 1] - sin * cumulative[:, 0],
                       cumulative[:, 2]], axis=-1)
     pdof = jax.vmap(pdof_degrees)(body)
-    return Interactions(final.slots, final.slot_time, final.slot_between, final.slot_interaction, final.count,
+    return Interactions(exchanges, final.slot_time, final.slot_between, final.slot_interaction, final.count,
                         cumulative, final.impulses, final.first_interaction, pdof, energy, final.exhausted,
                         final.gap < 0, rest)
