@@ -70,13 +70,23 @@ class RoadInputs(NamedTuple):
     friction: Any
     vehicles: tuple
 
+class InteractionInputs(NamedTuple):
+    """The exchanges after the first (docs/model.md, "Contact interactions"), SI: ``restitution``, ``friction``,
+    ``penetration_time`` (s)."""
+
+    restitution: Any
+    friction: Any
+    penetration_time: Any
+
 class CaseInputs(NamedTuple):
     """``vehicles``: two ``VehicleInputs``; ``contact``: ``ContactInputs``; ``road``: ``RoadInputs``, or None for a
-    case without motion to rest."""
+    case without motion to rest; ``interaction``: ``InteractionInputs`` where the case sets the later exchanges'
+    own values, None where they are the first contact's."""
 
     vehicles: tuple
     contact: ContactInputs
     road: Any = None
+    interaction: Any = None
 
 @dataclass(frozen=True)
 class Motion:
@@ -84,12 +94,17 @@ class Motion:
     ``time_step`` and ``time_limit``, s; ``path``: keep each vehicle's state after every step (for a picture:
     ``ks_jax.solve.motion_paths``); ``reverse``: ready for reverse-mode differentiation (``jax.grad``, first order),
     which runs every step to the time limit (``model.motion.to_rest``); forward mode (``jax.jacfwd``, as fits use)
-    needs it False."""
+    needs it False. The watched motion's settings (docs/model.md, "Contact interactions";
+    ``model.interaction.interact``): ``max_exchanges`` per case, the first included; ``approach_tolerance`` m/s;
+    ``poles``: the bodies that automatic contact meets as a pole's disc."""
 
     time_step: float
     time_limit: float
     path: bool = False
     reverse: bool = False
+    max_exchanges: int = 16
+    approach_tolerance: float = 0.05
+    poles: tuple = ()
 
 @dataclass(frozen=True)
 class Case:

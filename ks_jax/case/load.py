@@ -8,6 +8,7 @@ are still solved.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import tomllib
@@ -22,9 +23,10 @@ from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
 from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
-from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, Motion, RoadInputs, VehicleInputs
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, RoadInputs, VehicleInputs
 from .paths import check_output_path, output_kind
-from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, ROAD_FIELDS, TEXT_FIELDS, VEHICLE_FIELDS
+from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, INTERACTION_FIELDS, ROAD_FIELDS, TEXT_FIELDS
+from .schema import VEHICLE_FIELDS
 
 
 def _where(case_name, path):
@@ -222,7 +224,8 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     if "reference" in d:
         _check_reference(d["reference"], name)
     road, motion = _road(d, veh, name)
-    inputs = CaseInputs(veh, contact, road)
+    interaction, motion = _interaction(d, motion, fixed, name)
+    inputs = CaseInputs(veh, contact, road, interaction)
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
     if fixed is not None:
         names = (names[0], str(d["fixed"].get("name", fixed.kind)))
@@ -254,9 +257,10 @@ def _road(d, vehicles, case_name):
     friction = num("friction") if "friction" in road else None
     if friction is None:
         raise CaseError(f"{_where(case_name, 'road.friction')}: missing field (the tyre-road friction, e.g. 0.7)")
-    if not 0 < friction <= MAX_ROAD_FRICTION:
-        raise CaseError(f"{_where(case_name, 'road.friction')} = {_shown(road['friction'])}: must be positive (on a "
-                        f"road without friction nothing stops) and at most {MAX_ROAD_FRICTION:g} (no tyre grips more)")
+    if not 0 <= friction <= MAX_ROAD_FRICTION:
+        raise CaseError(f"{_where(case_name, 'road.friction')} = {_shown(road['friction'])}: must be >= 0 (0: a "
+                        f"frictionless plane, on which the motion runs to its time limit) and at most "
+                        f"{MAX_ROAD_FRICTION:g} (no tyre grips more)")
     dt = num("time_step") if "time_step" in road else MOTION_STEP
     if not 0 < dt <= 0.05:
         raise CaseError(f"{_where(case_name, 'road.time_step')} = {_given(road['time_step'], dt, 'time')}: must be "
@@ -273,6 +277,50 @@ def _road(d, vehicles, case_name):
     if len(after) == 1:
         after = (after[0], None)  # a fixed object does not move
     return RoadInputs(friction, after), Motion(float(dt), float(limit))
+
+
+MAX_EXCHANGES_LIMIT = 64  # a case's max_exchanges at most (each is a slot of results in every solved row)
+
+
+def _interaction(d, motion, fixed, case_name):
+    """(``InteractionInputs`` or None, the ``Motion`` with the watched motion's settings) of a case's
+    ``interaction`` entry (docs/model.md, "Contact interactions"): the later exchanges' restitution, friction and
+    penetration time (default: the first contact's), ``approach_tolerance`` and ``max_exchanges``. Later
+    exchanges happen during the motion to rest: without a ``road`` the entry is refused."""
+    poles = (1,) if fixed is not None and fixed.kind == "pole" else ()
+    if "interaction" not in d:
+        return None, None if motion is None else dataclasses.replace(motion, poles=poles)
+    entry = d["interaction"]
+    if not isinstance(entry, dict):
+        raise CaseError(f"{_where(case_name, 'interaction')} = {_shown(entry)}: must be an object/table of "
+                        f"{', '.join(INTERACTION_FIELDS)}")
+    _check_keys(entry, set(INTERACTION_FIELDS) | TEXT_FIELDS, "interaction", case_name)
+    if motion is None:
+        raise CaseError(f"{_where(case_name, 'interaction')}: later exchanges happen while the bodies move on, which "
+                        "a case without \"road\" does not do: add \"road\": {\"friction\": 0.7}, or remove "
+                        "\"interaction\"")
+    path = lambda k: f"interaction.{k}"  # noqa: E731
+    values = {k: _number(entry[k], INTERACTION_FIELDS[k][0], path(k), case_name)
+              for k in ("restitution", "friction", "penetration_time", "approach_tolerance") if k in entry}
+    rules = {"restitution": (lambda x: -1 <= x <= 1, "must be in [-1, 1]"),
+             "friction": (lambda x: x >= 0, "must be >= 0"),
+             "penetration_time": (lambda x: x >= 0, "must be >= 0 s"),
+             "approach_tolerance": (lambda x: x > 0, "must be positive (below it a pair is not approaching)")}
+    for k, x in values.items():
+        if not rules[k][0](x):
+            raise CaseError(f"{_where(case_name, path(k))} = {_shown(entry[k])}: {rules[k][1]}")
+    most = entry.get("max_exchanges", motion.max_exchanges)
+    if isinstance(most, bool) or not isinstance(most, int) or not 1 <= most <= MAX_EXCHANGES_LIMIT:
+        raise CaseError(f"{_where(case_name, path('max_exchanges'))} = {_shown(most)}: must be a whole number from 1 "
+                        f"to {MAX_EXCHANGES_LIMIT} (the first exchange included)")
+    motion = dataclasses.replace(motion, max_exchanges=most, poles=poles,
+                                 approach_tolerance=float(values.get("approach_tolerance", motion.approach_tolerance)))
+    own = [k for k in InteractionInputs._fields if k in values]
+    if not own:
+        return None, motion
+    c = d["contact"]
+    first = _contact_inputs(c, case_name)[0]
+    return InteractionInputs(*(values.get(k, getattr(first, k)) for k in InteractionInputs._fields)), motion
 
 
 def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
@@ -311,12 +359,14 @@ def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
     if abs(steer) > math.radians(MAX_STEER):
         raise CaseError(f"{_where(case_name, path + '.after.steer')} = {_given(after['steer'], steer, 'angle')}: must "
                         f"be within +-{MAX_STEER:g} deg")
+    # on a frictionless road (friction 0) the wheels roll without resistance unless the file says otherwise
     f = (_number(after["rolling_resistance"], "dimensionless", f"{path}.after.rolling_resistance", case_name)
-         if "rolling_resistance" in after else ROLLING_RESISTANCE)
-    if not 0 <= f < friction:
+         if "rolling_resistance" in after else min(ROLLING_RESISTANCE, friction))
+    if not (0 <= f < friction or f == friction == 0):
         raise CaseError(f"{_where(case_name, path + '.after.rolling_resistance')} = "
                         f"{_shown(after['rolling_resistance'])}"
-                        f": must be >= 0 and below the road's friction ({friction:.4g})")
+                        f": must be >= 0 and below the road's friction ({friction:.4g}), or 0 on a road of "
+                        "friction 0")
     return AfterInputs(wheelbase, track, a, np.array(brake, dtype=float), steer, f)
 
 

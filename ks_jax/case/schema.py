@@ -39,6 +39,14 @@ ROAD_FIELDS = {
     "time_limit": ("time", None),
 }
 
+INTERACTION_FIELDS = {  # the exchanges after the first (docs/model.md, "Contact interactions")
+    "restitution": ("dimensionless", None),
+    "friction": ("dimensionless", None),
+    "penetration_time": ("time", None),
+    "approach_tolerance": ("velocity", None),
+    "max_exchanges": ("count", None),
+}
+
 CONTACT_FIELDS = {
     "point": ("length", "vec3"),
     "normal": ("angle", "normal"),
@@ -50,8 +58,8 @@ CONTACT_FIELDS = {
 
 TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
 
-CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "road", "unknowns",
-               "evidence", "options", "reference"}
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "road", "interaction",
+               "unknowns", "evidence", "options", "reference"}
 
 INPUT_KINDS = {
     "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",
@@ -74,6 +82,8 @@ OUTPUT_KINDS = {
     "course_after": "degrees", "angular_velocity_after": "angular_velocity",
     "yaw_rate_after": "angular_velocity", "pdof": "degrees", "pdof_clock": "dimensionless",
     "crush": "length", "ees": "velocity",
+    "delta_v_cumulative": "velocity", "delta_v_cumulative_magnitude": "velocity", "delta_v_cumulative_pdof": "degrees",
+    "energy_loss_total": "energy",
     "rest_position": "length", "rest_yaw": "degrees", "rotation_to_rest": "degrees", "time_to_rest": "time",
     "distance_to_rest": "length", "at_rest": "dimensionless",
 }

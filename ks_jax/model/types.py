@@ -9,7 +9,7 @@ canonical arrays.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 
@@ -220,11 +220,14 @@ class VehicleResult(NamedTuple):
 
 class ExchangeResult(NamedTuple):
     """``contact``: a ContactResult; ``vehicles``: a pair of VehicleResult (vehicle 1, vehicle 2); ``rest``: where a
-    case's vehicles move on to rest, a pair of ``model.motion.RestResult`` (None for a fixed object), else None."""
+    case's vehicles move on to rest, a pair of ``model.motion.RestResult`` (None for a fixed object), else None;
+    ``interactions``: where they move on, the exchanges that follow the first (``model.interaction.Interactions``,
+    its ``rest`` empty: it is ``rest`` here), else None."""
 
     contact: ContactResult
     vehicles: tuple
     rest: tuple | None = None
+    interactions: Any = None
 
 
 # Status codes carried per row inside jit (docs/model.md, "status").
@@ -271,9 +274,9 @@ STATUS_TEXT = {
     INVALID_SMOOTHING: "invalid: smoothing must be in [0, 1)",
     INVALID_PARTED: ("invalid: contact.penetration_time is too long: the footprints touched but no longer overlap "
                      "at the exchange (first contact + penetration_time); shorten it"),
-    INVALID_MOTION: ("invalid: an input of the motion to rest breaks its rule: road.friction in (0, 10], each brake "
+    INVALID_MOTION: ("invalid: an input of the motion to rest breaks its rule: road.friction in [0, 10], each brake "
                      "fraction in [0, 1], 0 < cg_to_front_axle < wheelbase, track > 0, 0 <= rolling_resistance < "
-                     "road.friction"),
+                     "road.friction (or 0 on a road of friction 0)"),
     INVALID_OVERFLOW: ("invalid: the results overflow (an input is far out of scale, e.g. a speed of 1e200 m/s or a "
                        "mass of 1e-300 kg)"),
 }

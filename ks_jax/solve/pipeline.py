@@ -57,7 +57,7 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
             ok = status == OK
             states = tuple(jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), s_auto, s)
                            for s_auto, s in zip((found.state1, found.state2), states))
-        return to_rest(inputs, result, states, motion)
+        return to_rest(inputs, result, states, motion, smoothing)
 
     return (*first, blocked(exchange_and_rest))
 

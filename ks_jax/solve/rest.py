@@ -1,5 +1,6 @@
-"""The motion to rest of a solved row: each vehicle carried on from the exchange (``model.motion.to_rest``), rows
-whose exchange or motion breaks a rule moved from harmless stand-ins."""
+"""The motion to rest of a solved row: each vehicle carried on from the exchange, every pair of bodies watched for the
+exchanges that follow (``model.interaction``); rows whose exchange or motion breaks a rule moved from harmless
+stand-ins."""
 
 from __future__ import annotations
 
@@ -7,16 +8,17 @@ import jax
 import jax.numpy as jnp
 
 from ..case import CaseInputs, Motion
-from ..model.motion import Chassis, Planar, Wheels
-from ..model.motion import to_rest as motion_to_rest
+from ..model.interaction import Bodies, Watch, interact, pairs_of
+from ..model.motion import Chassis, Planar, Wheels, body
 from ..model.results import mask_invalid
-from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult
+from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult, Vehicle
 from .rules import motion_rules
 
 
-def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion) -> ExchangeResult:
-    """``result`` with ``rest``: each vehicle's motion from its state at the exchange (``states``, the pair of
-    ``model.types.State``) with its velocity and yaw rate after it, to rest (``model.motion.to_rest``).
+def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, smoothing=0.0) -> ExchangeResult:
+    """``result`` with ``rest`` and ``interactions``: the vehicles' motion from their states at the exchange
+    (``states``, the pair of ``model.types.State``) with their velocities and yaw rates after it, every pair of
+    bodies watched for later exchanges (``model.interaction.interact``) until every vehicle rests.
 
     A row whose exchange is invalid, or whose motion's inputs break their rules (``motion_rules``: a swept or
     fitted value can, a case file cannot), has NaN in every result and, for the latter, status
@@ -31,21 +33,45 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion) 
     result = mask_invalid(result, ~(valid & ~rules))
     result = result._replace(contact=result.contact._replace(status=status))
     friction = jnp.where(ok, road.friction, 0.7)
-    rest = []
-    for v, after, state, vr in zip(inputs.vehicles, road.vehicles, states, result.vehicles):
-        if after is None:  # a fixed object does not move
-            rest.append(None)
+    moving = [k for k, after in enumerate(road.vehicles) if after is not None]  # the vehicles, then the objects
+    order = moving + [k for k, after in enumerate(road.vehicles) if after is None]
+    vehicles, z, bodies, starts, fixed = [], [], [], [], []
+    for k in order:
+        v, state, after = inputs.vehicles[k], states[k], road.vehicles[k]
+        mass = jnp.where(ok, v.mass, 1.0) if after is not None else jnp.asarray(v.mass, friction.dtype)
+        vehicles.append(Vehicle(mass, jnp.where(ok, v.inertia, jnp.eye(3)), *(
+            jnp.where(ok, getattr(v, f), d) for f, d in zip(Vehicle._fields[2:], (4.5, 1.8, 1.4, 2.25, 0.55)))))
+        z.append(jnp.where(ok, state.position[2], 0.55))
+        yaw = jnp.where(ok, state.yaw, 0.0)
+        if after is None:
+            fixed.append(Planar(jnp.where(ok, state.position[:2], 0.0), yaw, jnp.zeros(2, yaw.dtype),
+                                jnp.zeros_like(yaw)))
             continue
+        vr = result.vehicles[k]
         after = jax.tree_util.tree_map(lambda x, d: jnp.where(ok, x, d), after, _stand_in(after))
-        start = Planar(jnp.where(ok, state.position[:2], 0.0), jnp.where(ok, state.yaw, 0.0),
-                       jnp.where(ok, vr.velocity_after[:2], 0.0), jnp.where(ok, vr.angular_velocity_after[2], 0.0))
-        mass, izz = jnp.where(ok, v.mass, 1.0), jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0)
+        starts.append(Planar(jnp.where(ok, state.position[:2], 0.0), yaw, jnp.where(ok, vr.velocity_after[:2], 0.0),
+                             jnp.where(ok, vr.angular_velocity_after[2], 0.0)))
         chassis = Chassis(after.wheelbase, after.track, after.cg_to_front_axle)
         wheels = Wheels(after.brake, after.steer, after.rolling_resistance)
-        r = motion_to_rest(mass, izz, jnp.where(ok, v.cg_height, 0.0), chassis, wheels, friction, start,
-                           dt=motion.time_step, time_limit=motion.time_limit, path=motion.path, reverse=motion.reverse)
-        rest.append(mask_invalid(r, ok))
-    return result._replace(rest=tuple(rest))
+        bodies.append(body(vehicles[-1].mass, jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0),
+                           vehicles[-1].cg_height, chassis, wheels, friction, motion.time_step))
+    stack = lambda parts: jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *parts)  # noqa: E731
+    no_fixed = Planar(jnp.zeros((0, 2)), jnp.zeros(0), jnp.zeros((0, 2)), jnp.zeros(0))
+    everything = Bodies(stack(vehicles), jnp.stack(z), stack(bodies), stack(fixed) if fixed else no_fixed)
+    pairs = pairs_of(len(moving), len(order) - len(moving))
+    later = inputs.interaction if inputs.interaction is not None else inputs.contact
+    watch = Watch(*(jnp.full(len(pairs), jnp.where(ok, getattr(later, f), d))
+                    for f, d in (("restitution", 0.0), ("friction", 0.0), ("penetration_time", 0.0))),
+                  jnp.asarray(motion.approach_tolerance))
+    first = (order.index(0), order.index(1))
+    out = interact(everything, stack(starts), result, first, watch, max_exchanges=motion.max_exchanges,
+                   dt=motion.time_step, time_limit=motion.time_limit, poles=tuple(order.index(k) for k in motion.poles),
+                   smoothing=smoothing, path=motion.path, reverse=motion.reverse)
+    rest = [None] * len(order)
+    for m, k in enumerate(moving):
+        rest[k] = mask_invalid(out.rest[m], ok)
+    interactions = mask_invalid(out._replace(rest=()), ok)
+    return result._replace(rest=tuple(rest), interactions=interactions)
 
 
 def _stand_in(after):

@@ -34,10 +34,10 @@ def with_speed_status(inputs: CaseInputs, result: ExchangeResult) -> ExchangeRes
 
 
 def motion_rules(road) -> jnp.ndarray:
-    """Whether the motion's inputs keep their rules (docs/model.md, "Motion to rest"): road.friction in (0, 10]; per
+    """Whether the motion's inputs keep their rules (docs/model.md, "Motion to rest"): road.friction in [0, 10]; per
     vehicle each brake fraction in [0, 1], 0 < cg_to_front_axle < wheelbase, track > 0 and
-    0 <= rolling_resistance < road.friction; all finite. Traced, per row."""
-    ok = (road.friction > 0) & (road.friction <= MAX_ROAD_FRICTION)
+    0 <= rolling_resistance < road.friction, or 0 on a road of friction 0; all finite. Traced, per row."""
+    ok = (road.friction >= 0) & (road.friction <= MAX_ROAD_FRICTION)
     for after in road.vehicles:
         if after is None:
             continue
@@ -45,7 +45,8 @@ def motion_rules(road) -> jnp.ndarray:
         ok = ok & jnp.all((b >= 0) & (b <= 1)) & (after.cg_to_front_axle > 0) \
             & (after.cg_to_front_axle < after.wheelbase) & jnp.isfinite(after.wheelbase) & (after.track > 0) \
             & jnp.isfinite(after.track) & jnp.isfinite(after.steer) \
-            & (after.rolling_resistance >= 0) & (after.rolling_resistance < road.friction)
+            & (after.rolling_resistance >= 0) & ((after.rolling_resistance < road.friction)
+                                                 | ((after.rolling_resistance == 0) & (road.friction == 0)))
     return ok
 
 
