@@ -136,6 +136,7 @@ def text_report(sol, reference: bool = True, units: str = "both") -> str:
     else:
         lines += _contact_rows(sol, c)
     lines += _vehicle_rows(sol, v1, v2)
+    lines += _exchange_rows(sol)
     notes = [f"{visible(note)}." for note in sol.notes()]
     if sol.status == "no_contact":
         notes.append(f"the footprints do not touch within {HORIZON:g} s of free motion from the case state "
@@ -199,6 +200,36 @@ def _vehicle_rows(sol, v1, v2):
         ]
         if sol.result.rest is not None and sol.result.rest[k] is not None:
             lines += _rest_rows(sol.result.rest[k], sol.case.motion)
+    return lines
+
+
+def _exchange_rows(sol):
+    """Where the case had more than one exchange: each exchange as the manual's "next contact" lists it (time, the
+    pair, impulse, energy loss, each vehicle's delta-V and PDOF), then each vehicle's cumulative delta-V over its
+    first contact interaction (docs/model.md, "Contact interactions")."""
+    exchanges = sol.exchange_list()
+    if len(exchanges) < 2:
+        return []
+    names = sol.body_names()
+    n = sol.vehicle_count()
+    lines = ["", f"  exchanges ({len(exchanges)}; the manual's \"next contact\")"]
+    for ex in exchanges:
+        pair = " and ".join(names[b if isinstance(b, int) else n + int(b[6:-1])][0] for b in ex["between"])
+        j, e = ex["impulse_magnitude"], ex["energy_loss"]
+        lines.append(_row(f"#{ex['index']} at {_fmt(ex['time'])} s, interaction {ex['interaction']}",
+                          f"{pair}: impulse {_fmt(j)} N s, energy {_fmt(e)} J",
+                          f"{_fmt(j / U.LBF)} lbf s, {_fmt(e / U.FT_LBF)} ft lbf"))
+        for v in ex["vehicles"]:
+            pdof = "undefined" if v["pdof"] is None else f"{angle_text(v['pdof'])} deg"
+            lines.append(_row(f"    vehicles[{v['vehicle']}] delta-V, PDOF", f"{_fmt(v['delta_v_magnitude'])} m/s, "
+                              f"{pdof}", f"{_fmt(v['delta_v_magnitude'] / U.MPH, 2)} mph"))
+    lines += ["", "  cumulative delta-V (first contact interaction, tyre forces between exchanges included)"]
+    for k in range(n):
+        dv = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_magnitude"))
+        pdof = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_pdof"))
+        lines.append(_row(f"vehicles[{k}]", f"{_fmt(dv)} m/s, PDOF "
+                          f"{'undefined' if not math.isfinite(pdof) else angle_text(pdof) + ' deg'}",
+                          f"{_fmt(dv / U.MPH, 2)} mph"))
     return lines
 
 

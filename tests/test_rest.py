@@ -42,16 +42,17 @@ def test_solve_json_gives_each_skid_its_closed_form(capsys):
 
 @pytest.mark.slow
 def test_a_vehicle_still_moving_at_the_time_limit_is_said_so(capsys):
-    """The pickup rolling free from 35 mph does not stop in 4 s, the sedan does: its at_rest is false, and a note says
-    what to change."""
-    raw = json.loads(SPIN_OUT.read_text())
+    """The Saturn, struck from behind and rolling free, does not stop in 4 s; the Pontiac behind it, its wheels
+    locked, does (and never reaches it again): the Saturn's at_rest is false, and a note says what to change."""
+    raw = json.loads(SEED_TO_REST.read_text())
     raw["road"]["time_limit"] = "4.003 s"
-    raw["vehicles"][1]["after"] = {"wheels": "free"}
+    raw["vehicles"][0]["after"] = {"wheels": "free"}
     sol = ks_jax.solve(case_from_dict(raw))
     d = sol.to_dict()
-    assert d["vehicles"][0]["at_rest"] is True and d["vehicles"][1]["at_rest"] is False
-    np.testing.assert_allclose(d["vehicles"][1]["time_to_rest"], 4.005, rtol=1e-9)  # whole steps: 801
-    assert any("vehicles[1] (Pickup) still moves at the time limit" in n and "road.time_limit" in n
+    assert d["vehicles"][0]["at_rest"] is False and d["vehicles"][1]["at_rest"] is True
+    assert len(d["exchanges"]) == 1
+    np.testing.assert_allclose(d["vehicles"][0]["time_to_rest"], 4.005, rtol=1e-9)  # whole steps: 801
+    assert any("vehicles[0] (Saturn L300) still moves at the time limit" in n and "road.time_limit" in n
                for n in d["notes"]), d.get("notes")
 
 

@@ -36,9 +36,14 @@ def _alone_batched_and_swept(case):
     for path, x in out[0][1].items():
         if path == ".contact.status" or (path == ".contact.time" and not case.auto_point):
             continue  # the sweep's status is its own; a first-contact time is automatic contact's
+        if path.startswith(".interactions."):
+            continue  # the later exchanges, as a sweep names them (exchanges[k]): tests/test_interactions.py
+        if case.fixed is not None and path.startswith(".vehicles[1]."):
+            continue  # a fixed object has no results to sweep
         columns[path] = None if np.ndim(x) == 0 else [f"{path[1:]}[{i}]" for i in range(len(x))]
-    speed = float(get_input(case.inputs, "vehicles[1].speed"))
-    swept = ks_jax.sweep(case, {"vehicles[1].speed": [speed, speed]}, mode="zip",
+    vehicle = "vehicles[0]" if case.fixed is not None else "vehicles[1]"  # against a fixed object: the one vehicle
+    speed = float(get_input(case.inputs, f"{vehicle}.speed"))
+    swept = ks_jax.sweep(case, {f"{vehicle}.speed": [speed, speed]}, mode="zip",
                          outputs=[c for p, cols in columns.items() for c in (cols or [p[1:]])])
     results = {p: np.asarray(float(swept[p[1:]][0]) if cols is None else [float(swept[c][0]) for c in cols])
                for p, cols in columns.items()}
@@ -59,9 +64,13 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
     (status, alone), *others = _alone_batched_and_swept(load_case(Path(ks_jax.__file__).parent / "cases" / name))
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
-    if load_case(Path(ks_jax.__file__).parent / "cases" / name).motion is not None:
-        fields += [f".vehicles[{i}].{f}" for i in range(2) for f in RestResult._fields if f != "path"]
-    assert sorted(alone) == sorted(fields) and len(others) == 3
+    case = load_case(Path(ks_jax.__file__).parent / "cases" / name)
+    if case.motion is not None:
+        moving = [0] if case.fixed is not None else [0, 1]  # a fixed object does not move
+        fields += [f".vehicles[{i}].{f}" for i in moving for f in RestResult._fields if f != "path"]
+    later = {p for p in alone if p.startswith(".interactions.")}  # the watched motion's, with a road
+    assert sorted(set(alone) - later) == sorted(fields) and len(others) == 3
+    assert bool(later) == (load_case(Path(ks_jax.__file__).parent / "cases" / name).motion is not None)
     for (other_status, other), what in zip(others, ("batch row 0", "batch row 1", "sweep")):
         assert other_status == status, what
         assert sorted(other) == sorted(alone) if what != "sweep" else set(other) <= set(alone), what

@@ -18,11 +18,13 @@ from .inputs import as_arrays, to_pytrees
 from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
-from .paths import PathError, automatic_part, canonical_path, check_output_path, get_input, get_output
+from .paths import CUMULATIVE_OUTPUTS, PathError, automatic_part, canonical_path, check_output_path, get_input
+from .paths import get_output
 from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, path_key
 from .paths import set_input, without_road
 
 __all__ = [
+    "CUMULATIVE_OUTPUTS",
     "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs",
     "CaseWarning", "ContactInputs", "InteractionInputs", "PathError", "VehicleInputs", "as_arrays", "at_rest_after",
     "automatic_part",

@@ -286,7 +286,7 @@ def _interaction(d, motion, fixed, case_name):
     """(``InteractionInputs`` or None, the ``Motion`` with the watched motion's settings) of a case's
     ``interaction`` entry (docs/model.md, "Contact interactions"): the later exchanges' restitution, friction and
     penetration time (default: the first contact's), ``approach_tolerance`` and ``max_exchanges``. Later
-    exchanges happen during the motion to rest: without a ``road`` the entry is refused."""
+    exchanges happen during the motion to rest: without a ``road`` the entry is ignored, with a warning."""
     poles = (1,) if fixed is not None and fixed.kind == "pole" else ()
     if "interaction" not in d:
         return None, None if motion is None else dataclasses.replace(motion, poles=poles)
@@ -296,9 +296,10 @@ def _interaction(d, motion, fixed, case_name):
                         f"{', '.join(INTERACTION_FIELDS)}")
     _check_keys(entry, set(INTERACTION_FIELDS) | TEXT_FIELDS, "interaction", case_name)
     if motion is None:
-        raise CaseError(f"{_where(case_name, 'interaction')}: later exchanges happen while the bodies move on, which "
-                        "a case without \"road\" does not do: add \"road\": {\"friction\": 0.7}, or remove "
-                        "\"interaction\"")
+        warnings.warn(CaseWarning(f"{_where(case_name, 'interaction')}: later exchanges happen while the bodies move "
+                                  "on, which a case without \"road\" does not do: ignored (add \"road\": "
+                                  "{\"friction\": 0.7})"), stacklevel=3)
+        return None, None
     path = lambda k: f"interaction.{k}"  # noqa: E731
     values = {k: _number(entry[k], INTERACTION_FIELDS[k][0], path(k), case_name)
               for k in ("restitution", "friction", "penetration_time", "approach_tolerance") if k in entry}

@@ -15,7 +15,7 @@ from ..model.types import NO_CONTACT
 from .paths import get_output, output_leaf, parse_path
 
 
-CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw"})
+CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw", "delta_v_cumulative_pdof"})
 
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
 _CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*
@@ -27,15 +27,19 @@ UNDEFINED_REASONS = {
     "ees": "both crushes are 0 (the centroid lies inside neither box, or the vehicles never touch) or the "
            "energy loss is negative",
     "heading": "the vehicle is at rest after the exchange: it has no direction of travel",
+    "cumulative": "the vehicle took part in no exchange: its cumulative delta-V has no direction",
+    "slot": "the case had fewer exchanges: this one did not happen",
 }
 REST_RATIO = 1e-6  # a horizontal speed after below this fraction of (speed before + delta-V) is rounding: at rest
 
 def undefined_kind(path: str) -> str | None:
     """Which ``UNDEFINED_REASONS`` can leave the result at ``path`` undefined in a solved row; None: never."""
     group, _, name, _ = parse_path(path)
+    if name == "delta_v_cumulative_pdof":
+        return "cumulative"
     if name in _IMPULSE_DIRECTIONS:
         return "direction"
-    if group == "contact" and name in _CONTACT_ONLY:
+    if group in ("contact", "exchanges") and name in _CONTACT_ONLY:
         return "contact"
     return "ees" if name == "ees" else "heading" if name == "course_after" else None
 
@@ -71,8 +75,13 @@ def defined_output(result, path: str):
     group, vi, name, idx = parse_path(path)
     x = get_output(result, path) if idx else output_leaf(result, path)
     kind = undefined_kind(path)
+    if group == "exchanges" and vi > 0:
+        # a later exchange: NaN where it did not happen (its slot unused); an impulse was exchanged where it did
+        return x
     if kind == "direction":
         defined = impulse_exchanged(result)
+    elif kind == "cumulative":
+        defined = get_output(result, f"vehicles[{vi}].delta_v_cumulative_magnitude") > 0
     elif kind in ("contact", "ees"):
         defined = result.contact.status != NO_CONTACT
     elif kind == "heading":

@@ -6,16 +6,18 @@ from __future__ import annotations
 import functools
 import re
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..model.motion import RestResult
 from ..model.types import ContactResult, VehicleResult
 from .errors import CaseError
-from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, VehicleInputs
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, VehicleInputs
 from .schema import INPUT_KINDS, OUTPUT_KINDS
 
-_PATH = re.compile(r"^(vehicles)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$|^(contact|road)\.(\w+)((?:\[\d+\])*)$")
+_PATH = re.compile(r"^(vehicles|exchanges)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$"
+                   r"|^(contact|road|interaction)\.(\w+)((?:\[\d+\])*)$|^(energy_loss_total)$")
 
 class PathError(CaseError):
     pass
@@ -26,7 +28,8 @@ def canonical_path(path: str) -> str:
 
 def parse_path(path: str):
     """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,));
-    'road.friction' -> ('road', None, 'friction', ()).
+    'road.friction' -> ('road', None, 'friction', ()); 'exchanges[2].impulse_magnitude' -> ('exchanges', 2,
+    'impulse_magnitude', ()); 'energy_loss_total' -> ('case', None, 'energy_loss_total', ()).
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     if not isinstance(path, str):
         raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
@@ -37,7 +40,12 @@ def parse_path(path: str):
 def _parse_path(path: str):
     m = _PATH.match(canonical_path(path))
     if not m:
-        raise PathError(f"path '{path}': not of the form vehicles[i].field[k], contact.field[k] or road.friction")
+        raise PathError(f"path '{path}': not of the form vehicles[i].field[k], contact.field[k], road.friction, "
+                        "exchanges[k].field or energy_loss_total")
+    if m.group(8):
+        return "case", None, m.group(8), ()
+    if m.group(1) == "exchanges":
+        return "exchanges", int(m.group(2)), m.group(3), tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
     if m.group(1):
         idx = tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
         vi = int(m.group(2))
@@ -50,6 +58,13 @@ def _parse_path(path: str):
 def input_leaf(path):
     """(group, vehicle index, field in CaseInputs, index tuple) for an input path."""
     group, vi, name, idx = parse_path(path)
+    if group in ("exchanges", "case"):
+        raise PathError(f"path '{path}': a result, not an input")
+    if group == "interaction":
+        if name not in InteractionInputs._fields or idx:
+            raise PathError(f"path '{path}': the later exchanges' inputs are "
+                            f"{', '.join('interaction.' + f for f in InteractionInputs._fields)}")
+        return group, None, name, ()
     if group == "vehicles":
         if name == "yaw_rate" and not idx:
             return group, vi, "angular_velocity", (2,)
@@ -124,6 +139,8 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
     if group == "vehicles":
         vehicles = tuple(holder if i == vi else v for i, v in enumerate(inputs.vehicles))
         return inputs._replace(vehicles=vehicles)
+    if group == "interaction":
+        return inputs._replace(interaction=holder)
     if group == "road":
         road = inputs.road
         if vi is not None:
@@ -140,6 +157,12 @@ def _holder(inputs: CaseInputs, group, vi, path):
         return inputs.vehicles[vi]
     if group == "contact":
         return inputs.contact
+    if group == "interaction":
+        if inputs.road is None:
+            raise PathError(f"path '{path}': {NO_ROAD}")
+        if inputs.interaction is None:  # the later exchanges take the first contact's values
+            return InteractionInputs(*(getattr(inputs.contact, f) for f in InteractionInputs._fields))
+        return inputs.interaction
     if inputs.road is None or (vi is not None and inputs.road.vehicles[vi] is None):
         raise PathError(f"path '{path}': {NO_ROAD}" if inputs.road is None else
                         f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")
@@ -154,8 +177,9 @@ NO_ROAD = ("the case has no road, so no motion to rest: give it one, e.g. \"road
 def without_road(case: "Case", path) -> str | None:
     """Where ``path`` names an input or result of the motion to rest (road.friction, vehicles[i].wheelbase,
     vehicles[i].rest_position[0], ...) and ``case`` has no road: the words saying so; else None."""
-    group, _, name, _ = parse_path(path)
-    motion = group == "road" or name in AfterInputs._fields or name in REST_OUTPUTS
+    group, k, name, _ = parse_path(path)
+    motion = group in ("road", "interaction") or name in AfterInputs._fields or name in REST_OUTPUTS \
+        or (group == "exchanges" and k > 0)
     return f"{path}: {NO_ROAD}" if motion and case.inputs is not None and case.inputs.road is None else None
 
 def automatic_part(case: "Case", path) -> str | None:
@@ -216,21 +240,30 @@ def input_ties(case: "Case", paths) -> tuple:
             ties.append((k, f"vehicles[{vi}].position[2]"))
     return tuple(ties)
 
+CUMULATIVE_OUTPUTS = ("delta_v_cumulative", "delta_v_cumulative_magnitude", "delta_v_cumulative_pdof")
+VECTOR_OUTPUTS = frozenset({"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
+                            "delta_v_body", "velocity_after", "angular_velocity_after", "rest_position",
+                            "delta_v_cumulative"})
+
+
 def check_output_path(path: str):
-    """Raise PathError unless ``path`` names a number among the section 4 results."""
+    """Raise PathError unless ``path`` names a number among the results (docs/model.md, "Results" and "Contact
+    interactions")."""
     group, vi, name, idx = parse_path(path)
-    if group == "road":
-        raise PathError(f"path '{path}': the road has no results; its input is road.friction")
-    fields = VehicleResult._fields + REST_OUTPUTS if group == "vehicles" else ContactResult._fields
-    if group == "contact" and name == "status":
+    if group in ("road", "interaction"):
+        raise PathError(f"path '{path}': {group}.{name} is an input, not a result")
+    if group == "case":
+        return group, vi, name, idx
+    fields = VehicleResult._fields + REST_OUTPUTS + CUMULATIVE_OUTPUTS if group == "vehicles" else ContactResult._fields
+    kind = {"vehicles": "vehicle", "contact": "contact", "exchanges": "exchange"}[group]
+    if group != "vehicles" and name == "status":
         raise PathError(f"path '{path}': the status is a code, not a number to sweep, fit or compare: read "
                         "result.contact.status (ks_jax.status_text gives its words); a sweep always returns "
                         "'status'")
     if name not in fields or name == "status":
-        raise PathError(f"path '{path}': '{name}' is not a {'vehicle' if group == 'vehicles' else 'contact'} result; "
+        raise PathError(f"path '{path}': '{name}' is not a {kind} result; "
                         f"results are {', '.join(f for f in fields if f != 'status')}")
-    vector = name in {"point", "normal", "impulse", "closing_velocity", "separation_velocity", "delta_v",
-                      "delta_v_body", "velocity_after", "angular_velocity_after", "rest_position"}
+    vector = name in VECTOR_OUTPUTS
     top = 1 if name == "rest_position" else 2
     if vector and (len(idx) != 1 or idx[0] > top):
         raise PathError(f"path '{path}': '{name}' is a vector: name a component, e.g. {name}[0]"
@@ -242,14 +275,51 @@ def check_output_path(path: str):
 def get_output(result, path: str):
     """The number at an output path of a (possibly batched) ExchangeResult."""
     group, vi, name, idx = check_output_path(path)
-    leaf = getattr(_result_holder(result, group, vi, name, path), name)
+    leaf = output_leaf(result, path)
     return leaf[(..., *idx)] if idx else leaf
 
 
 def output_leaf(result, path: str):
-    """The whole result that ``path`` names a part of ("vehicles[0].rest_position[1]": the (2,) rest position)."""
+    """The whole result that ``path`` names a part of ("vehicles[0].rest_position[1]": the (2,) rest position).
+
+    The results of contact interactions (docs/model.md, "Contact interactions") where a case has no road, so one
+    exchange: ``exchanges[0]`` is ``contact`` (its ``time`` 0), a vehicle's cumulative delta-V its delta-V, and
+    ``energy_loss_total`` the energy loss."""
     group, vi, name, _ = parse_path(path)
+    inter = getattr(result, "interactions", None)
+    if group == "case":
+        return result.contact.energy_loss if inter is None else inter.energy_loss_total
+    if group == "exchanges":
+        if inter is None:
+            if vi > 0:
+                raise PathError(f"path '{path}': {NO_ROAD}")
+            return jnp.zeros_like(result.contact.energy_loss) if name == "time" else getattr(result.contact, name)
+        slots = inter.exchanges.contact.energy_loss.shape[-1]
+        if vi >= slots:
+            raise PathError(f"path '{path}': the case keeps {slots} exchanges (exchanges[0] .. exchanges[{slots - 1}]; "
+                            "interaction.max_exchanges sets how many)")
+        whole = inter.time if name == "time" else getattr(inter.exchanges.contact, name)
+        axis = whole.ndim - (2 if name in VECTOR_OUTPUTS else 1)  # the slots' axis, after any batch axes
+        return jnp.take(whole, vi, axis=axis) if isinstance(whole, jax.Array) else np.take(whole, vi, axis=axis)
+    if name in CUMULATIVE_OUTPUTS:
+        return _cumulative(result, inter, vi, name)
     return getattr(_result_holder(result, group, vi, name, path), name)
+
+
+def _cumulative(result, inter, vi, name):
+    """A vehicle's cumulative delta-V (vector, magnitude or PDOF) over its first contact interaction; without a road,
+    the delta-V of the one exchange."""
+    if inter is None:
+        v = result.vehicles[vi]
+        return {"delta_v_cumulative": v.delta_v, "delta_v_cumulative_magnitude": v.delta_v_magnitude,
+                "delta_v_cumulative_pdof": v.pdof}[name]
+    dv = inter.delta_v_cumulative[..., vi, :]
+    if name == "delta_v_cumulative":
+        return dv
+    if name == "delta_v_cumulative_pdof":
+        return inter.delta_v_cumulative_pdof[..., vi]
+    xp = jnp if isinstance(dv, jax.Array) else np
+    return xp.sqrt(xp.sum(dv * dv, axis=-1))
 
 
 def _result_holder(result, group, vi, name, path):
@@ -263,6 +333,8 @@ def _result_holder(result, group, vi, name, path):
         return result.rest[vi]
     return result.vehicles[vi]
 
+
 def output_kind(path: str) -> str:
-    """The unit kind of an output path ("degrees" for the results reported in degrees)."""
+    """The unit kind of an output path ("degrees" for the results reported in degrees); an exchange's time is a time
+    like the contact's."""
     return OUTPUT_KINDS[check_output_path(path)[2]]

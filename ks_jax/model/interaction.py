@@ -52,7 +52,6 @@ from . import motion
 from .collision import Prepared, exchange, impulse
 from .results import mask_invalid, pdof_degrees
 from .contact import contact_geometry, disc_gap, footprint, separation
-from .checks import is_fixed
 from .contact.geometry import length_tolerance, reach, vertical_middle
 from .contact.pole import disc_contact
 from .types import OK, Contact, ExchangeResult, State, Vehicle
@@ -96,7 +95,8 @@ class Interactions(NamedTuple):
     ``first_interaction`` (V,) int32, -1 for none; ``delta_v_cumulative_pdof`` (V,) deg, the principal direction of
     ``delta_v_cumulative`` in the vehicle's frame at the first exchange of that interaction (SAE J224, as ``pdof``).
     ``energy_loss_total`` () J over every exchange; ``exhausted`` () bool, a pair was due for an exchange when every
-    slot was taken; ``overlapping`` (P,) bool, each pair's footprints overlap at the end; ``rest``: a tuple of V
+    slot was taken; ``overlapping`` (P,) bool, each pair's footprints overlap at the end, and ``overlap_depth`` (P,)
+    m by how much (the least push that would part them, 0 where apart); ``rest``: a tuple of V
     ``motion.RestResult``, each vehicle's motion from the first exchange."""
 
     exchanges: ExchangeResult
@@ -111,6 +111,7 @@ class Interactions(NamedTuple):
     energy_loss_total: jnp.ndarray
     exhausted: jnp.ndarray
     overlapping: jnp.ndarray
+    overlap_depth: jnp.ndarray
     rest: tuple
 
 
@@ -256,8 +257,8 @@ def _watch_pairs(bodies, states, moving, pairs, poles):
             continue
         i, j = [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
         v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
-        apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jnp.where(
-            jax.vmap(is_fixed)(v2), jnp.where(pole, 0.5 * v2.width, 0.0), jax.vmap(reach)(v2))
+        # a wall is a box kilometres long about a point of its face: its circle of reach holds any vehicle near it
+        apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jax.vmap(reach)(v2)
         moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
         close = _any_row(jnp.any((apart < 0) & moves))
 
@@ -508,6 +509,7 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     body = jnp.stack([cos * cumulative[:, 0] + sin * cumulative[:, 1], cos * cumulative[:, 1] - sin * cumulative[:, 0],
                       cumulative[:, 2]], axis=-1)
     pdof = jax.vmap(pdof_degrees)(body)
+    end = _gaps(bodies, _states(bodies, final.carry), pairs, tuple(poles))
     return Interactions(exchanges, final.slot_time, final.slot_between, final.slot_interaction, final.count,
                         cumulative, final.impulses, final.first_interaction, pdof, energy, final.exhausted,
-                        final.gap < 0, rest)
+                        end < 0, jnp.maximum(-end, 0.0), rest)

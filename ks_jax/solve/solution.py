@@ -6,10 +6,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 
-from ..case import Case, defined_output, undefined_kind
-from ..model.types import ContactResult, ExchangeResult, VehicleResult
+from ..case import CUMULATIVE_OUTPUTS, Case, defined_output, undefined_kind
+from ..model.interaction import pairs_of
+from ..model.types import ContactResult, ExchangeResult, VehicleResult, status_text
 
 
 @dataclass
@@ -30,7 +32,7 @@ class Solution:
         vehicle)."""
         if self.result is None or self.status.startswith("invalid"):
             return []
-        notes = self._moving_notes()
+        notes = self._moving_notes() + self._interaction_notes()
         if self.status != "separating":
             return notes
         c = self.result.contact
@@ -49,6 +51,94 @@ class Solution:
             notes.append(f"the normal may point the wrong way: it must point {into}; reversed (azimuth "
                          f"{azimuth:.1f} deg) the vehicles would be closing at {un:.4g} m/s there")
         return notes
+
+    def _interaction_notes(self) -> list:
+        """Where the watched motion left bodies inside each other: the exchanges stopped at ``max_exchanges`` while a
+        pair was due for another, or footprints that overlap where the bodies end."""
+        inter = self.result.interactions
+        if inter is None:
+            return []
+        notes = []
+        if bool(inter.exhausted):
+            notes.append(f"the exchanges stopped at interaction.max_exchanges ({self.case.motion.max_exchanges}) while "
+                         "a pair was due for another: from there the bodies may pass through each other unseen; "
+                         "raise interaction.max_exchanges (up to 64)")
+        names = self.body_names()
+        for (i, j), overlapping, depth in zip(pairs_of(self.vehicle_count(), len(names) - self.vehicle_count()),
+                                              np.asarray(inter.overlapping), np.asarray(inter.overlap_depth)):
+            if overlapping:
+                notes.append(f"{_label(names[i])} and {_label(names[j])} overlap where they end, by {float(depth):.3g} "
+                             "m (their undeformed outlines intersect): as much as they are crushed where they rest in "
+                             "contact; more means one passed into the other")
+        return notes
+
+    def vehicle_count(self) -> int:
+        """How many of the case's bodies are vehicles (the others are fixed objects)."""
+        return 1 if self.case.fixed is not None else 2
+
+    def body_names(self) -> list:
+        """Each body as results name it: (path, name): "vehicles[i]" for a vehicle, "fixed[k]" for a fixed object."""
+        n = self.vehicle_count()
+        return [(f"vehicles[{b}]" if b < n else f"fixed[{b - n}]", name) for b, name in
+                enumerate(self.case.vehicle_names)]
+
+    def exchange_list(self) -> list:
+        """Every exchange of the case in time order as plain data (SI): the first is ``contact``; a case with a road
+        adds those of the watched motion (docs/model.md, "Contact interactions"). Each: "time" (s from the first
+        exchange), "between" ([i, j] vehicle indices, or [i, "fixed[k]"]), "interaction", the contact results and,
+        for each vehicle of the pair, its delta-V, PDOF and share of the energy loss (Burg: in proportion to crush;
+        all of it where the other is a fixed object; None where both crushes are 0)."""
+        if self.result is None or self.status.startswith("invalid"):
+            return []
+        r, inter = self.result, self.result.interactions
+        n = self.vehicle_count()
+        count = 1 if inter is None else int(inter.count)
+        out = []
+        for k in range(count):
+            ex = r if inter is None else jax.tree_util.tree_map(lambda x: x[k], inter.exchanges)
+            pair = (0, 1) if inter is None else tuple(int(b) for b in inter.between[k])
+            contact = {f: _plain(defined_output(ex, f"contact.{f}") if undefined_kind(f"contact.{f}")
+                                 else getattr(ex.contact, f)) for f in ContactResult._fields if f != "status"}
+            contact["time"] = 0.0 if inter is None else _plain(inter.time[k])
+            contact["status"] = status_text(ex.contact.status) if k else self.status
+            crush = [float(v.crush) for v in ex.vehicles]
+            energy = float(ex.contact.energy_loss)
+            vehicles = []
+            for side, b in enumerate(pair):
+                if b >= n:
+                    continue
+                v = ex.vehicles[side]
+                share = energy if pair[1 - side] >= n else (
+                    energy * crush[side] / sum(crush) if sum(crush) > 0 else math.nan)
+                vehicles.append({"vehicle": b, "delta_v": _plain(v.delta_v),
+                                 "delta_v_magnitude": _plain(v.delta_v_magnitude),
+                                 "pdof": _plain(defined_output(ex, f"vehicles[{side}].pdof")),
+                                 "energy_share": _plain(share), "velocity_after": _plain(v.velocity_after)})
+            between = [b if b < n else f"fixed[{b - n}]" for b in pair]
+            out.append({"index": k, "between": between,
+                        "interaction": 0 if inter is None else int(inter.interaction[k]), **contact,
+                        "vehicles": vehicles})
+        return out
+
+    def interactions_of(self, vehicle: int, exchanges: list) -> list:
+        """The contact interactions ``vehicle`` took part in (from ``exchange_list``): each with its exchanges'
+        indices and its cumulative delta-V (the velocity after its last exchange minus before its first, tyre forces
+        between included) and the sum of its impulses over the mass ("delta_v_impulses")."""
+        found: dict[int, list] = {}
+        for ex in exchanges:
+            for v in ex["vehicles"]:
+                if v["vehicle"] == vehicle and (ex["impulse_magnitude"] or 0.0) > 0:
+                    found.setdefault(ex["interaction"], []).append((ex["index"], v))
+        out = []
+        for index, items in found.items():
+            first, last = items[0][1], items[-1][1]
+            after_last = np.asarray(last["velocity_after"], float)
+            before_first = np.asarray(first["velocity_after"], float) - np.asarray(first["delta_v"], float)
+            impulses = sum(np.asarray(v["delta_v"], float) for _, v in items)
+            dv = after_last - before_first
+            out.append({"interaction": index, "exchanges": [k for k, _ in items], "delta_v": _plain(dv),
+                        "delta_v_magnitude": _plain(np.linalg.norm(dv)), "delta_v_impulses": _plain(impulses)})
+        return out
 
     def _moving_notes(self) -> list:
         rest = self.result.rest
@@ -78,6 +168,7 @@ class Solution:
             contact["time"] = None  # no search for a first contact: the exchange is at the case state
         vehicles = []
         fixed = self.case.fixed
+        exchanges = self.exchange_list()
         for i, (name, v) in enumerate(zip(self.case.vehicle_names, r.vehicles)):
             if i == 1 and fixed is not None:
                 break  # a fixed object has no per-vehicle results
@@ -87,8 +178,11 @@ class Solution:
             d["pdof_clock"] = None if d["pdof_clock"] is None else int(d["pdof_clock"])
             if r.rest is not None:
                 d.update({k: _plain(x) for k, x in r.rest[i]._asdict().items() if k != "path"})
+            d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
+            d["interactions"] = self.interactions_of(i, exchanges)
             vehicles.append(d)
-        out = {"name": self.case.name, "contact": contact, "vehicles": vehicles}
+        out = {"name": self.case.name, "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
+               "energy_loss_total": _plain(defined_output(r, "energy_loss_total"))}
         notes = self.notes()
         if notes:  # only where there is something to say: a case solved as expected has the keys of the model
             out["notes"] = notes
@@ -111,3 +205,9 @@ def _plain(x):
     if not np.isfinite(x).any():
         return None
     return [_plain(v) for v in x]
+
+
+def _label(body) -> str:
+    """A body as a note names it: 'vehicles[0] (Honda Accord)' (the name exactly; the panel escapes it)."""
+    path, name = body
+    return f"{path} ({name})"

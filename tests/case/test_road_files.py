@@ -44,7 +44,7 @@ def test_a_road_reads_its_units_and_defaults():
 
 
 @pytest.mark.parametrize("change, field, rule", [
-    (lambda d: d["road"].update(friction=-0.2), "road.friction", "must be positive"),
+    (lambda d: d["road"].update(friction=-0.2), "road.friction", "must be >= 0"),
     (lambda d: d["road"].update(friction=1e300), "road.friction", "at most 10"),
     (lambda d: d["road"].pop("friction"), "road.friction", "missing field"),
     (lambda d: d["road"].update(time_step="0 s"), "road.time_step", "(0, 0.05] s"),
