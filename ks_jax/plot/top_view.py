@@ -21,6 +21,12 @@ What the top view draws (global frame, metres; a second axis in feet):
   rest: its CG's path (a thin line), its outline at ``PATH_OUTLINES`` instants evenly spaced in time along the
   way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
   dot at its CG; "at rest" in the legend, or "at the time limit" for one that had not stopped by then);
+- where the case had more than one exchange (docs/model.md, "Contact interactions"; ``Solution.exchange_list``),
+  every later one where it happened, numbered as the panel numbers them (#0 is the first, drawn as above):
+  one whose impulse is at least ``LATER_SHARE`` of the largest exchange's gets an open circle at its centroid,
+  its number, its normal (a short red arrow) and its impulse on each vehicle of its pair (on the first's scale:
+  one scale for every exchange's arrows), the smaller ones only a dot (a push of many small exchanges stays
+  readable); the legend says how many exchanges there were, and how many of each kind are drawn;
 - given ``evidence`` (result path -> measured value, SI), each vehicle's measured rest position where both
   of its coordinates are given (rest_position[0] and [1]): an x, "measured rest" in the legend, and with
   ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
@@ -29,7 +35,9 @@ quantity divided by X, X a round number (``round_scale``).
 The axes take in everything drawn: the whole paths, the rest outlines and the measured positions included.
 Artists a program may look for carry a gid: "rest-path-i" (the CG path of vehicle i, 0-based), "path-outline-i"
 (its outlines on the way), "rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and
-"measured-rest-sigma-i".
+"measured-rest-sigma-i"; and, for a case with more than one exchange, "exchange-k" (the marker at the centroid of
+exchange k >= 1), "exchange-number-k" (the text "#k", k = 0 included), "exchange-normal-k" and
+"exchange-impulse-k-i" (the impulse arrow of exchange k on vehicle i).
 """
 
 from __future__ import annotations
@@ -56,6 +64,8 @@ TITLE_SIZE = 9.0  # points, the title's font
 TWO_COLUMNS = 420.0  # points: an axes at least this wide has its legend in two columns
 PANEL_WIDTH = 8.5  # inches, one panel of ``save_top_view``
 PLOT_HEIGHT = 7.2  # inches of a panel above its legend: the axes, its labels and a two-line title
+LATER_SHARE = 0.05  # a later exchange is numbered and drawn whole where its impulse is this share of the largest
+LATER_NORMAL = 0.25  # a later exchange's normal arrow, in units of the larger vehicle's length or width
 
 
 def round_scale(x):
@@ -138,9 +148,11 @@ def _draw_box(ax, corners, color, style, label=None, alpha=1.0, lw=1.4, gid=None
 
 def _arrow(ax, tip, tail, props, **kw):
     """An arrow from ``tail`` to ``tip`` (data coordinates) that the axes' limits take in: matplotlib
-    leaves an annotation out of the autoscaling, and does not draw it at all where its tip is outside."""
-    ax.annotate("", tip, tail, arrowprops=props, **kw)
+    leaves an annotation out of the autoscaling, and does not draw it at all where its tip is outside.
+    Returns the annotation."""
+    arrow = ax.annotate("", tip, tail, arrowprops=props, **kw)
     ax.update_datalim(np.array([tip, tail], float))
+    return arrow
 
 
 def _friction_state(ax, c, p, n, mu, j, reach):
@@ -246,30 +258,53 @@ def _draw_plane_and_cone(ax, scene, p, n, mu):
     return cone
 
 
-def _draw_impulse(ax, scene, p, j):
+def horizontal_part(impulse):
+    """The length of an impulse's horizontal part (what its arrow draws), N s: 0 for an impulse that is
+    undefined (None) or not finite."""
+    if impulse is None:
+        return 0.0
+    size = float(np.linalg.norm(np.asarray(impulse, float)[:2]))
+    return size if math.isfinite(size) else 0.0
+
+
+def impulse_scale(exchanges, extent):
+    """N s per m of impulse arrow, one scale for every exchange's arrows so that their sizes compare: the round
+    scale (``round_scale``) that draws the largest horizontal impulse of ``exchanges`` (``Solution.exchange_list``;
+    the first exchange's unless a later one is larger) at most ``IMPULSE_LENGTH`` times ``extent`` long. None where
+    no exchange has a horizontal impulse."""
+    largest = max((horizontal_part(ex["impulse"]) for ex in exchanges), default=0.0)
+    return round_scale(largest / (IMPULSE_LENGTH * extent)) if largest > 0 else None
+
+
+def _impulse_scale_entry(ax, per_m):
+    """The legend's entry for the impulse arrows' scale ``per_m`` (N s per m)."""
+    ax.plot([], [], " ", label=f"impulse arrows: 1 m = {scale_text(per_m)} N s "
+                               f"({per_m / U.LBF_S:,.6g} lbf s)")
+
+
+def _draw_impulse(ax, scene, p, j, per_m):
     """The impulse's horizontal part ``j`` on each vehicle at the centroid ``p`` (J on vehicle 1, -J on
-    vehicle 2), on a round scale (``round_scale``) the legend states. Returns the arrows' length, m (0 for
-    no impulse)."""
+    vehicle 2), on the scale ``per_m`` (N s per m, ``impulse_scale``) the legend states. Returns the arrows'
+    length, m (0 for no impulse)."""
     c = scene.result.contact
     j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
     total = float(c.impulse_magnitude)
     if j_mag <= 0:
         return 0.0
-    per_m = round_scale(j_mag / (IMPULSE_LENGTH * scene.extent))  # N s per m of arrow
     shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
     vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
     for i, sign in enumerate((1.0, -1.0)[:scene.moving]):
         _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
         ax.plot([], [], color=COLORS[i], lw=3.5,
                 label=f"impulse on {scene.names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
-    ax.plot([], [], " ", label=f"impulse arrows: 1 m = {scale_text(per_m)} N s "
-                               f"({per_m / U.LBF_S:,.6g} lbf s)")
+    _impulse_scale_entry(ax, per_m)
     return j_mag / per_m
 
 
-def _draw_contact(ax, scene, fixed):
+def _draw_contact(ax, scene, fixed, per_m):
     """The contact at the exchange: the overlap, the plane, the normal, the friction cone, the impulse on
-    each vehicle, whether it slides or sticks, and the impulse centroid P (a black x)."""
+    each vehicle (``per_m`` N s per m of arrow), whether it slides or sticks, and the impulse centroid P (a
+    black x)."""
     c = scene.result.contact
     _draw_overlap(ax, scene, fixed)
     p = np.asarray(c.point, float)[:2]
@@ -278,10 +313,65 @@ def _draw_contact(ax, scene, fixed):
     mu = float(scene.inputs.contact.friction)
     cone = _draw_plane_and_cone(ax, scene, p, n, mu)
     j = np.asarray(c.impulse, float)[:2]
-    arrow = _draw_impulse(ax, scene, p, j)
+    arrow = _draw_impulse(ax, scene, p, j, per_m)
     if bool(impulse_exchanged(scene.result)):
         _friction_state(ax, c, p, n, mu, j, max(cone, arrow))
     ax.plot(*p, "kx", ms=9, mew=2, label=f"impulse centroid ({p[0]:.3f}, {p[1]:.3f}) m")
+
+
+def _draw_later_exchanges(ax, scene, exchanges, per_m):
+    """Every exchange after the first (``exchanges``: ``Solution.exchange_list``, two or more) where it happened,
+    the outlines staying at the first exchange. One whose impulse is at least ``LATER_SHARE`` of the largest
+    exchange's: an open circle at its centroid, its number "#k" as the panel's (and "#0" beside the first's), its
+    normal (a short red arrow, from the pair's second body into its first) and its horizontal impulse on each
+    vehicle of the pair (J on the first, -J on the second) on the first's scale ``per_m``, so that their sizes
+    compare (``impulse_scale``: one scale for every exchange's arrows). A smaller one: a dot at
+    its centroid only, so that a push of many small exchanges does not hide the picture. The legend says how many
+    exchanges there were and how many of each kind are drawn."""
+    sizes = [float(ex["impulse_magnitude"] or 0.0) for ex in exchanges]
+    sizes = [size if math.isfinite(size) else 0.0 for size in sizes]
+    largest = max(sizes)
+    share = f"{LATER_SHARE:.0%}"
+    later = [(ex, size > 0 and size >= LATER_SHARE * largest) for ex, size in zip(exchanges[1:], sizes[1:])
+             if ex["point"] is not None and all(map(math.isfinite, ex["point"][:2]))]
+    count = len(exchanges)
+    numbers = "#1" if count == 2 else f"#1 to #{count - 1}"
+    ax.plot([], [], " ", label=f"{count} exchanges, numbered as the panel numbers them: #0 the first (drawn as "
+                               f"above), {numbers} later, each where it happened")
+    number = dict(textcoords="offset points", xytext=(5, 5), fontsize=7, zorder=7,
+                  bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.7))
+    if not scene.no_contact:
+        ax.annotate("#0", np.asarray(scene.result.contact.point, float)[:2], gid="exchange-number-0", **number)
+    drawn = [sum(1 for _, big in later if big), sum(1 for _, big in later if not big)]
+    labels = [f"later exchange ({drawn[0]}, impulse at least {share} of the largest, {largest:,.0f} N s): its "
+              "centroid (o), number, normal (red) and impulse (on the same scale)",
+              f"smaller later exchange ({drawn[1]}, impulse under {share} of the largest): its centroid (dot)"]
+    arrows = False
+    for ex, big in later:
+        k, p = ex["index"], np.asarray(ex["point"], float)[:2]
+        style = (dict(marker="o", ms=6, mfc="none", mec="black", mew=1.2) if big
+                 else dict(marker="o", ms=2, color="0.2", alpha=0.7))
+        ax.plot(*p, ls="", zorder=6, gid=f"exchange-{k}", label=labels[0 if big else 1], **style)
+        labels[0 if big else 1] = None  # one legend entry for each kind
+        if not big:
+            continue
+        ax.annotate(f"#{k}", p, gid=f"exchange-number-{k}", **number)
+        n = np.asarray(ex["normal"] if ex["normal"] is not None else [math.nan] * 3, float)[:2]
+        if np.all(np.isfinite(n)) and np.linalg.norm(n) > 1e-12:
+            n = n / np.linalg.norm(n)
+            _arrow(ax, p + LATER_NORMAL * scene.extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.0), zorder=5,
+                   gid=f"exchange-normal-{k}")
+        if per_m is None or horizontal_part(ex["impulse"]) <= 0:
+            continue
+        j = np.asarray(ex["impulse"], float)[:2]
+        for side, body in enumerate(ex["between"]):
+            if isinstance(body, int) and body < scene.moving:  # a vehicle drawn (not a fixed object)
+                sign = 1.0 if side == 0 else -1.0
+                _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[body], lw=2.0), zorder=4,
+                       gid=f"exchange-impulse-{k}-{body}")
+                arrows = True
+    if arrows and horizontal_part(exchanges[0]["impulse"]) <= 0:  # the first drew no arrow, nor the scale
+        _impulse_scale_entry(ax, per_m)
 
 
 def _draw_velocities(ax, scene):
@@ -348,9 +438,13 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     if not solved:
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
         return ax
+    exchanges = solution.exchange_list()  # the first, and those of the watched motion (a case with a road)
     scene = _draw_outlines(ax, solution, names)
+    per_m = impulse_scale(exchanges, scene.extent)
     if not scene.no_contact:
-        _draw_contact(ax, scene, case.fixed)
+        _draw_contact(ax, scene, case.fixed, per_m)
+    if len(exchanges) > 1:
+        _draw_later_exchanges(ax, scene, exchanges, per_m)
     _draw_velocities(ax, scene)
     if scene.no_contact:
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)

@@ -25,7 +25,8 @@ from matplotlib.patches import Polygon, Wedge
 
 import ks_jax
 from ks_jax import plot
-from ks_jax.plot.top_view import clip_polygon, top_view_figure
+from ks_jax.plot.top_view import LATER_NORMAL, LATER_SHARE, clip_polygon, top_view_figure
+from ks_jax.solve import Solution
 from ks_jax import units as U
 from ks_jax.cli import main
 from samples import SEED0
@@ -275,3 +276,132 @@ def test_names_with_control_characters_are_drawn_as_their_escapes(tmp_path):
     texts = [t.get_text() for t in fig.findobj(matplotlib.text.Text)]
     assert any("\\x1b[2J\\u202eevil\\u202c" in t for t in texts) and any("Saturn \\x07" in t for t in texts)
     assert not any(c in t for t in texts for c in "\x1b\u202e\u202c\x07")
+
+
+# Cases with a road run a watched motion after the first exchange (docs/model.md, "Contact interactions"): the top
+# view draws every later exchange where it happened, numbered as the panel numbers them.
+
+
+@pytest.fixture(scope="module")
+def wall_slap():
+    """The sedan glancing off a wall (its rear then slaps it: several exchanges, two of them at least
+    ``LATER_SHARE`` of the largest, one smaller) solved once, and its top view as drawn, without the path to rest
+    (which would solve it again; tests/plot/test_rest_paths.py draws the paths of a case with later exchanges)."""
+    with resources.as_file(case_path("wall_side_slap.json")) as path:
+        sol = ks_jax.solve(ks_jax.load_case(path))
+    sol = dataclasses.replace(sol, result=sol.result._replace(rest=None))
+    ax = draw(sol)
+    ax.figure.canvas.draw()  # the equal aspect sets the final limits when drawn
+    return sol, ax
+
+
+def by_gid(ax, gid):
+    return [a for a in [*ax.lines, *ax.patches, *ax.texts] if a.get_gid() == gid]
+
+
+def later_gids(ax):
+    """The gids of every artist the later exchanges drew ("exchange-..."; "#0" beside the first included)."""
+    artists = [*ax.lines, *ax.patches, *ax.texts]
+    return sorted(a.get_gid() for a in artists if (a.get_gid() or "").startswith("exchange-"))
+
+
+def test_later_exchanges_are_drawn_where_they_happened(wall_slap):
+    sol, ax = wall_slap
+    exchanges = sol.exchange_list()
+    sizes = [ex["impulse_magnitude"] for ex in exchanges]
+    big = [ex["index"] for ex in exchanges[1:] if ex["impulse_magnitude"] >= LATER_SHARE * max(sizes)]
+    small = [ex["index"] for ex in exchanges[1:] if ex["index"] not in big]
+    assert len(exchanges) >= 3 and big and small  # both kinds of later exchange are drawn
+    # one marker at each later exchange's centroid: an open circle for a large one, a dot for a small one
+    markers = [a for a in ax.lines if re.fullmatch(r"exchange-\d+", a.get_gid() or "")]
+    assert len(markers) == len(exchanges) - 1
+    for ex in exchanges[1:]:
+        (marker,) = by_gid(ax, f"exchange-{ex['index']}")
+        np.testing.assert_allclose(np.ravel(marker.get_xydata()), ex["point"][:2], rtol=0, atol=1e-12)
+        assert marker.get_marker() == "o" and marker.get_markersize() == (6 if ex["index"] in big else 2)
+    # the numbers: "#k" at each large one's centroid, "#0" at the first's, none at a small one
+    for k in [0, *big]:
+        (number,) = by_gid(ax, f"exchange-number-{k}")
+        assert number.get_text() == f"#{k}"
+        np.testing.assert_allclose(number.xy, exchanges[k]["point"][:2], rtol=0, atol=1e-12)
+    for k in small:
+        assert not by_gid(ax, f"exchange-number-{k}") and not by_gid(ax, f"exchange-impulse-{k}-0")
+    numbers = sorted(t.get_text() for t in ax.texts if t.get_text().startswith("#"))
+    assert numbers == sorted(f"#{k}" for k in [0, *big])
+    labels = legend_texts(ax)
+    assert any(s.startswith(f"{len(exchanges)} exchanges, numbered as the panel numbers them") for s in labels)
+    assert any(s.startswith(f"later exchange ({len(big)}, impulse at least 5% of the largest") for s in labels)
+    assert any(s.startswith(f"smaller later exchange ({len(small)}, impulse under 5%") for s in labels)
+
+
+def test_later_exchanges_normal_and_impulse_on_the_first_exchanges_scale(wall_slap):
+    """A large later exchange's normal (a short red arrow from its centroid) and its impulse on the vehicle (its
+    horizontal part over the legend's impulse scale: the scale of the first exchange's arrow, so that their sizes
+    compare); every arrow inside the axes."""
+    sol, ax = wall_slap
+    exchanges = sol.exchange_list()
+    per_m = scale_in_legend(ax, "impulse arrows: ")
+    j0 = np.asarray(exchanges[0]["impulse"])[:2]
+    (first,) = impulse_arrows(ax, np.asarray(sol.result.contact.point)[:2])  # one vehicle against the wall
+    np.testing.assert_allclose(np.subtract(first.xy, first.xyann), j0 / per_m, rtol=1e-9)
+    v = sol.case.inputs.vehicles[0]  # the one vehicle (the wall stands in as the second)
+    extent = max(float(v.length), float(v.width))
+    drawn = 0
+    for ex in exchanges[1:]:
+        k, p = ex["index"], np.asarray(ex["point"])[:2]
+        if not by_gid(ax, f"exchange-number-{k}"):
+            continue
+        (normal,) = by_gid(ax, f"exchange-normal-{k}")
+        n = np.asarray(ex["normal"])[:2]
+        np.testing.assert_allclose(normal.xyann, p, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.subtract(normal.xy, normal.xyann), LATER_NORMAL * extent * n / np.linalg.norm(n),
+                                   rtol=1e-9, atol=1e-12)
+        (arrow,) = by_gid(ax, f"exchange-impulse-{k}-0")
+        np.testing.assert_allclose(arrow.xyann, p, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.subtract(arrow.xy, arrow.xyann), np.asarray(ex["impulse"])[:2] / per_m,
+                                   rtol=1e-9, atol=1e-12)
+        assert not by_gid(ax, f"exchange-impulse-{k}-1")  # the wall gets no arrow
+        drawn += 1
+    assert drawn >= 2
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    for a in [t for t in ax.texts if t.arrow_patch is not None]:
+        for x, y in (a.xy, a.xyann):
+            assert x0 <= x <= x1 and y0 <= y <= y1
+
+
+@dataclasses.dataclass
+class Pushed(Solution):
+    """A solution whose exchanges after the first are ``later`` (plain data, as ``exchange_list`` gives them)."""
+
+    later: list = dataclasses.field(default_factory=list)
+
+    def exchange_list(self):
+        return Solution.exchange_list(self)[:1] + self.later
+
+
+def test_a_push_of_many_small_exchanges_is_drawn_as_dots(wall_slap):
+    """20 exchanges of 50 N s after the first (a sustained push): a dot at each centroid, no number, no arrow; the
+    legend says how many exchanges there were."""
+    sol, _ = wall_slap
+    first, one = sol.exchange_list()[:2]
+    later = [dict(one, index=k, point=[6.0, 11.0 + 0.05 * k, 0.7], impulse=[-50.0, 0.0, 0.0], impulse_magnitude=50.0)
+             for k in range(1, 21)]
+    ax = draw(Pushed(sol.case, sol.result, sol.status, later))
+    assert [t.get_text() for t in ax.texts if t.get_text().startswith("#")] == ["#0"]
+    assert not [g for g in later_gids(ax) if g.startswith(("exchange-normal", "exchange-impulse"))]
+    dots = [a for a in ax.lines if re.fullmatch(r"exchange-\d+", a.get_gid() or "")]
+    assert len(dots) == 20 and {a.get_markersize() for a in dots} == {2}
+    np.testing.assert_allclose([np.ravel(a.get_xydata()) for a in dots], [ex["point"][:2] for ex in later])
+    labels = legend_texts(ax)
+    assert any(s.startswith("21 exchanges, numbered as the panel numbers them") for s in labels)
+    assert any(s.startswith("smaller later exchange (20, impulse under 5%") for s in labels)
+
+
+def test_a_single_exchange_case_draws_no_later_exchange_artists():
+    with resources.as_file(case_path("seed_001_lucid_kia.toml")) as path:
+        sol = ks_jax.solve(ks_jax.load_case(path))
+    assert len(sol.exchange_list()) == 1
+    ax = draw(sol)
+    assert later_gids(ax) == []
+    assert not [t for t in ax.texts if t.get_text().startswith("#")]
+    assert not any("exchange" in s for s in legend_texts(ax))
