@@ -112,6 +112,18 @@ def test_outlines_on_the_way_sit_on_the_path(drawn, i):
     np.testing.assert_allclose(gaps, gaps.mean(), atol=step)
 
 
+def test_later_exchanges_leave_every_path_drawn(drawn):
+    """The T-bone spin-out meets again after the first exchange (many small later exchanges, each marked where it
+    happened): each vehicle's path to rest, its outlines on the way and at rest are drawn all the same."""
+    sol, _, ax = drawn
+    exchanges = sol.exchange_list()
+    assert len(exchanges) > 1
+    assert len([a for a in ax.lines if (a.get_gid() or "").startswith("exchange-")]) == len(exchanges) - 1
+    for i in (0, 1):
+        assert len(by_gid(ax, f"rest-path-{i}")) == 1 and len(by_gid(ax, f"rest-outline-{i}")) == 1
+        assert by_gid(ax, f"path-outline-{i}")
+
+
 def test_axes_take_in_every_path_and_mark(drawn):
     sol, paths, ax = drawn
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
