@@ -198,9 +198,10 @@ def _title(ax, solution, solved):
     ax.set_title(wrap_to_width(title, width, TITLE_SIZE, indent=""), fontsize=TITLE_SIZE)
 
 
-def _draw_outlines(ax, solution, names):
+def _draw_outlines(ax, solution, names, exchanges):
     """The footprints at first contact t_i (dashed; automatic contact only) and at the exchange (solid), and
-    a fixed object; returns the ``_Scene`` the other parts draw from."""
+    a fixed object (a wall's face long enough to take in every exchange with it, of ``exchanges``); returns the
+    ``_Scene`` the other parts draw from."""
     case, res = solution.case, solution.result
     inputs = case.inputs
     auto = case.auto_point or case.auto_normal
@@ -220,7 +221,8 @@ def _draw_outlines(ax, solution, names):
         _draw_box(ax, boxes[i], COLORS[i], "-", label=f"{names[i]} {when}")
     extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:moving])
     if case.fixed is not None:
-        _draw_fixed(ax, case.fixed, names[1], boxes[1], np.asarray(res.contact.point, float)[:2], extent)
+        later = [ex["point"][:2] for ex in exchanges[1:] if isinstance(ex["between"][1], str) and ex["point"]]
+        _draw_fixed(ax, case.fixed, names[1], boxes[1], np.asarray(res.contact.point, float)[:2], extent, later)
     return _Scene(inputs, res, names, moving, no_contact, extent, boxes, cgs)
 
 
@@ -439,7 +441,7 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
         ax.text(0.5, 0.5, f"not solved: {solution.status}", ha="center", va="center", transform=ax.transAxes)
         return ax
     exchanges = solution.exchange_list()  # the first, and those of the watched motion (a case with a road)
-    scene = _draw_outlines(ax, solution, names)
+    scene = _draw_outlines(ax, solution, names, exchanges)
     per_m = impulse_scale(exchanges, scene.extent)
     if not scene.no_contact:
         _draw_contact(ax, scene, case.fixed, per_m)
@@ -517,9 +519,10 @@ def _draw_measured_rest(ax, names, evidence, sigma):
                                  zorder=6, gid=f"measured-rest-sigma-{i}"))
 
 
-def _draw_fixed(ax, obj, name, box, near, extent):
+def _draw_fixed(ax, obj, name, box, near, extent, later=()):
     """A fixed object (``case.fixed.FixedObject``): a wall as its face, hatched on the wall's side, for
-    1.2 vehicle lengths each way of ``near`` (the centroid's side of the face); a pole as its circle; a
+    1.2 vehicle lengths each way of ``near`` (the centroid's side of the face) and of each of ``later`` (the
+    centroids of later exchanges with it, so that none is drawn off the face's end); a pole as its circle; a
     barrier as its box; grey, filled."""
     from matplotlib.patches import Circle, Polygon
 
@@ -529,7 +532,9 @@ def _draw_fixed(ax, obj, name, box, near, extent):
         along = np.array([-n[1], n[0]])
         foot = obj.point + along * float(along @ (near - obj.point))  # the face's point nearest the centroid
         half, depth = 1.2 * extent, 0.15 * extent
-        face = [foot - half * along, foot + half * along]
+        reach = [float(along @ (np.asarray(q, float) - foot)) for q in later]  # each later centroid along the face
+        reach = [r for r in reach if math.isfinite(r)]
+        face = [foot + (min([0.0, *reach]) - half) * along, foot + (max([0.0, *reach]) + half) * along]
         ax.add_patch(Polygon([*face, face[1] - depth * n, face[0] - depth * n], closed=True,
                              label=f"{name} (fixed wall; its face)", **style))
         ax.plot(*np.stack(face).T, "-", color="0.1", lw=2.5)

@@ -369,6 +369,21 @@ def test_later_exchanges_normal_and_impulse_on_the_first_exchanges_scale(wall_sl
             assert x0 <= x <= x1 and y0 <= y <= y1
 
 
+def test_the_wall_face_takes_in_every_exchange_with_it(wall_slap):
+    """The wall's face is drawn 1.2 vehicle lengths beyond the first centroid's foot and beyond each later one's
+    (the rear's slap lies further along the wall than the first exchange's face would reach)."""
+    sol, ax = wall_slap
+    (wall,) = [p for p in ax.patches if "(fixed wall; its face)" in p.get_label()]
+    ends = wall.get_xy()[:2]  # the face's two ends, then the hatched depth behind it
+    along = (ends[1] - ends[0]) / np.linalg.norm(ends[1] - ends[0])
+    v = sol.case.inputs.vehicles[0]
+    half = 1.2 * max(float(v.length), float(v.width))
+    reach = [float(along @ (np.asarray(ex["point"])[:2] - ends[0])) for ex in sol.exchange_list()]
+    assert min(reach) == pytest.approx(half, rel=1e-9)
+    assert max(reach) == pytest.approx(np.linalg.norm(ends[1] - ends[0]) - half, rel=1e-9)
+    assert max(abs(r - reach[0]) for r in reach) > half  # one lies beyond the face drawn about the first alone
+
+
 @dataclasses.dataclass
 class Pushed(Solution):
     """A solution whose exchanges after the first are ``later`` (plain data, as ``exchange_list`` gives them)."""
