@@ -12,6 +12,12 @@
 # is the two rest positions (measured to a foot) and the crush of each vehicle. The rest positions were made from
 # speeds of 25 mph (sedan) and 35 mph (pickup), so the fit can be checked against them.
 #
+# After the first exchange the two do not simply part: the pickup's front stays inside the sedan's side as both
+# turn, and it pushes again. ks-jax watches the pair as they move and makes each later exchange where they meet
+# (docs/model.md, "Contact interactions"): here some two dozen small ones in the first 0.4 s after the impact, which
+# the top view marks as dots. They move where the vehicles stop by tens of feet, so a fit from rest positions needs
+# them.
+#
 # The notebook fits the speeds, draws the collision and both paths to rest at the estimate, and then shows what
 # rest positions alone cannot tell apart: the road's friction and the speeds.
 
@@ -71,8 +77,8 @@ ax = top_view(start, evidence=measured, sigma=sigma)
 ax.figure.set_size_inches(7, 7.5)
 
 # %% [markdown]
-# At 20 and 30 mph both vehicles come to rest well away from the marks (the sedan about 12 ft, the pickup about
-# 7 ft), and the sedan turns through 60 deg where the scene has it at some 100 deg from its heading.
+# At 20 and 30 mph both vehicles come to rest well away from the marks (the sedan about 24 ft, the pickup about
+# 7 ft).
 #
 # ## The fit
 #
@@ -97,7 +103,7 @@ for path, r in res.residuals.items():
 # %% [markdown]
 # Both speeds come back at the speeds the rest positions were made from, with standard errors under 1 mph: a
 # foot of uncertainty in where a vehicle stopped is worth well under a mile an hour here, because the pickup
-# slides to rest over some 25 ft and the sedan over some 58 ft.
+# slides to rest over some 25 ft and the sedan over some 76 ft.
 #
 # The case at the estimate: its unknowns set to the fitted speeds (`ks_jax.set_input`) and solved again. Its rest
 # outlines now sit on the measured marks. (`ks-jax fit fit_rest_positions.json --plot fit.png` draws the same
@@ -141,9 +147,10 @@ for a in paths:
     print(f"{a:20}" + "".join(f"{three.correlation[a][b]:20.3f}" for b in paths))
 
 # %% [markdown]
-# The fit still lands near the truth, but look at the numbers around it. The standard error of the friction is
-# about 0.19, as wide as knowing nothing beyond "somewhere between 0.4 and 1.0", and the fit says so in
-# `unidentified` ("poorly determined"). The speeds' standard errors grow from under 1 mph to 3 or 4 mph. The
+# The fit still lands near the truth (it reports `converged: False`: along the valley of equally good
+# explanations it stops short of its tolerance), but look at the numbers around it. The standard error of the
+# friction is about 0.27, wider than knowing nothing beyond "somewhere between 0.4 and 1.0", and the fit says so in
+# `unidentified` ("poorly determined"). The speeds' standard errors grow from under 1 mph to 5 and 7 mph. The
 # correlations close to +1 say why: a higher friction with higher speeds puts the vehicles in nearly the same
 # places. A vehicle sliding to rest covers about v^2 / (2 mu g): the rest position fixes v^2 / mu much better
 # than v or mu. The two do not trade exactly, because the tyres' rolling resistance and cornering forces do not
