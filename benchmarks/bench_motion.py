@@ -70,8 +70,7 @@ def programs(seconds):
         n = M.steps_for(seconds, M.TIME_STEP)
         chunk = max(1, round(math.sqrt(n)))
         b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
-        zero = jnp.zeros_like(start.yaw)
-        carry = M.Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+        carry = M.start_carry(start)
         steps = lambda c, k: jax.lax.scan(lambda c, _: (M._step(b, c, M.TIME_STEP), None), c, None, length=k)[0]  # noqa: E731
         carry = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=n // chunk)[0]
         return M.RestResult(steps(carry, n % chunk).state.position, *(None,) * 5)

@@ -58,8 +58,7 @@ def chunks(step, seconds):
         n = M.steps_for(seconds, M.TIME_STEP)
         chunk = max(1, round(math.sqrt(n)))
         b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
-        zero = jnp.zeros_like(start.yaw)
-        carry = M.Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
+        carry = M.start_carry(start)
 
         def steps(c, k):
             return jax.lax.scan(lambda c, _: (step(b, c, M.TIME_STEP), None), c, None, length=k)[0]

@@ -207,16 +207,23 @@ def _closing(point, normal, s1, s2):
     return normal @ (_material(point, s1) - _material(point, s2))
 
 
-def _gaps(bodies, states, pairs, poles):
-    """(P,) m: every pair's separation as the bodies stand."""
-    gap = jnp.zeros(len(pairs), states.yaw.dtype)
+def _by_kind(pairs, poles):
+    """The pairs split by how their geometry is worked (static): (pole, their positions in ``pairs``, their first
+    bodies, their second bodies), the pairs against a box, then those against a pole's disc; kinds with no pair left
+    out."""
     for pole in (False, True):
         idx = [k for k, (_, j) in enumerate(pairs) if (j in poles) == pole]
         if idx:
-            i, j = [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
-            g = jax.vmap(lambda a, b, c, d: _pair_gap(a, b, c, d, pole))(
-                _take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j), _take(states, j))
-            gap = gap.at[jnp.asarray(idx)].set(g)
+            yield pole, idx, [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
+
+
+def _gaps(bodies, states, pairs, poles):
+    """(P,) m: every pair's separation as the bodies stand."""
+    gap = jnp.zeros(len(pairs), states.yaw.dtype)
+    for pole, idx, i, j in _by_kind(pairs, poles):
+        g = jax.vmap(lambda a, b, c, d: _pair_gap(a, b, c, d, pole))(
+            _take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j), _take(states, j))
+        gap = gap.at[jnp.asarray(idx)].set(g)
     return gap
 
 
@@ -251,33 +258,29 @@ def _watch_pairs(bodies, states, moving, pairs, poles):
     dtype = states.yaw.dtype
     gap, point, normal, un = (jnp.zeros(len(pairs), dtype), jnp.zeros((len(pairs), 3), dtype),
                               jnp.zeros((len(pairs), 3), dtype), jnp.zeros(len(pairs), dtype))
-    for pole in (False, True):
-        idx = [k for k, (_, j) in enumerate(pairs) if (j in poles) == pole]
-        if not idx:
-            continue
-        i, j = [pairs[k][0] for k in idx], [pairs[k][1] for k in idx]
+    for pole, idx, i, j in _by_kind(pairs, poles):
         v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
         # a wall is a box kilometres long about a point of its face: its circle of reach holds any vehicle near it
         apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jax.vmap(reach)(v2)
         moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
-        close = _any_row(jnp.any((apart < 0) & moves))
+        watched = (apart < 0) & moves
+        # a pair not looked at closely (apart, or at rest) does not overlap as far as the watch is concerned
+        far = jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0)
 
         def look(args, pole=pole):
             a, b, c, d = args
             g, pt, n = jax.vmap(lambda w, x, y, z: _pair_contact(w, x, y, z, pole))(a, b, c, d)
             return g, pt, n, jax.vmap(_closing)(pt, n, b, d)
 
-        def glance(args):
-            z = jnp.zeros((len(idx), 3), dtype)
-            return jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0), z, z, jnp.zeros(len(idx), dtype)
+        def glance(args, count=len(idx)):
+            z = jnp.zeros((count, 3), dtype)
+            return far, z, z, jnp.zeros(count, dtype)
 
-        g, pt, n, u = jax.lax.cond(close, look, glance, (v1, s1, v2, s2))
-        # a pair not looked at closely (apart, or at rest): not overlapping as far as the watch is concerned
-        watched = (apart < 0) & moves
-        g = jnp.where(watched, g, jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0))
+        g, pt, n, u = jax.lax.cond(_any_row(jnp.any(watched)), look, glance, (v1, s1, v2, s2))
         where = jnp.asarray(idx)
-        gap, point, normal, un = gap.at[where].set(g), point.at[where].set(pt), normal.at[where].set(n), un.at[
-            where].set(jnp.where(watched, u, 0.0))
+        gap, point, normal = gap.at[where].set(jnp.where(watched, g, far)), point.at[where].set(pt), \
+            normal.at[where].set(n)
+        un = un.at[where].set(jnp.where(watched, u, 0.0))
     return gap, point, normal, un
 
 

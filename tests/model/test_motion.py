@@ -137,8 +137,7 @@ def _energies(chassis, wheels, friction, start, n):
         q = jnp.stack([c.state.velocity[0], c.state.velocity[1], c.state.yaw_rate])
         return c, 0.5 * jnp.sum(m * q * q)
 
-    zero = jnp.zeros(())
-    carry = M.Carry(start, jnp.zeros(2), zero, zero, jnp.ones(()))
+    carry = M.start_carry(start)
     q0 = jnp.stack([start.velocity[0], start.velocity[1], start.yaw_rate])
     return jnp.concatenate([(0.5 * jnp.sum(m * q0 * q0))[None], jax.lax.scan(one, carry, None, length=n)[1]])
 
