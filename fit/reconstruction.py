@@ -31,7 +31,7 @@ from .posterior import sampler
 from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .problem import predict, to_z
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
-from .rows import count_at_best, rows_per_call, run_rows, several_minima, stick_thresholds
+from .rows import count_at_best, refit_block, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .report import improbable_note, misfit_note, not_fitted_status, stalled_statement, status_note, unmoved_note
@@ -363,9 +363,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         return a.values, a.sigmas, a.lo, a.hi, a.pm, a.pw
 
     # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
-    # (``ROWS_PER_CALL``): one compiled program. A refit starts at the estimate (``refit_perturbed``), so that
-    # the calls hold the fit's starts or the refits, whichever are more
-    block = rows_per_call(max(len(cases) * starts, int(monte_carlo))) if monte_carlo else None
+    # (``rows.refit_block``): one compiled program
+    block = refit_block(len(cases) * starts, int(monte_carlo)) if monte_carlo else None
     first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
                      to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)

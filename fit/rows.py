@@ -207,6 +207,15 @@ def rows_per_call(rows: int) -> int:
     return min(rows, ROWS_PER_CALL if on_cpu() else ROWS_PER_CALL_ELSEWHERE)
 
 
+def refit_block(fit_rows: int, refits: int) -> int:
+    """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts) with ``refits`` Monte Carlo
+    refits. On the CPU's path, the fit's own row count: a CPU runs a call's rows one after another, so that refits
+    in calls of a few rows cost what one call of them all does, and the fit, the same fit with refits and its
+    further rounds of starts then share the program that a fit without refits compiles. On an accelerator's, the
+    larger of the two, as a call's rows run side by side there (``rows_per_call`` caps both)."""
+    return rows_per_call(fit_rows if on_cpu() else max(fit_rows, refits))
+
+
 def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts,
              block=None, devices=None):
     """Fit B cases x S starts. inputs: stacked CaseInputs [B]; values, sigmas (B, m); lo, hi, pm, pw

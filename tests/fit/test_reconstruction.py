@@ -301,15 +301,19 @@ def test_refits_from_the_estimate_alone_are_the_refits_from_every_start_where_th
 @pytest.mark.slow
 def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing(monkeypatch):
     """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
-    calls of one row count (``rows_per_call``), the last call padded, so that both use one compiled program.
-    Calls of 5 rows split cases between calls and pad the last: each result equals that of one call holding
-    every row of the fit (3 cases x 2 starts) and of the refits (4, each from the estimate, padded to 6), and
-    the solver was compiled once for the fit and its refits (twice before, one program per row count)."""
+    calls of one row count (``refit_block``: on a CPU the fit's own row count), the last call padded, so that a
+    fit, the same fit with refits and the refits use one compiled program. Calls of 5 rows split cases between
+    calls and pad the last: each result equals that of calls of 6 rows, one holding every row of the fit (3 cases
+    x 2 starts) and one the refits (4, each from the estimate, padded to 6), and the solver was compiled once for
+    the fit and its refits."""
 
     case = load_case(FIT_SEED)
     kw = dict(starts=2, seed=3, monte_carlo=4)
+    assert rc.refit_block(3 * 2, 4) == 6 and rc.refit_block(2, 20) == 2  # this test runs on a CPU
+    fit.reconstruct_batch([case] * 3, starts=2, seed=3)  # no refits: one call of its 6 rows
+    programs = rc.solver_for(6)._cache_size()
     one_call = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc.rows_per_call(max(3 * 2, 4)) == 6
+    assert rc.solver_for(6)._cache_size() == programs  # the refits ran in the fit's program
     monkeypatch.setattr(rc, "ROWS_PER_CALL", 5)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 5)
     programs = rc.solver_for(5)._cache_size()
