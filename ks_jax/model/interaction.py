@@ -246,6 +246,35 @@ def _take(tree, idx):
     return jax.tree_util.tree_map(lambda x: jnp.stack([x[k] for k in idx]), tree)
 
 
+def _circles_apart(bodies, states, moving, i, j):
+    """For the pairs (``i``, ``j``: static lists of their bodies), how far apart their circles of reach are
+    (``contact.geometry.reach``; < 0 where they meet) and whether one of their vehicles moves (``moving`` (V,))."""
+    v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
+    # a wall is a box kilometres long about a point of its face: its circle of reach holds any vehicle near it
+    apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jax.vmap(reach)(v2)
+    moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
+    return apart, moves
+
+
+def _watch_gaps(bodies, states, moving, pairs, poles):
+    """(P,) m: the gap of every pair as ``_watch_pairs`` gives it, without the overlaps' centroids and normals: the
+    separation where the pair is watched, else the distance between its circles of reach."""
+    gap = jnp.zeros(len(pairs), states.yaw.dtype)
+    for pole, idx, i, j in _by_kind(pairs, poles):
+        apart, moves = _circles_apart(bodies, states, moving, i, j)
+        g = jax.vmap(lambda a, b, c, d: _pair_gap(a, b, c, d, pole))(
+            _take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j), _take(states, j))
+        watched = (apart < 0) & moves
+        gap = gap.at[jnp.asarray(idx)].set(jnp.where(watched, g, _stand_in_gap(apart)))
+    return gap
+
+
+def _stand_in_gap(apart):
+    """The gap of a pair not looked at closely (apart, or at rest), which does not overlap as far as the watch is
+    concerned: the distance between its circles of reach, 1 m where they meet."""
+    return jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0)
+
+
 def _watch_pairs(bodies, states, moving, pairs, poles):
     """(gap, point, normal, u_n) of every pair, (P,) (P, 3) (P, 3) (P,) (the pairs against a box vmapped together,
     those against a pole together), for bodies in ``states`` of which the vehicles ``moving`` (V,) bool move.
@@ -260,12 +289,9 @@ def _watch_pairs(bodies, states, moving, pairs, poles):
                               jnp.zeros((len(pairs), 3), dtype), jnp.zeros(len(pairs), dtype))
     for pole, idx, i, j in _by_kind(pairs, poles):
         v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
-        # a wall is a box kilometres long about a point of its face: its circle of reach holds any vehicle near it
-        apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jax.vmap(reach)(v2)
-        moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
+        apart, moves = _circles_apart(bodies, states, moving, i, j)
         watched = (apart < 0) & moves
-        # a pair not looked at closely (apart, or at rest) does not overlap as far as the watch is concerned
-        far = jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0)
+        far = _stand_in_gap(apart)
 
         def look(args, pole=pole):
             a, b, c, d = args
@@ -471,14 +497,16 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     carry = jax.vmap(motion.start_carry)(start)
     position, yaw, velocity, yaw_rate = _planes(bodies, carry)
     states = jax.vmap(_state3)(position, yaw, velocity, yaw_rate, bodies.z)
-    gap, point, normal, _ = _watch_pairs(bodies, states, carry.moving >= 1.0, pairs, tuple(poles))
+    # the gaps the first step interpolates its touches from (the centroids and normals are the first step's own)
+    gap = _watch_gaps(bodies, states, carry.moving >= 1.0, pairs, tuple(poles))
+    point = jnp.zeros((len(pairs), 3), dtype)
     k = max_exchanges
     zeros = lambda tree, *lead: jax.tree_util.tree_map(  # noqa: E731
         lambda x: jnp.zeros(lead + jnp.shape(x), jnp.result_type(x)), tree)
     pair0 = jnp.asarray(first_pair, jnp.int32)
     # the first exchange's interaction lasts while its pair's footprints overlap
     current = jnp.full((len(pairs),), -1, jnp.int32).at[pairs.index(tuple(first_pair))].set(0)
-    loop = _Loop(carry, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), gap, point, normal,
+    loop = _Loop(carry, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), gap, point, point,
                  jnp.full((len(pairs),), jnp.inf, dtype), jnp.zeros(len(pairs), bool), current,
                  jnp.ones((), jnp.int32), zeros(_pick(states, 0), k, 2),
                  zeros(Contact(point[0], point[0], *(gap[0],) * 3), k), jnp.zeros(k, dtype),
