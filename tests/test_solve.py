@@ -17,12 +17,12 @@ from ks_jax.model.motion import RestResult
 from samples import US_CASE, run_cli
 
 
-def _alone_batched_and_swept(case):
-    """[(status, {path: np.ndarray})] of ``case`` solved alone, of the two rows of a batch of it twice, and of the
-    first point of a sweep of two points (its own speed twice). ``solve`` compiles one case unbatched and two
-    cases with vmap, and the sweep its own chunk of the case's stages, all with ``compilation.QUICK_CPU``:
-    programs which XLA fuses and rounds differently. (That the quick settings give the values of XLA's
-    defaults is checked apart, once: tests/model/test_transforms.py::
+def _alone_batched_and_swept(case, swept=True):
+    """[(status, {path: np.ndarray})] of ``case`` solved alone, of the two rows of a batch of it twice, and where
+    ``swept``, of the first point of a sweep of two points (its own speed twice). ``solve`` compiles one case
+    unbatched and two cases with vmap, and the sweep its own chunk of the case's stages, all with
+    ``compilation.QUICK_CPU``: programs which XLA fuses and rounds differently. (That the quick settings give the
+    values of XLA's defaults is checked apart, once: tests/model/test_transforms.py::
     test_solve_compiles_with_the_quick_settings_and_gets_the_defaults_values for ``solve`` and
     tests/sweeps/test_sweep.py::test_a_small_sweep_compiles_quick_and_gets_the_values_of_xla_defaults for
     ``sweep``.)"""
@@ -32,6 +32,8 @@ def _alone_batched_and_swept(case):
         # a vehicle's motion to rest (result.rest[i]) is named as its other results are: vehicles[i].rest_position
         out.append((sol.status, {jax.tree_util.keystr(k).replace(".rest[", ".vehicles["): np.asarray(x, float)
                                  for k, x in leaves}))
+    if not swept:
+        return out
     columns = {}
     for path, x in out[0][1].items():
         if path == ".contact.status" or (path == ".contact.time" and not case.auto_point):
@@ -56,21 +58,24 @@ def _alone_batched_and_swept(case):
                                          if p.suffix in (".json", ".toml")))
 @pytest.mark.slow
 def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
-    """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three
-    stages: programs which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A
-    quantity that is 0 up to rounding (the tangential impulse of the inline seed crashes) is where a
-    double-where's stand-in could leak: alone, the seed chapter's crash gave 1.1 N s of tangential impulse,
-    in a batch 0."""
-    (status, alone), *others = _alone_batched_and_swept(load_case(Path(ks_jax.__file__).parent / "cases" / name))
+    """``solve`` compiles a case alone without vmap and two cases with it, and ``sweep`` its own three stages:
+    programs which XLA fuses and rounds differently. Every result agrees (to 1e-9 of its scale). A quantity that
+    is 0 up to rounding (the tangential impulse of the inline seed crashes) is where a double-where's stand-in
+    could leak: alone, the seed chapter's crash gave 1.1 N s of tangential impulse, in a batch 0. Every result of
+    the exchange is swept in the cases without a road; a case with a road is swept by the matrix
+    (tests/test_matrix.py, ``check_sweep``: the sweep's results at the case's own values against ``solve``), as
+    its sweep compiles the watched motion once more."""
+    case = load_case(Path(ks_jax.__file__).parent / "cases" / name)
+    swept = case.motion is None
+    (status, alone), *others = _alone_batched_and_swept(case, swept=swept)
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
-    case = load_case(Path(ks_jax.__file__).parent / "cases" / name)
     if case.motion is not None:
         moving = [0] if case.fixed is not None else [0, 1]  # a fixed object does not move
         fields += [f".vehicles[{i}].{f}" for i in moving for f in RestResult._fields if f != "path"]
     later = {p for p in alone if p.startswith(".interactions.")}  # the watched motion's, with a road
-    assert sorted(set(alone) - later) == sorted(fields) and len(others) == 3
-    assert bool(later) == (load_case(Path(ks_jax.__file__).parent / "cases" / name).motion is not None)
+    assert sorted(set(alone) - later) == sorted(fields) and len(others) == 2 + swept
+    assert bool(later) == (case.motion is not None)
     for (other_status, other), what in zip(others, ("batch row 0", "batch row 1", "sweep")):
         assert other_status == status, what
         assert sorted(other) == sorted(alone) if what != "sweep" else set(other) <= set(alone), what
