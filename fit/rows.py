@@ -183,9 +183,10 @@ def stack(trees):
 # Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, at most. The fit and
 # its refits then run in calls of one row count (the last call of each padded with copies of its last row), so
 # that they share one compiled program instead of compiling one for each row count: compiling takes much longer
-# than the calls themselves (``refit_block``). A fit without refits is one call of exactly its rows. On a CPU a call's rows run one
-# after another and calls of a few hundred rows lose little to one call of them all (docs/performance.md); on
-# other devices a call's rows run side by side and its latency counts more, hence a larger block.
+# than the calls themselves (``refit_block``). A fit without refits is one call of exactly its rows. On a CPU a
+# call's rows run one after another and calls of a few hundred rows lose little to one call of them all
+# (docs/performance.md); on other devices a call's rows run side by side and its latency counts more, hence a
+# larger block.
 ROWS_PER_CALL = 500
 ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 
