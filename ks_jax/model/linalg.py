@@ -221,12 +221,22 @@ def _sincos_values(x):
     return jnp.where(q >= 2, -sin, sin), jnp.where((q == 1) | (q == 2), -cos, cos)
 
 
+@functools.partial(jax.jit, static_argnums=1)
+def _sincos_stored(x, cpu: bool):
+    """``materialize(*_sincos_values(x))``, traced once per shape and path (``cpu``: ``on_cpu()`` where it is
+    called, which the trace reads, in the key of JAX's cache): within a traced program a call is one operation,
+    which XLA inlines. The dozens of angles of a program with a motion to rest would otherwise trace the
+    polynomials again each, a quarter of its operations."""
+    del cpu
+    return materialize(*_sincos_values(x))
+
+
 @jax.custom_jvp
 def sincos(x):
     """(sin x, cos x) as vectorizable polynomials (see ``_sincos_values``), stored once
     (``materialize``: else XLA copies the polynomial into every loop that reads the values, and
     compiles each copy); derivative exact in terms of the values."""
-    return materialize(*_sincos_values(x))
+    return _sincos_stored(x, on_cpu())
 
 
 @sincos.defjvp
@@ -256,12 +266,19 @@ def _atan2_values(y, x):
     return jnp.where(jnp.signbit(y), -a, a)
 
 
+@functools.partial(jax.jit, static_argnums=2)
+def _atan2_stored(y, x, cpu: bool):
+    """``materialize(_atan2_values(y, x))[0]``, traced once per shape and path (as ``_sincos_stored``)."""
+    del cpu
+    return materialize(_atan2_values(y, x))[0]
+
+
 @jax.custom_jvp
 def _atan2(y, x):
     """atan2 as a vectorizable polynomial (``_atan2_values``); derivative
     (x dy - y dx) / (x^2 + y^2), 0 at the origin."""
     y, x = jnp.broadcast_arrays(y, x)
-    return materialize(_atan2_values(y, x))[0]
+    return _atan2_stored(y, x, on_cpu())
 
 
 @_atan2.defjvp
