@@ -246,10 +246,10 @@ def _take(tree, idx):
     return jax.tree_util.tree_map(lambda x: jnp.stack([x[k] for k in idx]), tree)
 
 
-def _circles_apart(bodies, states, moving, i, j):
-    """For the pairs (``i``, ``j``: static lists of their bodies), how far apart their circles of reach are
-    (``contact.geometry.reach``; < 0 where they meet) and whether one of their vehicles moves (``moving`` (V,))."""
-    v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
+def _circles_apart(v1, s1, v2, s2, moving, i, j):
+    """For the pairs of bodies ``i`` and ``j`` (static lists; ``v1``, ``s1``, ``v2``, ``s2`` their vehicles and
+    states, stacked in that order), how far apart their circles of reach are (``contact.geometry.reach``; < 0 where
+    they meet) and whether one of their vehicles moves (``moving`` (V,))."""
     # a wall is a box kilometres long about a point of its face: its circle of reach holds any vehicle near it
     apart = la.safe_norm(s1.position[:, :2] - s2.position[:, :2]) - jax.vmap(reach)(v1) - jax.vmap(reach)(v2)
     moves = jnp.stack([moving[a] | (moving[b] if b < moving.shape[0] else False) for a, b in zip(i, j)])
@@ -258,14 +258,13 @@ def _circles_apart(bodies, states, moving, i, j):
 
 def _watch_gaps(bodies, states, moving, pairs, poles):
     """(P,) m: the gap of every pair as ``_watch_pairs`` gives it, without the overlaps' centroids and normals: the
-    separation where the pair is watched, else the distance between its circles of reach."""
-    gap = jnp.zeros(len(pairs), states.yaw.dtype)
-    for pole, idx, i, j in _by_kind(pairs, poles):
-        apart, moves = _circles_apart(bodies, states, moving, i, j)
-        g = jax.vmap(lambda a, b, c, d: _pair_gap(a, b, c, d, pole))(
-            _take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j), _take(states, j))
-        watched = (apart < 0) & moves
-        gap = gap.at[jnp.asarray(idx)].set(jnp.where(watched, g, _stand_in_gap(apart)))
+    separation (``_gaps``) where the pair is watched, else the distance between its circles of reach."""
+    gap = _gaps(bodies, states, pairs, poles)
+    for _, idx, i, j in _by_kind(pairs, poles):
+        apart, moves = _circles_apart(_take(bodies.vehicle, i), _take(states, i), _take(bodies.vehicle, j),
+                                      _take(states, j), moving, i, j)
+        where = jnp.asarray(idx)
+        gap = gap.at[where].set(jnp.where((apart < 0) & moves, gap[where], _stand_in_gap(apart)))
     return gap
 
 
@@ -289,7 +288,7 @@ def _watch_pairs(bodies, states, moving, pairs, poles):
                               jnp.zeros((len(pairs), 3), dtype), jnp.zeros(len(pairs), dtype))
     for pole, idx, i, j in _by_kind(pairs, poles):
         v1, v2, s1, s2 = _take(bodies.vehicle, i), _take(bodies.vehicle, j), _take(states, i), _take(states, j)
-        apart, moves = _circles_apart(bodies, states, moving, i, j)
+        apart, moves = _circles_apart(v1, s1, v2, s2, moving, i, j)
         watched = (apart < 0) & moves
         far = _stand_in_gap(apart)
 
