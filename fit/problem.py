@@ -112,6 +112,7 @@ class Problem:
     auto_normal: bool = False
     pole: bool = False  # vehicle 2 is a pole (``Case.pole``)
     motion: Motion | None = None  # the vehicles move on to rest (``Case.motion``)
+    between: tuple = (0, 1)  # the first exchange's bodies (``Case.between``)
 
     @property
     def n(self) -> int:
@@ -483,7 +484,8 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
                 x = unknowns[j]
                 unknowns[j] = Unknown(x.path, float(lo[k]), float(hi[k]), x.start, x.prior)
         ties = input_ties(case, list(paths)) if ties_matter else ()
-        key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion)
+        key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion,
+               case.between)
         if key not in problems:
             evidence = tuple((p, *kind) for p, kind in zip(evidence_paths, kinds[key[0]]))
             problems[key] = Problem(paths, ties, evidence, *key[2:])
@@ -499,7 +501,7 @@ def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence],
     checks = checks or PathChecks()
     ev = tuple((e.path, *checks.evidence(case, e.path)) for e in evidence)
     return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal),
-                   bool(case.pole), case.motion)
+                   bool(case.pole), case.motion, case.between)
 
 
 # ---------------------------------------------------------------------------------------
@@ -546,7 +548,8 @@ def predict(problem: Problem, inputs, x, smoothing):
     """(predicted evidence (m,), (status (), sliding (), |J_t| / J_n ())) for unknowns x (n,), SI / the
     result's units. |J_t| / J_n of a contact that sticks is the least friction that keeps it sticking."""
     inputs = apply_unknowns(problem, inputs, x)
-    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole, problem.motion)
+    res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole, problem.motion,
+                       problem.between)
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
     c = res.contact

@@ -129,13 +129,16 @@ def text_report(sol, reference: bool = True, units: str = "both") -> str:
         lines.append(f"  status: {sol.status}")
         return "\n".join(lines)
     c = sol.result.contact
-    v1, v2 = sol.result.vehicles
+    v1 = sol.result.vehicles[sol.case.between[0]]
     lines += ["", "  contact", _row("status", sol.status), *_timing_rows(sol)]
+    if sol.case.vehicle_count + len(sol.case.fixed) > 2 or sol.case.between != (0, 1):
+        lines.append(_row("between", " and ".join(f"{sol.case.body_path(b)} ({visible(sol.case.vehicle_names[b])})"
+                                                 for b in sol.case.between)))
     if sol.status == "no_contact":  # no centroid, normal or closing speed: the exchange's are stand-ins
         lines.append(_row("impulse", "none (no contact)"))
     else:
         lines += _contact_rows(sol, c)
-    lines += _vehicle_rows(sol, v1, v2)
+    lines += _vehicle_rows(sol)
     lines += _exchange_rows(sol)
     notes = [f"{visible(note)}." for note in sol.notes()]
     if sol.status == "no_contact":
@@ -172,16 +175,27 @@ def _contact_rows(sol, c):
     ]
 
 
-def _vehicle_rows(sol, v1, v2):
+def _vehicle_rows(sol):
+    """Each vehicle's results of the first exchange (and its motion to rest), then each fixed object."""
     lines = []
-    for k, (name, v) in enumerate(zip(sol.case.vehicle_names, (v1, v2))):
-        if k == 1 and sol.case.fixed is not None:  # the object has no per-vehicle results
-            lines += ["", f"  fixed object: {visible(name)}", f"  {describe(sol.case.fixed)}",
-                      "  (infinite mass, at rest: vehicle 1 takes all of the energy loss, EES = sqrt(2 E / m))"]
+    case = sol.case
+    n = case.vehicle_count
+    for k, (name, v) in enumerate(zip(case.vehicle_names, sol.result.vehicles)):
+        if k >= n:  # a fixed object has no per-vehicle results
+            struck = k in case.between
+            lines += ["", f"  fixed object: {visible(name)} = {case.body_path(k)}", f"  {describe(case.fixed[k - n])}",
+                      "  (infinite mass, at rest" + (": vehicle 1 takes all of the first exchange's energy loss, EES = "
+                                                      "sqrt(2 E / m))" if struck else ")")]
+            continue
+        if k not in case.between:
+            lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)"]
+            if sol.result.rest is not None and sol.result.rest[k] is not None:
+                lines += _rest_rows(sol.result.rest[k], case.motion)
             continue
         lines += [
             "",
-            f"  vehicle {k + 1} = vehicles[{k}]: {visible(name)}",  # as the output paths (sweeps, fits, --json) name it
+            # as the output paths (sweeps, fits, --json) name it
+            f"  vehicle {case.between.index(k) + 1} = vehicles[{k}]: {visible(name)}",
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
@@ -211,7 +225,7 @@ def _exchange_rows(sol):
     if len(exchanges) < 2:
         return []
     names = sol.body_names()
-    n = sol.vehicle_count()
+    n = sol.case.vehicle_count
     lines = ["", f"  exchanges ({len(exchanges)}; the manual's \"next contact\")"]
     for ex in exchanges:
         pair = " and ".join(names[b if isinstance(b, int) else n + int(b[6:-1])][0] for b in ex["between"])

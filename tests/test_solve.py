@@ -40,10 +40,10 @@ def _alone_batched_and_swept(case, swept=True):
             continue  # the sweep's status is its own; a first-contact time is automatic contact's
         if path.startswith(".interactions."):
             continue  # the later exchanges, as a sweep names them (exchanges[k]): tests/test_interactions.py
-        if case.fixed is not None and path.startswith(".vehicles[1]."):
+        if case.fixed and path.startswith(".vehicles[1]."):
             continue  # a fixed object has no results to sweep
         columns[path] = None if np.ndim(x) == 0 else [f"{path[1:]}[{i}]" for i in range(len(x))]
-    vehicle = "vehicles[0]" if case.fixed is not None else "vehicles[1]"  # against a fixed object: the one vehicle
+    vehicle = "vehicles[0]" if case.fixed else "vehicles[1]"  # against a fixed object: the one vehicle
     speed = float(get_input(case.inputs, f"{vehicle}.speed"))
     swept = ks_jax.sweep(case, {f"{vehicle}.speed": [speed, speed]}, mode="zip",
                          outputs=[c for p, cols in columns.items() for c in (cols or [p[1:]])])
@@ -71,7 +71,7 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
     fields = [f".contact.{f}" for f in ks_jax.ContactResult._fields]
     fields += [f".vehicles[{i}].{f}" for i in range(2) for f in ks_jax.VehicleResult._fields]
     if case.motion is not None:
-        moving = [0] if case.fixed is not None else [0, 1]  # a fixed object does not move
+        moving = [0] if case.fixed else [0, 1]  # a fixed object does not move
         fields += [f".vehicles[{i}].{f}" for i in moving for f in RestResult._fields if f != "path"]
     later = {p for p in alone if p.startswith(".interactions.")}  # the watched motion's, with a road
     assert sorted(set(alone) - later) == sorted(fields) and len(others) == 2 + swept

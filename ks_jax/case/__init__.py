@@ -13,8 +13,9 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 """
 
 from .errors import CaseError, CaseWarning, visible, visible_lines
-from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, RoadInputs, VehicleInputs
-from .inputs import as_arrays, to_pytrees
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, PairInputs, RoadInputs
+from .inputs import VehicleInputs
+from .inputs import as_arrays, body_states, to_pytrees
 from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
@@ -26,8 +27,8 @@ from .paths import set_input, without_road
 __all__ = [
     "CUMULATIVE_OUTPUTS",
     "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs",
-    "CaseWarning", "ContactInputs", "InteractionInputs", "PathError", "VehicleInputs", "as_arrays", "at_rest_after",
-    "automatic_part",
+    "CaseWarning", "ContactInputs", "InteractionInputs", "PairInputs", "PathError", "VehicleInputs", "as_arrays",
+    "at_rest_after", "automatic_part", "body_states",
     "canonical_path", "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "get_input",
     "get_output", "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases",
     "on_fixed_object", "output_kind", "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees",

@@ -1,5 +1,5 @@
-"""Fixed objects (docs/model.md, "Fixed objects"): a wall, a pole or a rigid barrier struck by one vehicle,
-given to the exchange as its vehicle 2: a box at rest of infinite mass (``model.checks.is_fixed``: 1/m and
+"""Fixed objects (docs/model.md, "Fixed objects"): a wall, a pole or a rigid barrier, given to the exchanges as a
+body: a box at rest of infinite mass (``model.checks.is_fixed``: 1/m and
 I^-1 are 0), whose footprint automatic contact reads as it reads a second vehicle's.
 
 - barrier: its own box, from the ground up to ``height``.
@@ -44,9 +44,9 @@ class FixedObject(NamedTuple):
     height: float | None = None
 
 
-def object_inputs(obj: FixedObject, vehicle: VehicleInputs) -> VehicleInputs:
-    """The fixed object as the exchange's vehicle 2: a box at rest, of infinite mass (``vehicle``: the vehicle
-    that strikes it, whose position decides how long a wall must be)."""
+def object_inputs(obj: FixedObject, vehicles) -> VehicleInputs:
+    """The fixed object as a body of the exchanges: a box at rest, of infinite mass (``vehicles``: the case's
+    ``VehicleInputs``, whose positions decide how long a wall must be)."""
     if obj.kind == "barrier":
         xy, yaw, length, width, height = obj.position, obj.yaw, obj.length, obj.width, obj.height
         cg_to_front = 0.5 * length
@@ -54,7 +54,8 @@ def object_inputs(obj: FixedObject, vehicle: VehicleInputs) -> VehicleInputs:
         xy, length, width, height = obj.position, obj.diameter, obj.diameter, OBJECT_HEIGHT
         yaw, cg_to_front = 0.0, 0.5 * obj.diameter
     else:  # wall: the box's rear face (body -x) is the wall's face, so the box is turned to face into the wall
-        reach = float(np.hypot(*(np.asarray(vehicle.position[:2]) - obj.point))) + WALL_SPEED * HORIZON + WALL_MARGIN
+        far = max(float(np.hypot(*(np.asarray(v.position[:2]) - obj.point))) for v in vehicles)
+        reach = far + WALL_SPEED * HORIZON + WALL_MARGIN
         xy, yaw, length, width, height = obj.point, obj.normal + math.pi, 2.0 * reach, 2.0 * reach, OBJECT_HEIGHT
         cg_to_front = length  # the "CG" on the face: the box runs from the face into the wall
     return VehicleInputs(mass=math.inf, inertia=np.eye(3), length=length, width=width, height=height,

@@ -2,7 +2,8 @@
 
 ``CaseInputs`` holds every scalar a user may vary, sweep or fit, in the form case files give them
 (speed and course rather than a velocity vector, a normal's azimuth and pitch). ``to_pytrees`` turns it
-into the physics' (Vehicle, State, Vehicle, State, Contact).
+into the physics' (Vehicle, State, Vehicle, State, Contact) of the first exchange's pair of bodies; ``body_states``
+gives every body's ``State``.
 """
 
 from __future__ import annotations
@@ -78,15 +79,26 @@ class InteractionInputs(NamedTuple):
     friction: Any
     penetration_time: Any
 
+class PairInputs(NamedTuple):
+    """The later exchanges of one pair of bodies (a case's ``pairs`` entry), SI: ``restitution``, ``friction``,
+    ``penetration_time`` (s); which pair it is, is ``Motion.pairs``."""
+
+    restitution: Any
+    friction: Any
+    penetration_time: Any
+
 class CaseInputs(NamedTuple):
-    """``vehicles``: two ``VehicleInputs``; ``contact``: ``ContactInputs``; ``road``: ``RoadInputs``, or None for a
-    case without motion to rest; ``interaction``: ``InteractionInputs`` where the case sets the later exchanges'
-    own values, None where they are the first contact's."""
+    """``vehicles``: a ``VehicleInputs`` per body, the case's vehicles (1 to 8) and then its fixed objects (0 to 8,
+    each a box at rest of infinite mass, ``case.fixed.object_inputs``); ``contact``: ``ContactInputs``; ``road``:
+    ``RoadInputs``, or None for a case without motion to rest; ``interaction``: ``InteractionInputs`` where the case
+    sets the later exchanges' own values, None where they are the first contact's; ``pairs``: a ``PairInputs`` for
+    each pair of ``Motion.pairs``, whose own values take the place of the case's."""
 
     vehicles: tuple
     contact: ContactInputs
     road: Any = None
     interaction: Any = None
+    pairs: tuple = ()
 
 @dataclass(frozen=True)
 class Motion:
@@ -96,7 +108,8 @@ class Motion:
     which runs every step to the time limit (``model.motion.to_rest``); forward mode (``jax.jacfwd``, as fits use)
     needs it False. The watched motion's settings (docs/model.md, "Contact interactions";
     ``model.interaction.interact``): ``max_exchanges`` per case, the first included; ``approach_tolerance`` m/s;
-    ``poles``: the bodies that automatic contact meets as a pole's disc."""
+    ``poles``: the bodies that automatic contact meets as a pole's disc; ``pairs``: the pairs of bodies (i, j),
+    i < j, whose later exchanges have values of their own (``CaseInputs.pairs``)."""
 
     time_step: float
     time_limit: float
@@ -105,13 +118,16 @@ class Motion:
     max_exchanges: int = 16
     approach_tolerance: float = 0.05
     poles: tuple = ()
+    pairs: tuple = ()
 
 @dataclass(frozen=True)
 class Case:
     """One case: its name, its inputs (None if invalid), and which contact parts are automatic. ``fixed``: the
-    ``case.fixed.FixedObject`` struck in place of a second vehicle (None for two vehicles); its inputs are then
-    those of vehicle 2, a box at rest of infinite mass. ``motion``: the integration's settings where the case has a
-    ``road`` (its vehicles move on to rest), else None."""
+    case's ``case.fixed.FixedObject``s, in file order (empty for none); their inputs follow the vehicles' in
+    ``inputs.vehicles``, boxes at rest of infinite mass. ``vehicle_names``: every body's name, the vehicles' and then
+    the fixed objects'. ``between``: the bodies of the first exchange (indices into ``inputs.vehicles``: its vehicle
+    1 and vehicle 2). ``motion``: the integration's settings where the case has a ``road`` (its vehicles move on to
+    rest), else None."""
 
     name: str
     inputs: CaseInputs | None
@@ -121,43 +137,70 @@ class Case:
     error: str | None = None
     raw: dict = field(default_factory=dict, compare=False, repr=False)
     source: str | None = None
-    fixed: Any = None
+    fixed: tuple = ()
     motion: Motion | None = None
+    between: tuple = (0, 1)
 
     @property
     def valid(self) -> bool:
         return self.error is None
 
     @property
+    def vehicle_count(self) -> int:
+        """How many of the case's bodies are vehicles (the others, after them, are fixed objects)."""
+        return len(self.vehicle_names) - len(self.fixed)
+
+    @property
+    def struck_object(self):
+        """The fixed object of the first exchange (its vehicle 2), or None where that is a vehicle."""
+        k = self.between[1] - self.vehicle_count
+        return self.fixed[k] if k >= 0 else None
+
+    @property
     def pole(self) -> bool:
-        """The case strikes a pole: automatic contact meets vehicle 2 as a disc (``model.contact.pole``), not a box."""
-        return self.fixed is not None and self.fixed.kind == "pole"
+        """The first exchange strikes a pole: automatic contact meets it as a disc (``model.contact.pole``), not a
+        box."""
+        return self.struck_object is not None and self.struck_object.kind == "pole"
+
+    def body_path(self, b: int) -> str:
+        """How results name body ``b``: "vehicles[i]" for a vehicle, "fixed[k]" for a fixed object."""
+        n = self.vehicle_count
+        return f"vehicles[{b}]" if b < n else f"fixed[{b - n}]"
 
 def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
     """Every leaf as a jnp array (of ``dtype``, default: JAX's default float)."""
     dtype = dtype or jnp.result_type(float)
     return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dtype), inputs)
 
-def to_pytrees(inputs: CaseInputs):
-    """(Vehicle, State, Vehicle, State, Contact) from CaseInputs. Pure and differentiable.
+def to_pytrees(inputs: CaseInputs, between=(0, 1)):
+    """(Vehicle, State, Vehicle, State, Contact) of the bodies ``between`` (static: their indices in
+    ``inputs.vehicles``) from CaseInputs. Pure and differentiable.
 
     A velocity or normal made from a non-finite speed, course, velocity_z or angle is NaN, so that
     the exchange gives the row its status; it is computed from stand-ins (the double-where), so that
     the row's zero cotangent times an infinite derivative cannot make NaN the gradient of a parameter
     it shares with other rows."""
     out = []
-    for v in inputs.vehicles:
-        vehicle = Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height)
-        ok, (speed, course, vz) = _finite_stand_ins(v.speed, v.course, v.velocity_z)
-        sin, cos = la.sincos(course)
-        velocity = jnp.where(ok, jnp.stack([speed * cos, speed * sin, vz * jnp.ones_like(speed)]), jnp.nan)
-        state = State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
-        out += [vehicle, state]
+    for b in between:
+        v = inputs.vehicles[b]
+        out += [Vehicle(v.mass, v.inertia, v.length, v.width, v.height, v.cg_to_front, v.cg_height), _state(v)]
     c = inputs.contact
     ok, (azimuth, pitch) = _finite_stand_ins(c.normal, c.normal_pitch)
     contact = Contact(c.point, jnp.where(ok, normal_from_angles(azimuth, pitch), jnp.nan), c.restitution,
                       c.friction, c.penetration_time)
     return (*out, contact)
+
+def body_states(inputs: CaseInputs) -> tuple:
+    """Every body's ``State`` at the case start, in the order of ``inputs.vehicles``."""
+    return tuple(_state(v) for v in inputs.vehicles)
+
+
+def _state(v: VehicleInputs) -> State:
+    ok, (speed, course, vz) = _finite_stand_ins(v.speed, v.course, v.velocity_z)
+    sin, cos = la.sincos(course)
+    velocity = jnp.where(ok, jnp.stack([speed * cos, speed * sin, vz * jnp.ones_like(speed)]), jnp.nan)
+    return State(v.position, velocity, v.yaw, v.pitch, v.roll, v.angular_velocity)
+
 
 def _finite_stand_ins(*xs):
     """(ok, xs with 0 for each where ok is False): ok where all of ``xs`` are finite."""

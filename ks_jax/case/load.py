@@ -23,7 +23,8 @@ from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
 from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
-from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, RoadInputs, VehicleInputs
+from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, PairInputs, RoadInputs
+from .inputs import VehicleInputs
 from .paths import check_output_path, output_kind
 from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, INTERACTION_FIELDS, ROAD_FIELDS, TEXT_FIELDS
 from .schema import VEHICLE_FIELDS
@@ -208,29 +209,77 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
     if vehicles is None:
         raise CaseError(f"{_where(name, 'vehicles')}: missing field")
-    wanted = 1 if "fixed" in d else 2
-    if not isinstance(vehicles, list) or len(vehicles) != wanted:
+    if not isinstance(vehicles, list) or not 1 <= len(vehicles) <= MAX_VEHICLES:
         given = f": {len(vehicles)} given" if isinstance(vehicles, list) else f" = {_shown(vehicles)}: not a list"
-        rule = ("a case with a fixed object needs exactly one vehicle (the object takes the second's place)"
-                if wanted == 1 else "a case needs exactly two vehicles, or one and a fixed object (\"fixed\")")
-        raise CaseError(f"{_where(name, 'vehicles')}{given}; {rule}")
+        raise CaseError(f"{_where(name, 'vehicles')}{given}; a case has 1 to {MAX_VEHICLES} vehicles")
+    listed = d.get("fixed", [])
+    if isinstance(listed, dict):
+        objects_raw, where = [listed], lambda k: "fixed"
+    elif isinstance(listed, list) and len(listed) <= MAX_FIXED:
+        objects_raw, where = listed, lambda k: f"fixed[{k}]"
+    else:
+        given = f": {len(listed)} given" if isinstance(listed, list) else f" = {_shown(listed)}"
+        raise CaseError(f"{_where(name, 'fixed')}{given}; must be one fixed object or a list of at most {MAX_FIXED}, "
+                        "e.g. {\"kind\": \"wall\", \"point\": [0, 0], \"normal\": 180}")
+    if len(vehicles) + len(objects_raw) < 2:
+        raise CaseError(f"{_where(name, 'vehicles')}: 1 given and no fixed object; a case needs two bodies: two "
+                        "vehicles, or a vehicle and a fixed object (\"fixed\")")
     if "contact" not in d:
         raise CaseError(f"{_where(name, 'contact')}: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
-    fixed = _fixed_object(d["fixed"], name) if "fixed" in d else None
-    if fixed is not None:
-        veh = (veh[0], object_inputs(fixed, veh[0]))
+    objects = tuple(_fixed_object(o, name, where(k)) for k, o in enumerate(objects_raw))
+    bodies = veh + tuple(object_inputs(o, veh) for o in objects)
+    between = _between(d.get("between"), len(veh), len(objects), name)
     contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
     if "reference" in d:
         _check_reference(d["reference"], name)
-    road, motion = _road(d, veh, name)
-    interaction, motion = _interaction(d, motion, fixed, name)
-    inputs = CaseInputs(veh, contact, road, interaction)
-    names = tuple(str(v.get("name", f"vehicle {i + 1}")) for i, v in enumerate(vehicles))
-    if fixed is not None:
-        names = (names[0], str(d["fixed"].get("name", fixed.kind)))
-    return Case(name, inputs, auto_point, auto_normal, names, None, d, source, fixed, motion)
+    if "road" not in d and len(bodies) > 2:
+        raise CaseError(f"{_where(name, 'road')}: missing field; a case of more than two bodies needs a road: the "
+                        "exchanges after the first happen while the bodies move on (add \"road\": {\"friction\": "
+                        "0.7}; docs/model.md, \"Contact interactions\")")
+    road, motion = _road(d, bodies, len(veh), name)
+    interaction, motion = _interaction(d, motion, objects, len(veh), name)
+    pairs, motion = _pairs(d, motion, interaction, len(veh), len(objects), name)
+    inputs = CaseInputs(bodies, contact, road, interaction, pairs)
+    names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
+                  for i, v in enumerate(vehicles))
+    names += tuple(str(o.get("name", o["kind"])) for o in objects_raw)
+    return Case(name, inputs, auto_point, auto_normal, names, None, d, source, objects, motion, between)
 
+
+MAX_VEHICLES = 8  # vehicles in a case at most (docs/model.md, "Contact interactions")
+MAX_FIXED = 8  # fixed objects in a case at most
+
+
+def _body(value, vehicles, objects, path, case_name, vehicle_only=False) -> int:
+    """A body named in a case file as a vehicle's index (0, 1, ...) or "fixed[k]": its index among the case's
+    bodies (the vehicles, then the fixed objects)."""
+    if isinstance(value, int) and not isinstance(value, bool) and 0 <= value < vehicles:
+        return value
+    if isinstance(value, str) and not vehicle_only:
+        text = value.replace(" ", "")
+        if text.startswith("fixed[") and text.endswith("]") and text[6:-1].isdigit() and int(text[6:-1]) < objects:
+            return vehicles + int(text[6:-1])
+    some = f"0 to {vehicles - 1}" if vehicles > 1 else "0"
+    last = f' to "fixed[{objects - 1}]"' if objects > 1 else ""
+    fixed = "" if vehicle_only or not objects else f', or "fixed[0]"{last} for a fixed object'
+    rule = "the first body must be a vehicle" if vehicle_only else "no such body"
+    raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: {rule}; name a vehicle by its index ({some}){fixed}")
+
+
+def _between(value, vehicles, objects, case_name) -> tuple:
+    """The bodies of the first exchange (``Case.between``): "between": [i, j], default [0, 1], or [0, "fixed[0]"]
+    for a case of one vehicle."""
+    if value is None:
+        return (0, 1)
+    if not isinstance(value, list) or len(value) != 2:
+        raise CaseError(f"{_where(case_name, 'between')} = {_shown(value)}: must name the first exchange's two bodies, "
+                        "e.g. [0, 1] or [0, \"fixed[0]\"]")
+    i = _body(value[0], vehicles, objects, "between[0]", case_name, vehicle_only=True)
+    j = _body(value[1], vehicles, objects, "between[1]", case_name)
+    if i == j:
+        raise CaseError(f"{_where(case_name, 'between')} = {_shown(value)}: a body cannot strike itself")
+    return (i, j)
 
 # Defaults of a vehicle's wheels where the file gives none (docs/model.md, "Motion to rest"): a passenger car's
 # proportions
@@ -241,7 +290,7 @@ MAX_STEER = 60.0  # deg
 MAX_STEPS = 1_000_000  # time_limit / time_step
 
 
-def _road(d, vehicles, case_name):
+def _road(d, bodies, vehicles, case_name):
     """(RoadInputs, Motion) of a case with a ``road``, else (None, None) (docs/model.md, "Motion to rest")."""
     if "road" not in d:
         for i, v in enumerate(d["vehicles"]):
@@ -272,22 +321,20 @@ def _road(d, vehicles, case_name):
     if limit / dt > MAX_STEPS:
         raise CaseError(f"{_where(case_name, 'road')}: time_limit / time_step = {limit / dt:.4g} steps, more than "
                         f"{MAX_STEPS}: lengthen the step or shorten the limit")
-    after = tuple(_after(d["vehicles"][i], v, i, friction, case_name)
-                  for i, v in enumerate(vehicles[:len(d["vehicles"])]))
-    if len(after) == 1:
-        after = (after[0], None)  # a fixed object does not move
+    after = tuple(_after(d["vehicles"][i], v, i, friction, case_name) for i, v in enumerate(bodies[:vehicles]))
+    after += (None,) * (len(bodies) - vehicles)  # a fixed object does not move
     return RoadInputs(friction, after), Motion(float(dt), float(limit))
 
 
 MAX_EXCHANGES_LIMIT = 64  # a case's max_exchanges at most (each is a slot of results in every solved row)
 
 
-def _interaction(d, motion, fixed, case_name):
+def _interaction(d, motion, objects, vehicles, case_name):
     """(``InteractionInputs`` or None, the ``Motion`` with the watched motion's settings) of a case's
     ``interaction`` entry (docs/model.md, "Contact interactions"): the later exchanges' restitution, friction and
     penetration time (default: the first contact's), ``approach_tolerance`` and ``max_exchanges``. Later
     exchanges happen during the motion to rest: without a ``road`` the entry is ignored, with a warning."""
-    poles = (1,) if fixed is not None and fixed.kind == "pole" else ()
+    poles = tuple(vehicles + k for k, o in enumerate(objects) if o.kind == "pole")
     if "interaction" not in d:
         return None, None if motion is None else dataclasses.replace(motion, poles=poles)
     entry = d["interaction"]
@@ -301,15 +348,8 @@ def _interaction(d, motion, fixed, case_name):
                                   "{\"friction\": 0.7})"), stacklevel=3)
         return None, None
     path = lambda k: f"interaction.{k}"  # noqa: E731
-    values = {k: _number(entry[k], INTERACTION_FIELDS[k][0], path(k), case_name)
-              for k in ("restitution", "friction", "penetration_time", "approach_tolerance") if k in entry}
-    rules = {"restitution": (lambda x: -1 <= x <= 1, "must be in [-1, 1]"),
-             "friction": (lambda x: x >= 0, "must be >= 0"),
-             "penetration_time": (lambda x: x >= 0, "must be >= 0 s"),
-             "approach_tolerance": (lambda x: x > 0, "must be positive (below it a pair is not approaching)")}
-    for k, x in values.items():
-        if not rules[k][0](x):
-            raise CaseError(f"{_where(case_name, path(k))} = {_shown(entry[k])}: {rules[k][1]}")
+    values = _exchange_values(entry, ("restitution", "friction", "penetration_time", "approach_tolerance"),
+                              "interaction", case_name)
     most = entry.get("max_exchanges", motion.max_exchanges)
     if isinstance(most, bool) or not isinstance(most, int) or not 1 <= most <= MAX_EXCHANGES_LIMIT:
         raise CaseError(f"{_where(case_name, path('max_exchanges'))} = {_shown(most)}: must be a whole number from 1 "
@@ -322,6 +362,65 @@ def _interaction(d, motion, fixed, case_name):
     c = d["contact"]
     first = _contact_inputs(c, case_name)[0]
     return InteractionInputs(*(values.get(k, getattr(first, k)) for k in InteractionInputs._fields)), motion
+
+
+_EXCHANGE_RULES = {"restitution": (lambda x: -1 <= x <= 1, "must be in [-1, 1]"),
+                   "friction": (lambda x: x >= 0, "must be >= 0"),
+                   "penetration_time": (lambda x: x >= 0, "must be >= 0 s"),
+                   "approach_tolerance": (lambda x: x > 0, "must be positive (below it a pair is not approaching)")}
+
+
+def _exchange_values(entry, fields, where, case_name) -> dict:
+    """The SI values of ``fields`` that ``entry`` (an "interaction" or a "pairs" entry at ``where``) gives, each
+    checked against its rule."""
+    values = {}
+    for k in fields:
+        if k in entry:
+            values[k] = _number(entry[k], INTERACTION_FIELDS[k][0], f"{where}.{k}", case_name)
+            if not _EXCHANGE_RULES[k][0](values[k]):
+                raise CaseError(f"{_where(case_name, f'{where}.{k}')} = {_shown(entry[k])}: {_EXCHANGE_RULES[k][1]}")
+    return values
+
+
+PAIR_FIELDS = ("between", "restitution", "friction", "penetration_time")
+
+
+def _pairs(d, motion, interaction, vehicles, objects, case_name):
+    """(a ``PairInputs`` per entry, the ``Motion`` with their pairs) of a case's ``pairs`` (docs/model.md, "Contact
+    interactions"): the later exchanges of one pair with values of their own; what an entry does not give is the
+    case's (``interaction``, else the first contact's). Without a road the entry is ignored, with a warning."""
+    if "pairs" not in d:
+        return (), motion
+    entries = d["pairs"]
+    if motion is None:
+        warnings.warn(CaseWarning(f"{_where(case_name, 'pairs')}: later exchanges happen while the bodies move on, "
+                                  "which a case without \"road\" does not do: ignored (add \"road\": {\"friction\": "
+                                  "0.7})"), stacklevel=3)
+        return (), motion
+    if not isinstance(entries, list):
+        raise CaseError(f"{_where(case_name, 'pairs')} = {_shown(entries)}: must be a list of pairs, e.g. "
+                        "[{\"between\": [1, 2], \"restitution\": 0.1}]")
+    if interaction is None:
+        interaction = _contact_inputs(d["contact"], case_name)[0]
+    out, which = [], []
+    for n, entry in enumerate(entries):
+        where = f"pairs[{n}]"
+        _check_keys(entry, set(PAIR_FIELDS) | TEXT_FIELDS, where, case_name)
+        between = _require(entry, "between", where, case_name)
+        if not isinstance(between, list) or len(between) != 2:
+            raise CaseError(f"{_where(case_name, where + '.between')} = {_shown(between)}: must name two bodies, e.g. "
+                            "[1, 2] or [0, \"fixed[0]\"]")
+        i, j = sorted(_body(b, vehicles, objects, f"{where}.between[{k}]", case_name) for k, b in enumerate(between))
+        if i == j or i >= vehicles:
+            raise CaseError(f"{_where(case_name, where + '.between')} = {_shown(between)}: "
+                            + ("a body cannot strike itself" if i == j else "two fixed objects never meet"))
+        if (i, j) in which:
+            raise CaseError(f"{_where(case_name, where + '.between')} = {_shown(between)}: "
+                            f"pairs[{which.index((i, j))}] names the same pair")
+        values = _exchange_values(entry, PairInputs._fields, where, case_name)
+        out.append(PairInputs(*(values.get(k, getattr(interaction, k)) for k in PairInputs._fields)))
+        which.append((i, j))
+    return tuple(out), dataclasses.replace(motion, pairs=tuple(which))
 
 
 def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
@@ -394,9 +493,9 @@ FIXED_FIELDS = {"wall": {"point": ("length", "vec2"), "normal": ("angle", None)}
                             "width": ("length", None), "height": ("length", None)}}
 
 
-def _fixed_object(d, case_name) -> FixedObject:
-    """The ``fixed`` entry of a case (docs/model.md, "Fixed objects"), SI."""
-    path = "fixed"
+def _fixed_object(d, case_name, path="fixed") -> FixedObject:
+    """A fixed object of a case's ``fixed`` entry (docs/model.md, "Fixed objects"), SI; ``path``: where it is
+    ("fixed", or "fixed[k]" in a list)."""
     if not isinstance(d, dict):
         raise CaseError(f"{_where(case_name, path)} = {_shown(d)}: must be a table/object, e.g. "
                         "{\"kind\": \"wall\", \"point\": [0, 0], \"normal\": 180}")

@@ -21,7 +21,8 @@ _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevati
 _CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*
 
 UNDEFINED_REASONS = {
-    "direction": "no impulse was exchanged (separating, no contact, restitution -1): it has no direction",
+    "direction": "no impulse was exchanged (separating, no contact, restitution -1), or the vehicle took no part in "
+                 "the exchange: it has no direction",
     "contact": "the vehicles never touch within the search horizon: there is no first contact, centroid, "
                "normal or relative velocity at one",
     "ees": "both crushes are 0 (the centroid lies inside neither box, or the vehicles never touch) or the "
@@ -80,6 +81,8 @@ def defined_output(result, path: str):
         return x
     if kind == "direction":
         defined = impulse_exchanged(result)
+        if group == "vehicles":  # and the vehicle took part in it (a body the exchange left as it was has none)
+            defined = defined & (result.vehicles[vi].delta_v_magnitude > 0)
     elif kind == "cumulative":
         defined = get_output(result, f"vehicles[{vi}].delta_v_cumulative_magnitude") > 0
     elif kind in ("contact", "ees"):

@@ -22,6 +22,9 @@ _PATH = re.compile(r"^(vehicles|exchanges)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$"
 class PathError(CaseError):
     pass
 
+
+MAX_VEHICLES = 8  # a case's vehicles at most (``case.load``)
+
 def canonical_path(path: str) -> str:
     """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
     return path.strip().replace(" ", "")
@@ -49,8 +52,9 @@ def _parse_path(path: str):
     if m.group(1):
         idx = tuple(int(k) for k in re.findall(r"\d+", m.group(4)))
         vi = int(m.group(2))
-        if vi not in (0, 1):
-            raise PathError(f"path '{path}': vehicle index must be 0 or 1")
+        if vi >= MAX_VEHICLES:
+            raise PathError(f"path '{path}': vehicle index must be 0 to {MAX_VEHICLES - 1} (a case has at most "
+                            f"{MAX_VEHICLES} vehicles)")
         return "vehicles", vi, m.group(3), idx
     idx = tuple(int(k) for k in re.findall(r"\d+", m.group(7)))
     return m.group(5), None, m.group(6), idx
@@ -154,6 +158,9 @@ def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
 def _holder(inputs: CaseInputs, group, vi, path):
     """The inputs' part that holds the leaf of ``input_leaf``'s (group, vi)."""
     if group == "vehicles":
+        if vi >= len(inputs.vehicles):
+            raise PathError(f"path '{path}': the case has no vehicles[{vi}] (its bodies are vehicles[0] to "
+                            f"vehicles[{len(inputs.vehicles) - 1}] at most)")
         return inputs.vehicles[vi]
     if group == "contact":
         return inputs.contact
@@ -189,23 +196,28 @@ def automatic_part(case: "Case", path) -> str | None:
     return name if (name == "point" and case.auto_point or name == "normal" and case.auto_normal) else None
 
 def on_fixed_object(case: "Case", path) -> str | None:
-    """Where ``case`` strikes a fixed object (docs/model.md, "Fixed objects") and ``path`` names vehicle 2,
-    which is the object there: the words saying why it has no input or result to vary, fit or read; else
-    None."""
+    """Where ``path`` names a vehicle that ``case`` does not have (vehicles[i] with i at least its count of
+    vehicles): the words saying why there is no input or result to vary, fit or read there (in particular where a
+    fixed object takes the place of a second vehicle, docs/model.md, "Fixed objects"); else None."""
     group, vi = parse_path(path)[:2]
-    if case.fixed is None or group != "vehicles" or vi != 1:
+    n = case.vehicle_count
+    if group != "vehicles" or vi < n:
         return None
-    return (f"{path}: this case strikes a fixed {case.fixed.kind}, which takes the place of vehicles[1]: the object "
-            "has no inputs to vary and no per-vehicle results (vehicles[0] is the vehicle)")
+    some = "vehicles[0]" if n == 1 else f"vehicles[0] to vehicles[{n - 1}]"
+    if n == 1 and vi == 1 and case.fixed:
+        return (f"{path}: this case strikes a fixed {case.fixed[0].kind}, which takes the place of vehicles[1]: the "
+                "object has no inputs to vary and no per-vehicle results (vehicles[0] is the vehicle)")
+    objects = "; its fixed objects (fixed[k]) have no inputs to vary and no per-vehicle results" if case.fixed else ""
+    return f"{path}: this case has {n} vehicle{'s' if n > 1 else ''} ({some}){objects}"
 
 
 def path_key(case: "Case") -> tuple:
     """All that ``get_input``, ``without_road``, ``automatic_part`` and ``on_fixed_object`` read of ``case`` to
-    accept or refuse a path: the fixed object's kind, which of the road and its vehicles are missing, and which
-    contact parts are automatic. Cases with one key accept and refuse the same paths, so a batch of cases checks
-    each path once per key."""
+    accept or refuse a path: how many vehicles it has, its fixed objects' kinds, which of the road and its vehicles
+    are missing, and which contact parts are automatic. Cases with one key accept and refuse the same paths, so a
+    batch of cases checks each path once per key."""
     road = None if case.inputs is None else case.inputs.road
-    return (None if case.fixed is None else case.fixed.kind, road is None,
+    return (case.vehicle_count, tuple(o.kind for o in case.fixed), road is None,
             () if road is None else tuple(v is None for v in road.vehicles), bool(case.auto_point),
             bool(case.auto_normal))
 

@@ -26,7 +26,8 @@ def _xy(x):
 def scene_origin(inputs: CaseInputs, extra=(), dtype=None):
     """Where ``solve`` and ``sweep`` move the origin before computing: None where JAX computes in float64,
     or where no CG or impulse centroid lies more than FAR_IN_FLOAT32 from the origin; else the CGs'
-    midpoint (x, y), float64, shape (..., 2) (0 for rows of a batch that are near the origin).
+    midpoint (x, y; the mean of every body's), float64, shape (..., 2) (0 for rows of a batch that are near the
+    origin).
 
     Float32 (JAX's default) keeps about 7 digits: at survey coordinates (5e5 m) a position keeps only
     centimetres, and crush and EES come out far off. The exchange is the same in a translated scene
@@ -36,13 +37,13 @@ def scene_origin(inputs: CaseInputs, extra=(), dtype=None):
     if not _computes_in_float32(dtype):
         return None
     cg = [_xy(v.position) for v in inputs.vehicles]
-    reach = np.maximum(np.abs(cg[0]).max(-1), np.abs(cg[1]).max(-1))
+    reach = np.max([np.abs(c).max(-1) for c in cg], axis=0)
     reach = np.maximum(reach, np.abs(_xy(inputs.contact.point)).max(-1))
     reach = np.maximum(reach, max((np.abs(np.asarray(e, np.float64)).max() for e in extra), default=0.0))
     far = reach > FAR_IN_FLOAT32
     if not far.any():
         return None
-    return np.where(far[..., None], (cg[0] + cg[1]) / 2, 0.0)
+    return np.where(far[..., None], sum(cg) / len(cg), 0.0)
 
 def move_scene(inputs: CaseInputs, origin, auto_point=False) -> CaseInputs:
     """``inputs`` with the CG positions and the impulse centroid given about ``origin`` (x, y; float64,

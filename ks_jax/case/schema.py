@@ -58,8 +58,8 @@ CONTACT_FIELDS = {
 
 TEXT_FIELDS = {"name", "description", "notes", "source", "...", "make", "model"}
 
-CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "contact", "road", "interaction",
-               "unknowns", "evidence", "options", "reference"}
+CASE_FIELDS = {"name", "description", "notes", "source", "vehicles", "fixed", "between", "contact", "road",
+               "interaction", "pairs", "unknowns", "evidence", "options", "reference"}
 
 INPUT_KINDS = {
     "mass": "mass", "inertia": "inertia", "length": "length", "width": "length", "height": "length",

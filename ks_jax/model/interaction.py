@@ -483,15 +483,18 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
 
     ``bodies``: the case's bodies (``Bodies``); ``start``: a ``motion.Planar`` of (V, ...) leaves, each vehicle at the
     first exchange's instant, with its velocity and yaw rate after it; ``first``: the first exchange's result (its
-    pair's ``vehicles``); ``first_pair``: its two bodies' indices (static, a vehicle first); ``watch``: the later
-    exchanges' settings per pair (``pairs_of`` order). Static: ``max_exchanges`` (slots, the first exchange's
-    included), ``dt``, ``time_limit`` s, ``poles`` (indices of the bodies that are poles), ``smoothing`` (of the
-    exchanges), ``path`` (each vehicle's rest result keeps its path) and ``reverse`` (``motion.drive``)."""
+    pair's ``vehicles``); ``first_pair``: its two bodies' indices (static; the first, its vehicle 1, a vehicle);
+    ``watch``: the later exchanges' settings per pair (``pairs_of`` order). Static: ``max_exchanges`` (slots, the
+    first exchange's included), ``dt``, ``time_limit`` s, ``poles`` (indices of the bodies that are poles),
+    ``smoothing`` (of the exchanges), ``path`` (each vehicle's rest result keeps its path) and ``reverse``
+    (``motion.drive``)."""
     vehicles = start.yaw.shape[0]
     fixed = bodies.fixed.yaw.shape[0]
     pairs = pairs_of(vehicles, fixed)
-    if tuple(first_pair) not in pairs:
-        raise ValueError(f"interact: the first exchange's pair {tuple(first_pair)} is not one of the pairs {pairs}")
+    watched = tuple(sorted(first_pair))  # the pair as ``pairs_of`` lists it; its exchange's vehicle 1 may be either
+    if watched not in pairs or first_pair[0] >= vehicles:
+        raise ValueError(f"interact: the first exchange's pair {tuple(first_pair)} is not one of the pairs {pairs} "
+                         "with a vehicle first")
     dtype = start.yaw.dtype
     carry = jax.vmap(motion.start_carry)(start)
     position, yaw, velocity, yaw_rate = _planes(bodies, carry)
@@ -504,7 +507,7 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
         lambda x: jnp.zeros(lead + jnp.shape(x), jnp.result_type(x)), tree)
     pair0 = jnp.asarray(first_pair, jnp.int32)
     # the first exchange's interaction lasts while its pair's footprints overlap
-    current = jnp.full((len(pairs),), -1, jnp.int32).at[pairs.index(tuple(first_pair))].set(0)
+    current = jnp.full((len(pairs),), -1, jnp.int32).at[pairs.index(watched)].set(0)
     loop = _Loop(carry, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), gap, point, point,
                  jnp.full((len(pairs),), jnp.inf, dtype), jnp.zeros(len(pairs), bool), current,
                  jnp.ones((), jnp.int32), zeros(_pick(states, 0), k, 2),

@@ -18,17 +18,17 @@ from .rules import status_words
 from .solution import Solution
 
 
-def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=None):
+def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=None, between=(0, 1)):
     """``solve_inputs`` of every row of ``inputs``. One row is solved unbatched: XLA compiles a batch of
     one row to a program several times the size of one unbatched row's."""
-    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion)
+    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion, between)
     if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
         row = run_row(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), fenced=len(pipeline))
         return jax.tree_util.tree_map(lambda x: x[None], row)
     return run(pipeline, (inputs,))
 
 
-_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4, 5))  # a file's few cases: compiling is most of the time
+_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4, 5, 6))  # a file's few cases: compiling is most of the time
 
 
 def solve(cases, smoothing: float = 0.0):
@@ -47,15 +47,16 @@ def solve(cases, smoothing: float = 0.0):
     groups: dict[tuple, list[int]] = {}
     for i, c in enumerate(cases):
         if c.valid:
-            # a pole is met as a disc by automatic contact only: at a given contact it is any other case
+            # a pole is met as a disc by automatic contact only: at a given contact it is any other case; cases of
+            # one group stack into one batch: the same bodies and parts of inputs (their tree)
             groups.setdefault((c.auto_point, c.auto_normal, c.pole and (c.auto_point or c.auto_normal), c.motion,
-                               c.fixed is not None and c.motion is not None), []).append(i)
+                               c.between, jax.tree_util.tree_structure(c.inputs)), []).append(i)
         else:
             out[i] = Solution(c, None, c.error if c.error.startswith("invalid") else f"invalid: {c.error}")
-    for (auto_point, auto_normal, pole, motion, _), idx in groups.items():
+    for (auto_point, auto_normal, pole, motion, between, _), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
         stacked, origin = about_midpoint(stacked, auto_point)  # float32 far from the origin: about the CGs' midpoint
-        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole, motion)
+        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole, motion, between)
         res = moved_back(jax.tree_util.tree_map(np.asarray, res), origin)
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)

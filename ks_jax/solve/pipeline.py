@@ -8,23 +8,27 @@ import jax
 import jax.numpy as jnp
 
 from ..batch.stages import blocked, run_row
-from ..case import CaseInputs, Motion, to_pytrees
+from ..case import CaseInputs, Motion, body_states, to_pytrees
 from ..model import collision
-from ..model.contact import automatic_stage, exchange_at_contact
+from ..model import linalg as la
+from ..model.contact import advance, automatic_stage, exchange_at_contact
 from ..model.checks import input_status
-from ..model.types import OK, ExchangeResult
+from ..model.results import mask_invalid
+from ..model.types import INVALID_NONFINITE, OK, ExchangeResult, VehicleResult
 from .rest import to_rest
 from .rules import speed_status, with_speed_status
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
-                 smoothing=0.0, pole: bool = False, motion: Motion | None = None) -> ExchangeResult:
+                 smoothing=0.0, pole: bool = False, motion: Motion | None = None, between=(0, 1)) -> ExchangeResult:
     """One case's results from its inputs (pure, unbatched; jit, vmap and grad at the edge).
 
     ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
     otherwise the exchange is at the case state. ``pole`` (static): vehicle 2 is a pole, which automatic
     contact meets as a disc (``Case.pole``). ``motion`` (static, ``Case.motion``): where the inputs have a
-    ``road``, how the vehicles' motion to rest is integrated (the result's ``rest``). A negative ``speed``
+    ``road``, how the vehicles' motion to rest is integrated (the result's ``rest``). ``between`` (static,
+    ``Case.between``): the first exchange's bodies; the result's ``vehicles`` has one entry per body of
+    ``inputs.vehicles`` (``in_body_order``). A negative ``speed``
     (reachable by ``set_input``, a sweep or a fit, never by a case file) gives status INVALID_SPEED_1/2 and NaN
     results (``speed_status``), unless another input breaks a rule first.
 
@@ -32,60 +36,96 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     (``batch.stages.run_row``): every later loop reads the rules, and XLA would derive them again inside each
     loop that reads a stand-in input, in a program over twice the size to compile. The others are fused
     freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``."""
-    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion), (inputs,),
+    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between), (inputs,),
                    fenced=1 if auto_point or auto_normal else 0)
 
 
-def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False, motion: Motion | None = None):
+def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False, motion: Motion | None = None,
+           between=(0, 1)):
     """The case's pipeline, functions of a row's ``CaseInputs`` and the outputs of the stages before
     (``ks_jax.batch.stages.run``): the exchange's own stages (``model.collision.stages``) at a given
     contact; for automatic contact, the input rules, the contact (``model.contact.automatic_stage``)
     and the exchange there (``exchange_at_contact``). ``smoothing``: a Python number or an array. With
     ``motion`` (a ``case.Motion``), the last stage moves the vehicles on from the exchange to rest
-    (``to_rest``): the result's ``rest``."""
-    exchange_stages = _exchange_stages(auto_point, auto_normal, smoothing, pole)
-    if motion is None:
-        return exchange_stages
-    *first, last = exchange_stages
+    (``to_rest``): the result's ``rest``. ``between``: the first exchange's bodies (``Case.between``)."""
+    between = tuple(between)
+    *first, last = _exchange_stages(auto_point, auto_normal, smoothing, pole, between)
     auto = auto_point or auto_normal
 
     def exchange_and_rest(inputs, *earlier):
         result = last(inputs, *earlier)
-        states = to_pytrees(inputs)[1:4:2]
-        if auto:  # the vehicles at the exchange: where automatic contact put them, where it could
+        if motion is None and between == tuple(range(len(inputs.vehicles))):
+            return result  # the case's two bodies, in order: its exchange's results as they are
+        states = body_states(inputs)
+        if auto:  # every body at the exchange: the pair where automatic contact put it, the others moved freely
             status, found = earlier
             ok = status == OK
-            states = tuple(jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), s_auto, s)
-                           for s_auto, s in zip((found.state1, found.state2), states))
-        return to_rest(inputs, result, states, motion, smoothing)
+            instant = jnp.where(found.found, found.time + found.contact.penetration_time, 0.0)
+            at_exchange = [advance(s, instant) for s in states]
+            at_exchange[between[0]], at_exchange[between[1]] = found.state1, found.state2
+            states = tuple(jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), moved, s)
+                           for moved, s in zip(at_exchange, states))
+        if motion is not None:
+            result = to_rest(inputs, result, states, motion, smoothing, between)
+        return in_body_order(result, between, states)
 
-    return (*first, blocked(exchange_and_rest))
+    return (*first, blocked(exchange_and_rest) if motion is not None else exchange_and_rest)
 
 
-def _exchange_stages(auto_point, auto_normal, smoothing, pole):
+def in_body_order(result: ExchangeResult, between, states) -> ExchangeResult:
+    """``result`` with ``vehicles`` as one ``VehicleResult`` per body (those of ``inputs.vehicles``, whose ``states``
+    at the first exchange are given): the first exchange's pair's own results (``between``: its vehicle 1, then its
+    vehicle 2), and for every other body the results of an exchange it took no part in: no delta-V, its velocity
+    then as its velocity after, no crush, and its directions (PDOF, course) undefined where they have none
+    (``case.defined_output``). A row whose exchange is invalid has NaN in them too."""
+    if tuple(between) == tuple(range(len(states))):
+        return result
+    valid = result.contact.status < INVALID_NONFINITE
+    out = []
+    for b, state in enumerate(states):
+        if b in between:
+            out.append(result.vehicles[between.index(b)])
+            continue
+        like = result.vehicles[0]
+        out.append(mask_invalid(_bystander(state, like), valid))
+    return result._replace(vehicles=tuple(out))
+
+
+def _bystander(state, like: VehicleResult) -> VehicleResult:
+    """The results of an exchange a body took no part in, from its ``state`` then."""
+    v, w = state.velocity, state.angular_velocity
+    zero = jnp.zeros_like(v[0])
+    speed = la.safe_norm(v)
+    course = la.degrees_0_360(la.safe_atan2(v[1], v[0]))
+    return VehicleResult(jnp.zeros_like(v), zero, jnp.zeros_like(v), zero, v, speed, course, w, w[2], zero,
+                         jnp.full_like(like.pdof_clock, 12), zero, jnp.full_like(zero, jnp.nan))
+
+
+def _exchange_stages(auto_point, auto_normal, smoothing, pole, between):
     if auto_point or auto_normal:
         def rules(inputs):
-            return input_status(*to_pytrees(inputs))
+            return input_status(*to_pytrees(inputs, between))
 
         def contact(inputs, status):
-            return automatic_stage(*to_pytrees(inputs), inputs.contact.normal_pitch, status,
+            return automatic_stage(*to_pytrees(inputs, between), inputs.contact.normal_pitch, status,
                                    auto_point=auto_point, auto_normal=auto_normal, pole=pole)
 
         def exchange(inputs, status, auto):
-            return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs), status, auto, smoothing))
+            return with_speed_status(inputs, exchange_at_contact(*to_pytrees(inputs, between), status, auto,
+                                                                 smoothing))
 
         return rules, contact, exchange
     prepare, impulse, results = collision.stages(smoothing)
 
     def prepared(inputs):
-        p = prepare(*to_pytrees(inputs))
+        p = prepare(*to_pytrees(inputs, between))
         return p._replace(status=speed_status(inputs, p.status))
 
     def found(inputs, p):
-        return impulse(*to_pytrees(inputs), p)
+        return impulse(*to_pytrees(inputs, between), p)
 
     def derived(inputs, p, j):
-        return results(*to_pytrees(inputs), p, j)
+        return results(*to_pytrees(inputs, between), p, j)
 
     return prepared, found, derived
 

@@ -15,10 +15,12 @@ from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult, Veh
 from .rules import motion_rules
 
 
-def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, smoothing=0.0) -> ExchangeResult:
-    """``result`` with ``rest`` and ``interactions``: the vehicles' motion from their states at the exchange
-    (``states``, the pair of ``model.types.State``) with their velocities and yaw rates after it, every pair of
-    bodies watched for later exchanges (``model.interaction.interact``) until every vehicle rests.
+def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, smoothing=0.0,
+            between=(0, 1)) -> ExchangeResult:
+    """``result`` (the first exchange's, between the bodies ``between``) with ``rest`` and ``interactions``: the
+    vehicles' motion from their states at the exchange (``states``, a ``model.types.State`` per body of
+    ``inputs.vehicles``), the pair's with their velocities and yaw rates after it, every pair of bodies watched for
+    later exchanges (``model.interaction.interact``) until every vehicle rests.
 
     A row whose exchange is invalid, or whose motion's inputs break their rules (``motion_rules``: a swept or
     fitted value can, a case file cannot), has NaN in every result and, for the latter, status
@@ -47,10 +49,14 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
             fixed.append(Planar(jnp.where(ok, state.position[:2], 0.0), yaw, jnp.zeros(2, yaw.dtype),
                                 jnp.zeros_like(yaw)))
             continue
-        vr = result.vehicles[k]
+        if k in between:
+            vr = result.vehicles[between.index(k)]
+            velocity, yaw_rate = vr.velocity_after[:2], vr.angular_velocity_after[2]
+        else:  # a body the first exchange left as it was
+            velocity, yaw_rate = state.velocity[:2], state.angular_velocity[2]
         after = jax.tree_util.tree_map(lambda x, d: jnp.where(ok, x, d), after, _stand_in(after))
-        starts.append(Planar(jnp.where(ok, state.position[:2], 0.0), yaw, jnp.where(ok, vr.velocity_after[:2], 0.0),
-                             jnp.where(ok, vr.angular_velocity_after[2], 0.0)))
+        starts.append(Planar(jnp.where(ok, state.position[:2], 0.0), yaw, jnp.where(ok, velocity, 0.0),
+                             jnp.where(ok, yaw_rate, 0.0)))
         chassis = Chassis(after.wheelbase, after.track, after.cg_to_front_axle)
         wheels = Wheels(after.brake, after.steer, after.rolling_resistance)
         bodies.append(body(vehicles[-1].mass, jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0),
@@ -60,10 +66,16 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
     everything = Bodies(stack(vehicles), jnp.stack(z), stack(bodies), stack(fixed) if fixed else no_fixed)
     pairs = pairs_of(len(moving), len(order) - len(moving))
     later = inputs.interaction if inputs.interaction is not None else inputs.contact
-    watch = Watch(*(jnp.full(len(pairs), jnp.where(ok, getattr(later, f), d))
-                    for f, d in (("restitution", 0.0), ("friction", 0.0), ("penetration_time", 0.0))),
+    own = {pairs.index(tuple(sorted((order.index(i), order.index(j))))): values
+           for (i, j), values in zip(motion.pairs, inputs.pairs)}  # pairs with values of their own
+
+    def per_pair(field):
+        return jnp.stack([jnp.asarray(getattr(own[p] if p in own else later, field), friction.dtype)
+                          for p in range(len(pairs))])
+
+    watch = Watch(*(jnp.where(ok, per_pair(f), 0.0) for f in ("restitution", "friction", "penetration_time")),
                   jnp.asarray(motion.approach_tolerance))
-    first = (order.index(0), order.index(1))
+    first = (order.index(between[0]), order.index(between[1]))
     out = interact(everything, stack(starts), result, first, watch, max_exchanges=motion.max_exchanges,
                    dt=motion.time_step, time_limit=motion.time_limit, poles=tuple(order.index(k) for k in motion.poles),
                    smoothing=smoothing, path=motion.path, reverse=motion.reverse)

@@ -3,6 +3,9 @@ a fit, never by a case file), the motion's inputs, and the words of a case's sta
 
 from __future__ import annotations
 
+import functools
+import operator
+
 import jax.numpy as jnp
 
 from ..case import Case, CaseInputs
@@ -14,14 +17,15 @@ from ..model.types import ExchangeResult, status_text
 
 
 def speed_status(inputs: CaseInputs, status):
-    """``status`` (() int, the exchange's) with INVALID_SPEED_1 (2) where vehicle 1's (2's) ``speed`` is
-    negative and ``status`` is not already invalid (the exchange's reasons come first).
+    """``status`` (() int, the exchange's) with INVALID_SPEED_1 where vehicles[0]'s ``speed`` is negative,
+    INVALID_SPEED_2 where another vehicle's is, and ``status`` is not already invalid (the exchange's reasons come
+    first).
 
     A case file refuses a negative speed; a swept, sampled or fitted one can reach it, and ``to_pytrees``
     would turn it into travel backwards along the course. Such a row gets this status and NaN results
     instead (traceable, per row)."""
-    s1, s2 = inputs.vehicles[0].speed, inputs.vehicles[1].speed
-    code = jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(s2 < 0, INVALID_SPEED_2, OK))
+    s1, others = inputs.vehicles[0].speed, [v.speed < 0 for v in inputs.vehicles[1:]]
+    code = jnp.where(s1 < 0, INVALID_SPEED_1, jnp.where(functools.reduce(operator.or_, others), INVALID_SPEED_2, OK))
     return jnp.where((code != OK) & (status < INVALID_NONFINITE), code, status).astype(jnp.asarray(status).dtype)
 
 
@@ -53,6 +57,9 @@ def motion_rules(road) -> jnp.ndarray:
 def status_words(case: Case, code) -> str:
     """The status words of a solved case; an overflow also names the input farthest out of scale."""
     text = status_text(code)
+    if int(code) == INVALID_SPEED_2 and case.vehicle_count > 2:
+        last = case.vehicle_count - 1
+        text = text.replace("vehicles[1].speed", f"the speed of each of vehicles[1] to vehicles[{last}]")
     if int(code) == INVALID_OVERFLOW:
         text += f"; the input farthest out of scale: {farthest_out_of_scale(case.inputs)}"
     return text

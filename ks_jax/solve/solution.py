@@ -40,13 +40,14 @@ class Solution:
         un = float(n @ u)
         notes.insert(0, f"no impulse: at the centroid the relative velocity along the normal is n . u = {un:.4g} m/s "
                      "(vehicle 1's velocity there minus vehicle 2's); an exchange needs it below 0 (closing)")
-        x1, x2 = (np.asarray(v.position, float)[:2] for v in self.case.inputs.vehicles)
+        i, j = self.case.between
+        x1, x2 = (np.asarray(self.case.inputs.vehicles[b].position, float)[:2] for b in (i, j))
         # reversed it would be closing, and it points from vehicle 1's CG towards vehicle 2's (an object's
         # point): vehicles that are truly parting, under a normal that points the right way, get no such note
         if not self.case.auto_normal and un > 0 and float(n[:2] @ (x1 - x2)) < 0:
-            names = self.case.vehicle_names
-            into = (f"from the fixed {self.case.fixed.kind} into {names[0]}" if self.case.fixed is not None
-                    else f"from vehicle 2 ({names[1]}) into vehicle 1 ({names[0]})")
+            names, struck = self.case.vehicle_names, self.case.struck_object
+            into = (f"from the fixed {struck.kind} into {names[i]}" if struck is not None
+                    else f"from vehicle 2 ({names[j]}) into vehicle 1 ({names[i]})")
             azimuth = round(math.degrees(math.atan2(-n[1], -n[0])) % 360.0, 1) % 360.0  # 359.97 is 0.0
             notes.append(f"the normal may point the wrong way: it must point {into}; reversed (azimuth "
                          f"{azimuth:.1f} deg) the vehicles would be closing at {un:.4g} m/s there")
@@ -64,7 +65,8 @@ class Solution:
                          "a pair was due for another: from there the bodies may pass through each other unseen; "
                          "raise interaction.max_exchanges (up to 64)")
         names = self.body_names()
-        for (i, j), overlapping, depth in zip(pairs_of(self.vehicle_count(), len(names) - self.vehicle_count()),
+        n = self.case.vehicle_count
+        for (i, j), overlapping, depth in zip(pairs_of(n, len(names) - n),
                                               np.asarray(inter.overlapping), np.asarray(inter.overlap_depth)):
             if overlapping:
                 notes.append(f"{_label(names[i])} and {_label(names[j])} overlap where they end, by {float(depth):.3g} "
@@ -72,15 +74,9 @@ class Solution:
                              "contact; more means one passed into the other")
         return notes
 
-    def vehicle_count(self) -> int:
-        """How many of the case's bodies are vehicles (the others are fixed objects)."""
-        return 1 if self.case.fixed is not None else 2
-
     def body_names(self) -> list:
         """Each body as results name it: (path, name): "vehicles[i]" for a vehicle, "fixed[k]" for a fixed object."""
-        n = self.vehicle_count()
-        return [(f"vehicles[{b}]" if b < n else f"fixed[{b - n}]", name) for b, name in
-                enumerate(self.case.vehicle_names)]
+        return [(self.case.body_path(b), name) for b, name in enumerate(self.case.vehicle_names)]
 
     def exchange_list(self) -> list:
         """Every exchange of the case in time order as plain data (SI): the first is ``contact``; a case with a road
@@ -91,12 +87,16 @@ class Solution:
         if self.result is None or self.status.startswith("invalid"):
             return []
         r, inter = self.result, self.result.interactions
-        n = self.vehicle_count()
+        n = self.case.vehicle_count
         count = 1 if inter is None else int(inter.count)
         out = []
         for k in range(count):
-            ex = r if inter is None else jax.tree_util.tree_map(lambda x: x[k], inter.exchanges)
-            pair = (0, 1) if inter is None else tuple(int(b) for b in inter.between[k])
+            if inter is None:  # the one exchange, its vehicles' results in the order of the bodies
+                pair = self.case.between
+                ex = r._replace(vehicles=tuple(r.vehicles[b] for b in pair))
+            else:
+                ex = jax.tree_util.tree_map(lambda x: x[k], inter.exchanges)
+                pair = tuple(int(b) for b in inter.between[k])
             contact = {f: _plain(defined_output(ex, f"contact.{f}") if undefined_kind(f"contact.{f}")
                                  else getattr(ex.contact, f)) for f in ContactResult._fields if f != "status"}
             contact["time"] = 0.0 if inter is None else _plain(inter.time[k])
@@ -114,7 +114,7 @@ class Solution:
                                  "delta_v_magnitude": _plain(v.delta_v_magnitude),
                                  "pdof": _plain(defined_output(ex, f"vehicles[{side}].pdof")),
                                  "energy_share": _plain(share), "velocity_after": _plain(v.velocity_after)})
-            between = [b if b < n else f"fixed[{b - n}]" for b in pair]
+            between = [b if b < n else self.case.body_path(b) for b in pair]
             out.append({"index": k, "between": between,
                         "interaction": 0 if inter is None else int(inter.interaction[k]), **contact,
                         "vehicles": vehicles})
@@ -151,7 +151,8 @@ class Solution:
 
     def to_dict(self) -> dict:
         """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, the result names of docs/model.md,
-        (against a fixed object: one vehicle, and "fixed": the object as the file gives it, SI, angles in rad;
+        (a vehicle's per case vehicle, in order; with fixed objects, "fixed": each as the file gives it, SI, angles in
+        rad, one object or a list as in the file; "between": the first exchange's bodies;
         where ``notes`` has something to say, "notes": its list of sentences),
         the status in words, NaN as None: what ``ks-jax solve --json`` prints for the case. An invalid case
         has only its status. What the model leaves undefined is None too (``case.defined_output``): the
@@ -169,9 +170,7 @@ class Solution:
         vehicles = []
         fixed = self.case.fixed
         exchanges = self.exchange_list()
-        for i, (name, v) in enumerate(zip(self.case.vehicle_names, r.vehicles)):
-            if i == 1 and fixed is not None:
-                break  # a fixed object has no per-vehicle results
+        for i, (name, v) in enumerate(zip(self.case.vehicle_names[:self.case.vehicle_count], r.vehicles)):
             d = {"name": name}
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}") if undefined_kind(f"vehicles[{i}].{k}")
                                 else getattr(v, k)) for k in VehicleResult._fields})
@@ -181,15 +180,19 @@ class Solution:
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
             d["interactions"] = self.interactions_of(i, exchanges)
             vehicles.append(d)
-        out = {"name": self.case.name, "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
+        n = self.case.vehicle_count
+        out = {"name": self.case.name, "between": [b if b < n else self.case.body_path(b) for b in self.case.between],
+               "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
                "energy_loss_total": _plain(defined_output(r, "energy_loss_total"))}
         notes = self.notes()
         if notes:  # only where there is something to say: a case solved as expected has the keys of the model
             out["notes"] = notes
-        if fixed is not None:
-            out["fixed"] = {"name": self.case.vehicle_names[1],
-                            **{k: _plain(v) for k, v in fixed._asdict().items() if v is not None and k != "kind"},
-                            "kind": fixed.kind}
+        if fixed:  # as the file gives it: one object, or a list of them
+            names = self.case.vehicle_names[self.case.vehicle_count:]
+            listed = [{"name": name, **{k: _plain(v) for k, v in obj._asdict().items()
+                                        if v is not None and k != "kind"}, "kind": obj.kind}
+                      for name, obj in zip(names, fixed)]
+            out["fixed"] = listed if isinstance(self.case.raw.get("fixed"), list) else listed[0]
         return out
 
 

@@ -7,9 +7,9 @@ inputs, with only the chosen results kept (docs/sweeps.md).
 - ``files``: ``ResultWriter`` and ``write_results``: .csv, .npz or .parquet, chunk by chunk.
 """
 
-from .engine import DEFAULT_OUTPUTS, sweep
+from .engine import default_outputs, sweep
 from .files import ResultWriter, write_results
 from .result import SweepResult, SweepSample, check_kept, plot_strides
 
-__all__ = ["DEFAULT_OUTPUTS", "ResultWriter", "SweepResult", "SweepSample", "check_kept", "plot_strides", "sweep",
+__all__ = ["ResultWriter", "SweepResult", "SweepSample", "check_kept", "default_outputs", "plot_strides", "sweep",
            "write_results"]

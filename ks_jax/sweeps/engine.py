@@ -32,20 +32,20 @@ from .columns import invalid_rows
 from .result import SweepResult
 
 
-# the default's, with a road
-DEFAULT_REST_OUTPUTS = tuple(f"vehicles[{i}].{name}" for i in (0, 1)
-                             for name in ("rest_position[0]", "rest_position[1]", "rest_yaw"))
-DEFAULT_OUTPUTS = (
-    "contact.impulse_magnitude",
-    "contact.energy_loss",
-    "contact.sliding",
-    "vehicles[0].delta_v_magnitude",
-    "vehicles[1].delta_v_magnitude",
-    "vehicles[0].pdof",
-    "vehicles[1].pdof",
-    "vehicles[0].speed_after",
-    "vehicles[1].speed_after",
-)
+def default_outputs(case) -> tuple:
+    """The outputs a sweep keeps where none are asked for: the first exchange's impulse, energy loss and sliding,
+    each vehicle's delta-V, PDOF and speed after it; with a road, each vehicle's rest position and yaw, and where the
+    case has more than two bodies (so later exchanges of its own), each vehicle's cumulative delta-V and the total
+    energy loss."""
+    vehicles = range(case.vehicle_count)
+    outputs = ("contact.impulse_magnitude", "contact.energy_loss", "contact.sliding",
+               *(f"vehicles[{i}].{name}" for name in ("delta_v_magnitude", "pdof", "speed_after") for i in vehicles))
+    if case.motion is not None:
+        outputs += tuple(f"vehicles[{i}].{name}" for i in vehicles
+                         for name in ("rest_position[0]", "rest_position[1]", "rest_yaw"))
+    if case.vehicle_count + len(case.fixed) > 2:
+        outputs += (*(f"vehicles[{i}].delta_v_cumulative_magnitude" for i in vehicles), "energy_loss_total")
+    return outputs
 
 
 DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk on a CPU (elsewhere: ``backend.chunk_rows``)
@@ -104,7 +104,7 @@ class ChunkProgram:
     results kept; mode: "grid" or "zip"; n_rows: the chunk's points; static_sizes: the axes' sizes compiled in
     (a sweep of several chunks: dividing by a constant is cheaper), or None: read at run time (a whole sweep in
     one chunk: a sweep of another size in the same ``_bucket`` runs the same program); auto_point, auto_normal,
-    pole, motion: the case's pipeline (``solve.stages``); smoothing: tau of the smooth cone; out_dtype: the
+    pole, motion, between: the case's pipeline (``solve.stages``); smoothing: tau of the smooth cone; out_dtype: the
     kept results' float dtype; devices: the rows are sharded over them; quick: compiled quickly
     (``QUICK_POINTS``); cpu: ``backend.on_cpu()`` (the stages are fenced on the CPU's path only)."""
 
@@ -123,6 +123,7 @@ class ChunkProgram:
     cpu: bool = True
     pole: object = False
     motion: object = None
+    between: tuple = (0, 1)
 
 
 @lru_cache(maxsize=32)
@@ -137,7 +138,7 @@ def _program(key: ChunkProgram):
     of each status (``STATUS_CODES``, then any other) and of undefined values per output in
     ``undefined``: a sweep that keeps nothing then copies none of its rows to the host."""
     rows, replicated = row_placement(key.devices)
-    pipeline = stages(key.auto_point, key.auto_normal, key.smoothing, key.pole, key.motion)
+    pipeline = stages(key.auto_point, key.auto_normal, key.smoothing, key.pole, key.motion, key.between)
     undefined = tuple(p for p in key.outputs if undefined_kind(p))
 
     def chunk(start, stop, axes, sizes, total, base):
@@ -211,7 +212,7 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     ``.yaw``, ``.speed``, ``.course``, ``.yaw_rate``, ``contact.point[k]``, ``contact.normal``
     (azimuth), ``contact.restitution``, ``contact.friction``, ...).
     outputs: output paths of docs/model.md (components by index, e.g. ``vehicles[0].delta_v[0]``; one path may be a
-    plain string); default ``DEFAULT_OUTPUTS``. ``"status"`` is always returned.
+    plain string); default ``default_outputs(case)``. ``"status"`` is always returned.
     mode: "grid" (cartesian product; result shape = (len(values) per path, in order)) or
     "zip" (samples of equal length n, e.g. Monte Carlo draws; result shape (n,)).
     chunk_size: rows per device and chunk (default 16384). smoothing: tau of the smooth cone.
@@ -296,9 +297,8 @@ def _checked_over(case, over):
 
 def _checked_outputs(case, outputs, axes):
     """The canonical output paths to keep (``"status"`` apart, always kept): ``outputs``, or the defaults."""
-    if outputs is None:  # against a fixed object, vehicles[1] is the object: no results of its own
-        outputs = [p for p in DEFAULT_OUTPUTS + (DEFAULT_REST_OUTPUTS if case.motion else ())
-                   if not on_fixed_object(case, p)]
+    if outputs is None:
+        outputs = default_outputs(case)
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
@@ -387,7 +387,7 @@ def plan(request: Request, chunk_size=None, devices=None, output_dtype=None) -> 
                            None if one_chunk else sizes, case.auto_point, case.auto_normal, request.smoothing,
                            np.dtype(output_dtype or dtype), devices,
                            n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), on_cpu(),
-                           case.pole, case.motion)
+                           case.pole, case.motion, case.between)
     axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
     return Plan(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
 

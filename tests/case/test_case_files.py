@@ -50,8 +50,11 @@ BAD = {
                      r"vehicles\[1\]\.speed = '30 zorks'.*unknown unit"),
     "missing field": (lambda d: d["vehicles"][0].pop("width"), r"vehicles\[0\]\.width: missing field"),
     "missing restitution": (lambda d: d["contact"].pop("restitution"), r"contact\.restitution: missing field"),
-    "one vehicle": (lambda d: d["vehicles"].pop(), r"exactly two vehicles"),
-    "three vehicles": (lambda d: d["vehicles"].append(copy.deepcopy(d["vehicles"][0])), r"exactly two vehicles"),
+    "one vehicle": (lambda d: d["vehicles"].pop(), r"1 given and no fixed object; a case needs two bodies"),
+    "three vehicles without a road": (lambda d: d["vehicles"].append(copy.deepcopy(d["vehicles"][0])),
+                                      r"road: missing field; a case of more than two bodies needs a road"),
+    "nine vehicles": (lambda d: d["vehicles"].extend([copy.deepcopy(d["vehicles"][0])] * 7),
+                      r"vehicles: 9 given; a case has 1 to 8 vehicles"),
     "zero normal": (lambda d: d["contact"].update(normal=[0, 0, 0]), r"contact\.normal.*non-zero"),
     "misspelt required field": (lambda d: d["vehicles"][1].update(sped=d["vehicles"][1].pop("speed")),
                                 r"vehicles\[1\]\.speed: missing field"),
@@ -106,7 +109,7 @@ def test_toml_case_and_unreadable_file(tmp_path, capsys):
     path = tmp_path / "c.toml"
     path.write_text('name = "t"\n[[vehicles]]\nmass = 1000\n')
     code, _, err = run_cli(capsys, "solve", str(path))
-    assert code == 2 and "exactly two vehicles" in err
+    assert code == 2 and "a case needs two bodies" in err
     path = tmp_path / "broken.json"
     path.write_text("{not json")
     code, _, err = run_cli(capsys, "solve", str(path))

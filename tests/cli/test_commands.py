@@ -45,7 +45,7 @@ def test_json_keys_are_model_section_4(tmp_path, capsys):
     path.write_text(json.dumps(US_CASE))
     code, out, _ = run_cli(capsys, "solve", str(path), "--json")
     res = json.loads(out)["cases"][0]
-    assert set(res) == {"name", "contact", "vehicles", "exchanges", "energy_loss_total"}
+    assert set(res) == {"name", "between", "contact", "vehicles", "exchanges", "energy_loss_total"}
     assert set(res["contact"]) == set(ks_jax.ContactResult._fields)
     assert set(res["vehicles"][0]) == set(ks_jax.VehicleResult._fields) | {"name", "interactions"} | set(
         ks_jax.case.CUMULATIVE_OUTPUTS)

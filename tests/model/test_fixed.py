@@ -167,7 +167,8 @@ def test_first_contact_with_each_object_by_hand():
 def test_fixed_objects_in_case_files_say_what_is_wrong():
     good = wall_case()
     bad = {
-        "two vehicles and a fixed object": (dict(good, vehicles=[CAR, CAR]), "exactly one vehicle"),
+        "two vehicles and a fixed object without a road": (dict(good, vehicles=[CAR, CAR]),
+                                                            "a case of more than two bodies needs a road"),
         "unknown kind": (dict(good, fixed={"kind": "tree"}), r"fixed\.kind.*wall, pole, barrier"),
         "pole without a diameter": (dict(good, fixed={"kind": "pole", "position": [3, 0]}),
                                     r"fixed\.diameter: missing"),
