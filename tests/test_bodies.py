@@ -121,6 +121,28 @@ def test_three_cars_in_line_through_solve_json_meet_the_closed_form(tmp_path, ca
     assert [i["exchanges"] for i in out["vehicles"][0]["interactions"]] == [[0], [2]]
 
 
+def test_an_oblique_three_car_crash_keeps_its_momentum_through_every_exchange():
+    """The first car strikes the second, turned 60 deg, off its centre; the second is sent into the third, parked at
+    an angle: side-slaps of both pairs follow. On a road of friction 0 nothing acts between exchanges, so the cars'
+    total momentum after their last exchanges (each car's velocity after its last exchange in the JSON, or its own
+    where it had none) is what it was before the first, and no exchange gains energy. (The program of the line of
+    cars above: the same bodies and settings.)"""
+    raw = line(MASSES, SPEEDS, XS, E)
+    raw["vehicles"][1].update(yaw=60, position=["0 m", "1 m"])
+    raw["vehicles"][2].update(yaw=-30, position=["5 m", "4.5 m"])
+    out = ks_jax.solve(case_from_dict(raw)).to_dict()
+    pairs = [tuple(ex["between"]) for ex in out["exchanges"]]
+    assert pairs.count((0, 1)) >= 2 and pairs.count((1, 2)) >= 2  # a side-slap of each pair
+    velocity = {k: np.array([s, 0.0, 0.0]) for k, s in enumerate(SPEEDS)}
+    before = sum(m * velocity[k] for k, m in enumerate(MASSES))
+    for ex in out["exchanges"]:
+        assert ex["energy_loss"] >= 0.0
+        for v in ex["vehicles"]:
+            velocity[v["vehicle"]] = np.asarray(v["velocity_after"])
+    after = sum(m * velocity[k] for k, m in enumerate(MASSES))
+    np.testing.assert_allclose(after, before, rtol=0, atol=1e-9 * np.linalg.norm(before))
+
+
 def test_the_first_exchange_between_named_bodies_and_a_pair_of_its_own_restitution():
     """Two cars in line, a wall at the end of the line and a pole far away that nothing meets (the fixed objects a
     list, reported as one); ``"between": [1, "fixed[0]"]``: the second car strikes the wall first (the first car,
