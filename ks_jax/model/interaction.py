@@ -453,13 +453,14 @@ def _busy(loop: _Loop):
 def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse):
     """The loop over the steps (``n`` at most, ``motion.drive``): (the final loop, the samples of ``sample`` after
     every step, or None). Each step watches, then makes the exchanges due: ``pairs`` turns of ``fire``, as many as
-    may be due at once."""
+    may be due at once, as a loop of its own (unrolled, the program would hold a copy of the exchange per pair, and
+    its compile time would grow with the number of pairs)."""
 
     def step(lp):
         lp = watch_step(lp)
-        for _ in range(pairs):
-            lp = fire(lp)
-        return lp
+        if pairs == 1:
+            return fire(lp)
+        return jax.lax.fori_loop(0, pairs, lambda _, turn: fire(turn), lp)
 
     return motion.drive(step, loop, n, _busy, sample=sample, reverse=reverse)
 
