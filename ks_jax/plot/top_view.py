@@ -7,14 +7,18 @@ state (docs/model.md, "Automatic contact", as ``ks_jax.model.contact`` moves the
 road needs no JAX call. The motion to rest is the one thing the results do not hold step by step: for a case
 with a road, ``ks_jax.solve.motion_paths`` solves the case once more, keeping every step of it.
 
+A case has 1 to 8 vehicles and 0 to 8 fixed objects (its bodies: ``case.inputs.vehicles``, the vehicles and then
+the objects); its first exchange is between two of them, ``case.between`` (its vehicle 1, and its vehicle 2, a
+vehicle or a fixed object). Each vehicle has its own colour (``COLORS``, by its index) and its name in the legend.
 What the top view draws (global frame, metres; a second axis in feet):
-- outlines at first contact t_i (dashed; automatic contact only) and at the exchange (solid),
-  the front face thicker; the overlap polygon at the exchange (grey);
-- the impulse centroid P, the contact plane (red line through P, perpendicular to n), the normal
-  n (red arrow, from vehicle 2 into vehicle 1), the friction cone (cyan wedge about n,
-  half-angle atan(mu));
-- the impulse on each vehicle (J on vehicle 1, -J on vehicle 2, drawn at P: its horizontal part), and
-  each vehicle's CG velocity before (dotted) and after (solid);
+- every vehicle's outline at first contact t_i (dashed; automatic contact only) and at the first exchange (solid),
+  the front face thicker; every fixed object as what it is (a wall as its hatched face, a pole as its circle, a
+  barrier as its box; grey), with its name; the overlap polygon of the first exchange's pair at the exchange (grey);
+- the first exchange's impulse centroid P, the contact plane (red line through P, perpendicular to n), the normal
+  n (red arrow, from its vehicle 2 into its vehicle 1), the friction cone (cyan wedge about n, half-angle atan(mu));
+- the impulse on each vehicle of that pair (J on vehicle 1, -J on vehicle 2, drawn at P: its horizontal part; a
+  fixed object gets none), and each vehicle's CG velocity before (dotted) and after (solid) the first exchange
+  (a vehicle that took no part in it keeps its velocity);
 - whether the contact slides (the impulse on the cone's edge, |T| = mu N: that edge drawn dashed
   beyond the wedge) or sticks (inside the cone), in the title and the legend;
 - where the case has a road (``solution.result.rest`` is not None), each vehicle's motion from the exchange to
@@ -22,22 +26,27 @@ What the top view draws (global frame, metres; a second axis in feet):
   way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
   dot at its CG; "at rest" in the legend, or "at the time limit" for one that had not stopped by then);
 - where the case had more than one exchange (docs/model.md, "Contact interactions"; ``Solution.exchange_list``),
-  every later one where it happened, numbered as the panel numbers them (#0 is the first, drawn as above):
-  one whose impulse is at least ``LATER_SHARE`` of the largest exchange's gets an open circle at its centroid,
-  its number, its normal (a short red arrow) and its impulse on each vehicle of its pair (on the first's scale:
-  one scale for every exchange's arrows), the smaller ones only a dot (a push of many small exchanges stays
-  readable); the legend says how many exchanges there were, and how many of each kind are drawn;
+  every later one where it happened, whichever pair of bodies exchanged it, numbered as the panel numbers them
+  (#0 is the first, drawn as above): one whose impulse is at least ``LATER_SHARE`` of the largest exchange's gets
+  an open circle at its centroid, its number, its normal (a short red arrow) and its impulse on each vehicle of its
+  pair (on the first's scale: one scale for every exchange's arrows), the smaller ones only a dot (a push of many
+  small exchanges stays readable); the legend says how many exchanges there were, and how many of each kind are
+  drawn;
 - given ``evidence`` (result path -> measured value, SI), each vehicle's measured rest position where both
   of its coordinates are given (rest_position[0] and [1]): an x, "measured rest" in the legend, and with
   ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
 The legend states each arrow's scale as "1 m = X": an arrow's drawn length in metres is its
 quantity divided by X, X a round number (``round_scale``).
-The axes take in everything drawn: the whole paths, the rest outlines and the measured positions included.
-Artists a program may look for carry a gid: "rest-path-i" (the CG path of vehicle i, 0-based), "path-outline-i"
-(its outlines on the way), "rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and
-"measured-rest-sigma-i"; and, for a case with more than one exchange, "exchange-k" (the marker at the centroid of
-exchange k >= 1), "exchange-number-k" (the text "#k", k = 0 included), "exchange-normal-k" and
-"exchange-impulse-k-i" (the impulse arrow of exchange k on vehicle i).
+The axes take in everything drawn: the whole paths, the rest outlines, the fixed objects and the measured positions
+included.
+Artists a program may look for carry a gid (i a body's index, 0-based, as in ``case.inputs.vehicles``; k a fixed
+object's, as in ``case.fixed``): "outline-i" (vehicle i's closed outline at the first exchange),
+"first-contact-outline-i" (at first contact), "fixed-k" (fixed object k's patch), "impulse-i" (the first exchange's
+impulse arrow on vehicle i), "rest-path-i" (the CG path of vehicle i), "path-outline-i" (its outlines on the way),
+"rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and "measured-rest-sigma-i"; and, for a
+case with more than one exchange, "exchange-k" (the marker at the centroid of exchange k >= 1), "exchange-number-k"
+(the text "#k", k = 0 included), "exchange-normal-k" and "exchange-impulse-k-i" (the impulse arrow of exchange k on
+vehicle i).
 """
 
 from __future__ import annotations
@@ -54,7 +63,10 @@ from ..model.types import ExchangeResult
 from ..solve import motion_paths
 from .text import wrap_to_width
 
-COLORS = ("tab:blue", "tab:orange")
+# one colour per vehicle, by its index (a case has at most 8): tab10 without the red, cyan and grey that draw the
+# contact (plane, normal, cone) and the fixed objects, and magenta for the eighth (not the navy of a sliding contact's
+# cone edge, nor the black of the centroids)
+COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "magenta")
 IMPULSE_LENGTH = 0.4  # the longest impulse arrow, in units of the larger vehicle's length or width
 VELOCITY_LENGTH = 0.5  # the longest velocity arrow, likewise
 ROUND_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # of a scale, times a power of ten
@@ -127,8 +139,14 @@ def clip_polygon(subject, clip):
     return np.array(out).reshape(-1, 2)
 
 
+def vehicle_color(i):
+    """Vehicle ``i``'s colour (``COLORS``; a case has at most as many vehicles as there are colours)."""
+    return COLORS[i % len(COLORS)]
+
+
 def _vehicle_boxes(inputs, t):
-    """Footprint corners of both vehicles after free motion for ``t`` s, and their CGs (2,)."""
+    """Footprint corners of every body after free motion for ``t`` s (a fixed object, at rest, stays where it is),
+    and their CGs (2,)."""
     boxes, cgs = [], []
     for v in inputs.vehicles:
         vel = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
@@ -173,17 +191,20 @@ def _friction_state(ax, c, p, n, mu, j, reach):
 
 
 class _Scene(NamedTuple):
-    """What the parts of one top view share: the case, the vehicles drawn, and where they are at the exchange
-    (``_draw_outlines`` makes it)."""
+    """What the parts of one top view share: the case, the vehicles drawn, the first exchange's pair, and where
+    every body is at the first exchange (``_draw_outlines`` makes it)."""
 
     inputs: CaseInputs  # the case's inputs
-    result: ExchangeResult  # its results (NumPy arrays)
-    names: list  # the vehicles' names, control characters drawn as their escapes
-    moving: int  # the vehicles drawn moving: 2, or 1 beside a fixed object (drawn once, as what it is)
+    result: ExchangeResult  # its results (NumPy arrays; ``vehicles`` one per body, in body order)
+    names: list  # every body's name (the vehicles', then the fixed objects'), control characters as their escapes
+    count: int  # how many bodies are vehicles (the first ``count`` of ``inputs.vehicles``), drawn moving; the fixed
+    # objects after them are drawn once, as what they are
+    between: tuple  # the first exchange's bodies: its vehicle 1, and its vehicle 2 (a vehicle or a fixed object)
+    many: bool  # more than two bodies: the legend names the first exchange's pair where two bodies need no names
     no_contact: bool  # no contact within the search horizon
-    extent: float  # the larger moving vehicle's length or width, m: the scale of the arrows and the contact
-    boxes: list  # each footprint's corners at the exchange (4, 2)
-    cgs: list  # each CG at the exchange (2,)
+    extent: float  # the largest vehicle's length or width, m: the scale of the arrows and the contact
+    boxes: list  # each body's footprint corners at the first exchange (4, 2)
+    cgs: list  # each body's CG at the first exchange (2,)
 
 
 def _title(ax, solution, solved):
@@ -199,46 +220,66 @@ def _title(ax, solution, solved):
 
 
 def _draw_outlines(ax, solution, names, exchanges):
-    """The footprints at first contact t_i (dashed; automatic contact only) and at the exchange (solid), and
-    a fixed object (a wall's face long enough to take in every exchange with it, of ``exchanges``); returns the
-    ``_Scene`` the other parts draw from."""
+    """Every vehicle's footprint at first contact t_i (dashed; automatic contact only) and at the first exchange
+    (solid), those not in its pair moved freely for as long as the pair (as the pipeline moves them), and every fixed
+    object (``_draw_fixed``: a wall's face long enough to take in every exchange with it, of ``exchanges``); returns
+    the ``_Scene`` the other parts draw from."""
     case, res = solution.case, solution.result
     inputs = case.inputs
     auto = case.auto_point or case.auto_normal
     t_i = float(res.contact.time)
     no_contact = solution.status == "no_contact"
     t_x = 0.0 if (no_contact or not auto) else t_i + float(inputs.contact.penetration_time)
-    moving = 1 if case.fixed is not None else 2  # a fixed object is drawn as what it is, once (it does not move)
+    count = case.vehicle_count  # the fixed objects after the vehicles are drawn as what they are, once
+    many = len(inputs.vehicles) > 2
     if auto and not no_contact:
         first, _ = _vehicle_boxes(inputs, t_i)
-        for i in range(moving):
-            _draw_box(ax, first[i], COLORS[i], "--", alpha=0.6,
+        for i in range(count):
+            _draw_box(ax, first[i], vehicle_color(i), "--", alpha=0.6, gid=f"first-contact-outline-{i}",
                       label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
     boxes, cgs = _vehicle_boxes(inputs, t_x)
-    when = ("at the case state (no contact)" if no_contact else f"at the exchange, t = {t_x:.4f} s" if auto
+    exchange = "the first exchange" if many else "the exchange"
+    when = ("at the case state (no contact)" if no_contact else f"at {exchange}, t = {t_x:.4f} s" if auto
             else "at the case state (explicit contact)")
-    for i in range(moving):
-        _draw_box(ax, boxes[i], COLORS[i], "-", label=f"{names[i]} {when}")
-    extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:moving])
-    if case.fixed is not None:
-        later = [ex["point"][:2] for ex in exchanges[1:] if isinstance(ex["between"][1], str) and ex["point"]]
-        _draw_fixed(ax, case.fixed, names[1], boxes[1], np.asarray(res.contact.point, float)[:2], extent, later)
-    return _Scene(inputs, res, names, moving, no_contact, extent, boxes, cgs)
+    for i in range(count):
+        _draw_box(ax, boxes[i], vehicle_color(i), "-", label=f"{names[i]} {when}", gid=f"outline-{i}")
+    extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:count])
+    for k, obj in enumerate(case.fixed):
+        b = count + k
+        # the centroids of the exchanges with it, in time order: the face is drawn about the first of them
+        mine = [ex["point"] for ex in exchanges if case.body_path(b) in ex["between"]]
+        mine = [np.asarray(q, float)[:2] for q in mine if q is not None]
+        mine = [q for q in mine if np.all(np.isfinite(q))]
+        near = mine[0] if mine else _unstruck_near(obj, cgs[:count])
+        _draw_fixed(ax, obj, names[b], boxes[b], near, extent, mine[1:], gid=f"fixed-{k}")
+    return _Scene(inputs, res, names, count, tuple(case.between), many, no_contact, extent, boxes, cgs)
+
+
+def _unstruck_near(obj, cgs):
+    """Where a fixed object that no exchange touched is drawn about (``_draw_fixed``'s ``near``): a wall's face about
+    the foot of the vehicle CG nearest it (of ``cgs``), a pole or a barrier about its position."""
+    if obj.kind != "wall":
+        return np.asarray(obj.position, float)[:2]
+    n = np.array([math.cos(obj.normal), math.sin(obj.normal)])
+    return min(cgs, key=lambda cg: abs(float(n @ (cg - np.asarray(obj.point, float)[:2]))))
 
 
 def _draw_overlap(ax, scene, fixed):
-    """The overlap of the footprints at the exchange (grey): vehicle 1's with vehicle 2's, or with a fixed
-    object's (a pole's disc, not the square about it)."""
+    """The overlap of the first exchange's pair at the exchange (grey): its vehicle 1's footprint with its vehicle
+    2's, or with the fixed object ``fixed`` it strikes (``case.struck_object``: a pole's disc, not the square about
+    it)."""
     from matplotlib.patches import Polygon
 
-    other = scene.boxes[1]
+    one, two = scene.between
+    other = scene.boxes[two]
     if fixed is not None and fixed.kind == "pole":  # the disc, not the square about it
         angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
         other = fixed.position + 0.5 * fixed.diameter * np.stack([np.cos(angle), np.sin(angle)], -1)
-    overlap = clip_polygon(scene.boxes[0], other)
+    overlap = clip_polygon(scene.boxes[one], other)
+    label = (f"overlap of {scene.names[one]} and {scene.names[two]} at the first exchange" if scene.many
+             else "overlap of the footprints")
     if len(overlap) >= 3:
-        ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5,
-                             label="overlap of the footprints"))
+        ax.add_patch(Polygon(overlap, closed=True, facecolor="0.6", edgecolor="0.3", alpha=0.5, label=label))
 
 
 def _draw_plane_and_cone(ax, scene, p, n, mu):
@@ -251,7 +292,9 @@ def _draw_plane_and_cone(ax, scene, p, n, mu):
     ax.plot(*np.stack([p - half * tang, p + half * tang]).T, "-", color="red", lw=1.2, label="contact plane")
     # thin and on top: an impulse arrow along n (an inline impact) shows on both sides of it
     _arrow(ax, p + 0.4 * scene.extent * n, p, dict(arrowstyle="-|>", color="red", lw=1.2), zorder=5)
-    ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label="normal n (from 2 into 1)")
+    one, two = (scene.names[b] for b in scene.between)
+    into = f"from {two} into {one}" if scene.many else "from 2 into 1"
+    ax.plot([], [], color="red", marker=r"$\rightarrow$", ls="", ms=12, label=f"normal n ({into})")
     half_angle = math.degrees(math.atan(mu))
     az = math.degrees(math.atan2(n[1], n[0]))
     cone = 0.3 * scene.extent
@@ -285,9 +328,9 @@ def _impulse_scale_entry(ax, per_m):
 
 
 def _draw_impulse(ax, scene, p, j, per_m):
-    """The impulse's horizontal part ``j`` on each vehicle at the centroid ``p`` (J on vehicle 1, -J on
-    vehicle 2), on the scale ``per_m`` (N s per m, ``impulse_scale``) the legend states. Returns the arrows'
-    length, m (0 for no impulse)."""
+    """The impulse's horizontal part ``j`` on each vehicle of the first exchange's pair at the centroid ``p`` (J on
+    its vehicle 1, -J on its vehicle 2; none on a fixed object), each in its vehicle's colour, on the scale
+    ``per_m`` (N s per m, ``impulse_scale``) the legend states. Returns the arrows' length, m (0 for no impulse)."""
     c = scene.result.contact
     j_mag = float(np.linalg.norm(j))  # the arrow: the horizontal part
     total = float(c.impulse_magnitude)
@@ -295,18 +338,21 @@ def _draw_impulse(ax, scene, p, j, per_m):
         return 0.0
     shown = f"{j_mag:,.0f}"  # where the impulse has a vertical part, the arrow is shorter than it
     vertical = "" if shown == f"{total:,.0f}" else f", horizontal part {shown} N s"
-    for i, sign in enumerate((1.0, -1.0)[:scene.moving]):
-        _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[i], lw=3.5), zorder=4)
-        ax.plot([], [], color=COLORS[i], lw=3.5,
-                label=f"impulse on {scene.names[i]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
+    for b, sign in zip(scene.between, (1.0, -1.0)):
+        if b >= scene.count:  # a fixed object: no arrow
+            continue
+        _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=vehicle_color(b), lw=3.5), zorder=4,
+               gid=f"impulse-{b}")
+        ax.plot([], [], color=vehicle_color(b), lw=3.5,
+                label=f"impulse on {scene.names[b]}: {total:,.0f} N s ({total / U.LBF_S:,.0f} lbf s){vertical}")
     _impulse_scale_entry(ax, per_m)
     return j_mag / per_m
 
 
 def _draw_contact(ax, scene, fixed, per_m):
-    """The contact at the exchange: the overlap, the plane, the normal, the friction cone, the impulse on
-    each vehicle (``per_m`` N s per m of arrow), whether it slides or sticks, and the impulse centroid P (a
-    black x)."""
+    """The first exchange's contact (between its pair, ``scene.between``; ``fixed``: the fixed object it strikes,
+    or None): the overlap, the plane, the normal, the friction cone, the impulse on each vehicle of the pair
+    (``per_m`` N s per m of arrow), whether it slides or sticks, and the impulse centroid P (a black x)."""
     c = scene.result.contact
     _draw_overlap(ax, scene, fixed)
     p = np.asarray(c.point, float)[:2]
@@ -323,13 +369,14 @@ def _draw_contact(ax, scene, fixed, per_m):
 
 def _draw_later_exchanges(ax, scene, exchanges, per_m):
     """Every exchange after the first (``exchanges``: ``Solution.exchange_list``, two or more) where it happened,
-    the outlines staying at the first exchange. One whose impulse is at least ``LATER_SHARE`` of the largest
-    exchange's: an open circle at its centroid, its number "#k" as the panel's (and "#0" beside the first's), its
-    normal (a short red arrow, from the pair's second body into its first) and its horizontal impulse on each
-    vehicle of the pair (J on the first, -J on the second) on the first's scale ``per_m``, so that their sizes
-    compare (``impulse_scale``: one scale for every exchange's arrows). A smaller one: a dot at
-    its centroid only, so that a push of many small exchanges does not hide the picture. The legend says how many
-    exchanges there were and how many of each kind are drawn."""
+    whichever pair of bodies exchanged it, the outlines staying at the first exchange. One whose impulse is at least
+    ``LATER_SHARE`` of the largest exchange's: an open circle at its centroid, its number "#k" as the panel's (and
+    "#0" beside the first's), its normal (a short red arrow, from the pair's second body into its first) and its
+    horizontal impulse on each vehicle of the pair (J on the first, -J on the second, each in its vehicle's colour;
+    none on a fixed object) on the first's scale ``per_m``, so that their sizes compare (``impulse_scale``: one
+    scale for every exchange's arrows). A smaller one: a dot at its centroid only, so that a push of many small
+    exchanges does not hide the picture. The legend says how many exchanges there were and how many of each kind are
+    drawn."""
     sizes = [float(ex["impulse_magnitude"] or 0.0) for ex in exchanges]
     sizes = [size if math.isfinite(size) else 0.0 for size in sizes]
     largest = max(sizes)
@@ -367,19 +414,20 @@ def _draw_later_exchanges(ax, scene, exchanges, per_m):
             continue
         j = np.asarray(ex["impulse"], float)[:2]
         for side, body in enumerate(ex["between"]):
-            if isinstance(body, int) and body < scene.moving:  # a vehicle drawn (not a fixed object)
+            if isinstance(body, int) and body < scene.count:  # a vehicle (a fixed object is "fixed[k]")
                 sign = 1.0 if side == 0 else -1.0
-                _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=COLORS[body], lw=2.0), zorder=4,
-                       gid=f"exchange-impulse-{k}-{body}")
+                _arrow(ax, p + sign * j / per_m, p, dict(arrowstyle="-|>", color=vehicle_color(body), lw=2.0),
+                       zorder=4, gid=f"exchange-impulse-{k}-{body}")
                 arrows = True
     if arrows and horizontal_part(exchanges[0]["impulse"]) <= 0:  # the first drew no arrow, nor the scale
         _impulse_scale_entry(ax, per_m)
 
 
 def _draw_velocities(ax, scene):
-    """Each moving vehicle's CG velocity before (dotted) and after (solid) the exchange, from its CG at the
-    exchange, on one round scale (``round_scale``) the legend states."""
-    vehicles = scene.inputs.vehicles[:scene.moving]
+    """Each vehicle's CG velocity before (dotted) and after (solid) the first exchange, from its CG at the
+    exchange, on one round scale (``round_scale``) the legend states (a vehicle not in the exchange keeps its
+    velocity: its two arrows are alike)."""
+    vehicles = scene.inputs.vehicles[:scene.count]
     speeds = []
     for i, v in enumerate(vehicles):
         speeds.append(float(v.speed))
@@ -401,8 +449,8 @@ def _draw_velocities(ax, scene):
             # each other or the impulse arrows of an inline impact
             shift = side * 0.05 * scene.extent * np.array([-vec[1], vec[0]]) / length
             _arrow(ax, cg + shift + v_scale * vec, cg + shift,
-                   dict(arrowstyle="-|>", color=COLORS[i], lw=1.3, ls=style))
-        ax.plot(*cg, "o", color=COLORS[i], ms=4)
+                   dict(arrowstyle="-|>", color=vehicle_color(i), lw=1.3, ls=style))
+        ax.plot(*cg, "o", color=vehicle_color(i), ms=4)
     unit = f"1 m = {scale_text(v_per_m)} m/s = {v_per_m / U.MPH:.2f} mph"
     ax.plot([], [], color="0.3", ls=":", label=f"CG velocity before ({unit})")
     ax.plot([], [], color="0.3", ls="-", label=f"CG velocity after ({unit})")
@@ -444,22 +492,22 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     scene = _draw_outlines(ax, solution, names, exchanges)
     per_m = impulse_scale(exchanges, scene.extent)
     if not scene.no_contact:
-        _draw_contact(ax, scene, case.fixed, per_m)
+        _draw_contact(ax, scene, case.struck_object, per_m)
     if len(exchanges) > 1:
         _draw_later_exchanges(ax, scene, exchanges, per_m)
     _draw_velocities(ax, scene)
     if scene.no_contact:
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
     if solution.result.rest is not None:
-        _draw_motion_to_rest(ax, solution, scene.moving)
+        _draw_motion_to_rest(ax, solution, scene.count)
     _draw_measured_rest(ax, names, evidence, sigma)
     _finish_axes(ax)
     return ax
 
 
-def _draw_motion_to_rest(ax, solution, moving):
-    """Each moving vehicle's path from the exchange to rest (``motion_paths``: the case solved once more,
-    every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly spaced in time
+def _draw_motion_to_rest(ax, solution, count):
+    """The path of each of the ``count`` vehicles from the exchange to rest (``motion_paths``: the case solved once
+    more, every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly spaced in time
     (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
     results (``rest_position``, ``rest_yaw``) where the path's last step is."""
     from matplotlib.patches import Polygon
@@ -468,7 +516,7 @@ def _draw_motion_to_rest(ax, solution, moving):
     if paths is None:
         return
     names, inputs = [visible(n) for n in solution.case.vehicle_names], solution.case.inputs
-    for i in range(moving):
+    for i in range(count):
         rest, path = solution.result.rest[i], paths[i]
         if rest is None or path is None:
             continue
@@ -476,23 +524,23 @@ def _draw_motion_to_rest(ax, solution, moving):
         size = (float(v.length), float(v.width), float(v.cg_to_front))
         t, d = float(rest.time_to_rest), float(rest.distance_to_rest)
         step = t / (PATH_OUTLINES + 1)
-        ax.plot(path[:, 1], path[:, 2], "-", color=COLORS[i], lw=0.9, gid=f"rest-path-{i}",
+        ax.plot(path[:, 1], path[:, 2], "-", color=vehicle_color(i), lw=0.9, gid=f"rest-path-{i}",
                 label=f"{names[i]}: CG path to rest, {d:.2f} m ({d / U.FT:.1f} ft) in {t:.2f} s; "
                       f"outlines every {step:.2f} s")
         if step > 0:
             instants = step * np.arange(1, PATH_OUTLINES + 1)
             for k in np.unique(np.clip(np.searchsorted(path[:, 0], instants), 1, len(path) - 1)):
-                _draw_box(ax, _box(*size, path[k, 1:3], path[k, 3]), COLORS[i], "-", alpha=0.3, lw=0.6,
+                _draw_box(ax, _box(*size, path[k, 1:3], path[k, 3]), vehicle_color(i), "-", alpha=0.3, lw=0.6,
                           gid=f"path-outline-{i}")
         xy = np.asarray(rest.rest_position, float)
         yaw = float(rest.rest_yaw)
         corners = _box(*size, xy, math.radians(yaw))
         where = "at rest" if bool(rest.at_rest) else f"at the time limit, {t:.2f} s (not at rest)"
-        ax.add_patch(Polygon(corners, closed=True, facecolor=COLORS[i], edgecolor="none", alpha=0.15))
-        _draw_box(ax, corners, COLORS[i], "-", gid=f"rest-outline-{i}",
+        ax.add_patch(Polygon(corners, closed=True, facecolor=vehicle_color(i), edgecolor="none", alpha=0.15))
+        _draw_box(ax, corners, vehicle_color(i), "-", gid=f"rest-outline-{i}",
                   label=f"{names[i]} {where}: CG ({xy[0]:.2f}, {xy[1]:.2f}) m, yaw {yaw:.1f} deg "
                         f"(turned {float(rest.rotation_to_rest):+.1f} deg)")
-        ax.plot(*xy, "o", color=COLORS[i], ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
+        ax.plot(*xy, "o", color=vehicle_color(i), ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
 
 
 def _draw_measured_rest(ax, names, evidence, sigma):
@@ -505,25 +553,26 @@ def _draw_measured_rest(ax, names, evidence, sigma):
         return
     given = {canonical_path(k): float(v) for k, v in evidence.items()}
     spread = {canonical_path(k): float(v) for k, v in (sigma or {}).items()}
-    for i in range(2):
+    for i in range(len(names)):  # a fixed object (after the vehicles) has no rest position: none is given
         keys = [f"vehicles[{i}].rest_position[{k}]" for k in (0, 1)]
         if not all(k in given for k in keys):
             continue
         x, y = (given[k] for k in keys)
         s = [spread.get(k) for k in keys]
         within = f", +/- ({s[0]:.2f}, {s[1]:.2f}) m dashed" if None not in s else ""
-        ax.plot(x, y, "x", color=COLORS[i], ms=10, mew=2.2, zorder=6, gid=f"measured-rest-{i}",
+        ax.plot(x, y, "x", color=vehicle_color(i), ms=10, mew=2.2, zorder=6, gid=f"measured-rest-{i}",
                 label=f"{names[i]} measured rest: ({x:.2f}, {y:.2f}) m, ({x / U.FT:.1f}, {y / U.FT:.1f}) ft{within}")
         if None not in s:
-            ax.add_patch(Ellipse((x, y), 2 * s[0], 2 * s[1], fill=False, edgecolor=COLORS[i], ls="--", lw=1.0,
+            ax.add_patch(Ellipse((x, y), 2 * s[0], 2 * s[1], fill=False, edgecolor=vehicle_color(i), ls="--", lw=1.0,
                                  zorder=6, gid=f"measured-rest-sigma-{i}"))
 
 
-def _draw_fixed(ax, obj, name, box, near, extent, later=()):
-    """A fixed object (``case.fixed.FixedObject``): a wall as its face, hatched on the wall's side, for
-    1.2 vehicle lengths each way of ``near`` (the centroid's side of the face) and of each of ``later`` (the
-    centroids of later exchanges with it, so that none is drawn off the face's end); a pole as its circle; a
-    barrier as its box; grey, filled."""
+def _draw_fixed(ax, obj, name, box, near, extent, later=(), gid=None):
+    """A fixed object (``case.fixed.FixedObject``) named ``name``, its patch carrying ``gid``: a wall as its face,
+    hatched on the wall's side, for 1.2 vehicle lengths each way of ``near`` (the centroid of its first exchange,
+    or for a wall no exchange touched the CG of the vehicle nearest it: the face about that point's foot) and of each
+    of ``later`` (the centroids of later exchanges with it, so that none is drawn off the face's end); a pole as its
+    circle; a barrier as its box (``box``, its corners); grey, filled."""
     from matplotlib.patches import Circle, Polygon
 
     style = dict(facecolor="0.75", edgecolor="0.25", hatch="///", lw=1.4, alpha=0.9, zorder=1)
@@ -536,13 +585,13 @@ def _draw_fixed(ax, obj, name, box, near, extent, later=()):
         reach = [r for r in reach if math.isfinite(r)]
         face = [foot + (min([0.0, *reach]) - half) * along, foot + (max([0.0, *reach]) + half) * along]
         ax.add_patch(Polygon([*face, face[1] - depth * n, face[0] - depth * n], closed=True,
-                             label=f"{name} (fixed wall; its face)", **style))
+                             label=f"{name} (fixed wall; its face)", gid=gid, **style))
         ax.plot(*np.stack(face).T, "-", color="0.1", lw=2.5)
     elif obj.kind == "pole":
         ax.add_patch(Circle(obj.position, 0.5 * obj.diameter, label=f"{name} (fixed pole, {obj.diameter:.3f} m)",
-                            **style))
+                            gid=gid, **style))
     else:
-        ax.add_patch(Polygon(box, closed=True, label=f"{name} (fixed barrier)", **style))
+        ax.add_patch(Polygon(box, closed=True, label=f"{name} (fixed barrier)", gid=gid, **style))
     ax.update_datalim(np.asarray(box if obj.kind == "barrier" else [near - extent, near + extent], float))
 
 

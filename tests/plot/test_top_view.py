@@ -25,7 +25,8 @@ from matplotlib.patches import Polygon, Wedge
 
 import ks_jax
 from ks_jax import plot
-from ks_jax.plot.top_view import LATER_NORMAL, LATER_SHARE, clip_polygon, top_view_figure
+from ks_jax.case import case_from_dict
+from ks_jax.plot.top_view import COLORS, LATER_NORMAL, LATER_SHARE, clip_polygon, top_view_figure
 from ks_jax.solve import Solution
 from ks_jax import units as U
 from ks_jax.cli import main
@@ -420,3 +421,209 @@ def test_a_single_exchange_case_draws_no_later_exchange_artists():
     assert later_gids(ax) == []
     assert not [t for t in ax.texts if t.get_text().startswith("#")]
     assert not any("exchange" in s for s in legend_texts(ax))
+
+
+# A case of several bodies (docs/model.md, "Contact interactions"): three vehicles and a pole, the first exchange
+# between vehicles[2] (its vehicle 1) and vehicles[1] (its vehicle 2), not the first two bodies. The van strikes the
+# pickup's side; the sedan then runs into the pickup's rear, and the pickup is pushed into the pole.
+
+
+def car(name, mass, length, width, cg_to_front, xy, yaw, speed):
+    return {"name": name, "mass": f"{mass} kg", "inertia": [0.2 * mass, 1.5 * mass, 1.7 * mass],
+            "length": f"{length} m", "width": f"{width} m", "height": "1.5 m", "cg_to_front": f"{cg_to_front} m",
+            "cg_height": "0.6 m", "wheelbase": "2.8 m", "track": "1.6 m", "cg_to_front_axle": "1.3 m",
+            "position": [f"{xy[0]} m", f"{xy[1]} m"], "yaw": yaw, "speed": f"{speed} m/s",
+            "after": {"wheels": "locked"}}
+
+
+SEVERAL = {
+    "name": "three vehicles and a pole",
+    "vehicles": [car("2015 Honda Accord EX-L V6 sedan", 1500, 4.9, 1.85, 2.3, (-14.0, 0.3), 0, 14.0),
+                 car("2019 Ford F-150 XLT SuperCrew pickup", 2300, 5.9, 2.0, 2.6, (0.0, 0.0), 0, 0.0),
+                 car("2018 Toyota Sienna van", 2000, 5.1, 1.95, 2.4, (0.8, -6.0), 90, 8.0)],
+    "fixed": [{"kind": "pole", "position": ["1.2 m", "2.6 m"], "diameter": "0.35 m", "name": "utility pole"}],
+    "between": [2, 1],
+    "contact": {"restitution": 0.1, "friction": 0.5, "penetration_time": "0.03 s"},
+    "road": {"friction": 0.7, "time_limit": "3 s"},
+    "interaction": {"max_exchanges": 8},
+}
+
+
+@pytest.fixture(scope="module")
+def several():
+    """``SEVERAL`` solved once and its top view as ``ks-jax solve --plot`` draws it (``top_view_figure``: the paths
+    to rest included, which solve it once more), drawn so that the equal aspect has set the limits."""
+    sol = ks_jax.solve(case_from_dict(SEVERAL))
+    assert sol.status == "ok" and sol.case.between == (2, 1) and sol.case.vehicle_count == 3
+    fig = top_view_figure([sol])
+    fig.canvas.draw()
+    return sol, fig.axes[0]
+
+
+def hand_box(v, xy, yaw):
+    """A footprint's corners by hand, from the CG ``xy``, the heading ``yaw`` (rad) and the vehicle's size: rear
+    right, front right, front left, rear left."""
+    f = np.array([math.cos(yaw), math.sin(yaw)])
+    left = np.array([-f[1], f[0]])
+    front, rear, half = float(v.cg_to_front), float(v.cg_to_front) - float(v.length), 0.5 * float(v.width)
+    return np.array([xy + rear * f - half * left, xy + front * f - half * left, xy + front * f + half * left,
+                     xy + rear * f + half * left])
+
+
+def free_pose(v, t):
+    """A vehicle's CG and yaw after free motion for ``t`` s from the case state."""
+    xy = np.asarray(v.position, float)[:2] + float(v.speed) * t * np.array([math.cos(v.course), math.sin(v.course)])
+    return xy, float(v.yaw) + float(np.asarray(v.angular_velocity)[2]) * t
+
+
+def drawn_polygon(line):
+    """A closed outline's corners as drawn (its last point repeats its first)."""
+    xy = np.column_stack([line.get_xdata(), line.get_ydata()])
+    np.testing.assert_allclose(xy[-1], xy[0], rtol=0, atol=1e-12)
+    return xy[:-1]
+
+
+@pytest.mark.slow
+def test_every_vehicle_is_drawn_as_its_box_in_its_own_colour(several):
+    """Each vehicle's outline at the first exchange and at first contact is its box moved freely from the case state
+    (the vehicle not in the first exchange as far as its pair), in the vehicle's own colour, labelled with its name."""
+    sol, ax = several
+    inputs = sol.case.inputs
+    t_i = float(sol.result.contact.time)
+    t_x = t_i + float(inputs.contact.penetration_time)
+    labels = legend_texts(ax)
+    colours = []
+    for i, name in enumerate(sol.case.vehicle_names[:3]):
+        v = inputs.vehicles[i]
+        for gid, t in ((f"outline-{i}", t_x), (f"first-contact-outline-{i}", t_i)):
+            (line,) = by_gid(ax, gid)
+            np.testing.assert_allclose(drawn_polygon(line), hand_box(v, *free_pose(v, t)), rtol=0, atol=1e-9)
+        colours.append(to_rgba(line.get_color()))
+        assert any(s.replace("\n  ", " ").startswith(f"{name} at the first exchange, t = {t_x:.4f} s")
+                   for s in labels)
+    assert len(set(colours)) == 3
+    assert not by_gid(ax, "outline-3")  # the pole is no vehicle
+
+
+@pytest.mark.slow
+def test_the_fixed_object_is_drawn_as_what_it_is(several):
+    sol, ax = several
+    (pole,) = by_gid(ax, "fixed-0")
+    obj = sol.case.fixed[0]
+    np.testing.assert_allclose(pole.center, obj.position, rtol=0, atol=1e-12)
+    assert pole.radius == pytest.approx(0.5 * 0.35, rel=1e-12)
+    assert pole.get_label() == "utility pole (fixed pole, 0.350 m)"
+
+
+@pytest.mark.slow
+def test_the_first_exchange_is_drawn_for_its_pair(several):
+    """The overlap, the normal, the cone and the impulse arrows are those of the first exchange's pair (vehicles[2]
+    and vehicles[1]): each arrow starts at the centroid and is the impulse on its vehicle, its mass times its delta-V,
+    over the legend's scale; the vehicle outside the exchange gets none."""
+    sol, ax = several
+    c, inputs = sol.result.contact, sol.case.inputs
+    p = np.asarray(c.point)[:2]
+    per_m = scale_in_legend(ax, "impulse arrows: ")
+    for b in (2, 1):
+        (arrow,) = by_gid(ax, f"impulse-{b}")
+        np.testing.assert_allclose(arrow.xyann, p, rtol=0, atol=1e-12)
+        on_b = float(inputs.vehicles[b].mass) * np.asarray(sol.result.vehicles[b].delta_v)[:2]
+        np.testing.assert_allclose(np.subtract(arrow.xy, arrow.xyann), on_b / per_m, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.subtract(*(by_gid(ax, f"impulse-{b}")[0].xy for b in (2, 1))),
+                               2 * np.asarray(c.impulse)[:2] / per_m, rtol=1e-9)  # J on vehicle 1, -J on vehicle 2
+    assert not by_gid(ax, "impulse-0") and len(impulse_arrows(ax, p)) == 2
+    (wedge,) = [w for w in ax.patches if isinstance(w, Wedge)]
+    np.testing.assert_allclose(wedge.center, p, rtol=0, atol=1e-12)
+    n = np.asarray(c.normal)[:2]
+    assert 0.5 * (wedge.theta1 + wedge.theta2) == pytest.approx(math.degrees(math.atan2(n[1], n[0])), abs=1e-9)
+    # the overlap lies in both of the pair's boxes at the exchange, and not in the sedan's
+    t_x = float(c.time) + float(inputs.contact.penetration_time)
+    (overlap,) = [q for q in ax.patches if isinstance(q, Polygon) and (q.get_label() or "").startswith("overlap")]
+    corners = overlap.get_xy()[:-1]
+    assert shoelace(corners) > 0.01
+    for b in (2, 1):
+        box = hand_box(inputs.vehicles[b], *free_pose(inputs.vehicles[b], t_x))
+        assert shoelace(clip_polygon(corners, box)) == pytest.approx(shoelace(corners), rel=1e-9)
+    sedan = hand_box(inputs.vehicles[0], *free_pose(inputs.vehicles[0], t_x))
+    assert len(clip_polygon(corners, sedan)) == 0
+    names = sol.case.vehicle_names
+    assert f"normal n (from {names[1]} into {names[2]})" in [s.replace("\n  ", " ") for s in legend_texts(ax)]
+
+
+@pytest.mark.slow
+def test_every_later_exchange_is_numbered_at_its_centroid_with_its_impulses(several):
+    """Each later exchange of any pair (vehicles, or a vehicle and the pole) is marked at its centroid, a large one
+    numbered there, its impulse arrow on each vehicle of its pair the vehicle's mass times its delta-V in that
+    exchange over the legend's scale, none on the pole."""
+    sol, ax = several
+    exchanges = sol.exchange_list()
+    per_m = scale_in_legend(ax, "impulse arrows: ")
+    largest = max(ex["impulse_magnitude"] for ex in exchanges)
+    big = [ex for ex in exchanges[1:] if ex["impulse_magnitude"] >= LATER_SHARE * largest]
+    pairs = {tuple(ex["between"]) for ex in big}
+    assert {(0, 1), (1, "fixed[0]")} <= pairs  # a pair without the first exchange's vehicle 1, and the pole
+    (first,) = by_gid(ax, "exchange-number-0")
+    np.testing.assert_allclose(first.xy, np.asarray(sol.result.contact.point)[:2], rtol=0, atol=1e-12)
+    for ex in exchanges[1:]:
+        k, p = ex["index"], np.asarray(ex["point"])[:2]
+        (marker,) = by_gid(ax, f"exchange-{k}")
+        np.testing.assert_allclose(np.ravel(marker.get_xydata()), p, rtol=0, atol=1e-12)
+    for ex in big:
+        k, p = ex["index"], np.asarray(ex["point"])[:2]
+        (number,) = by_gid(ax, f"exchange-number-{k}")
+        assert number.get_text() == f"#{k}"
+        np.testing.assert_allclose(number.xy, p, rtol=0, atol=1e-12)
+        for entry in ex["vehicles"]:
+            b = entry["vehicle"]
+            (arrow,) = by_gid(ax, f"exchange-impulse-{k}-{b}")
+            np.testing.assert_allclose(arrow.xyann, p, rtol=0, atol=1e-12)
+            on_b = float(sol.case.inputs.vehicles[b].mass) * np.asarray(entry["delta_v"])[:2]
+            np.testing.assert_allclose(np.subtract(arrow.xy, arrow.xyann), on_b / per_m, rtol=1e-9, atol=1e-12)
+        assert len([g for g in later_gids(ax) if g.startswith(f"exchange-impulse-{k}-")]) == len(ex["vehicles"])
+
+
+@pytest.mark.slow
+def test_every_vehicle_path_runs_from_the_first_exchange_to_its_rest_position(several):
+    sol, ax = several
+    inputs = sol.case.inputs
+    t_x = float(sol.result.contact.time) + float(inputs.contact.penetration_time)
+    for i in range(3):
+        rest, v = sol.result.rest[i], inputs.vehicles[i]
+        (line,) = by_gid(ax, f"rest-path-{i}")
+        xy = np.column_stack([line.get_xdata(), line.get_ydata()])
+        np.testing.assert_allclose(xy[0], free_pose(v, t_x)[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(xy[-1], rest.rest_position, rtol=1e-6, atol=1e-9)
+        assert np.linalg.norm(xy[-1] - xy[0]) > 0.5  # every vehicle was struck and moved
+        (outline,) = by_gid(ax, f"rest-outline-{i}")
+        np.testing.assert_allclose(drawn_polygon(outline),
+                                   hand_box(v, np.asarray(rest.rest_position), math.radians(float(rest.rest_yaw))),
+                                   rtol=0, atol=1e-9)
+    assert sol.result.rest[3] is None and not by_gid(ax, "rest-path-3")
+
+
+@pytest.mark.slow
+def test_the_legend_of_several_vehicles_fits_below_the_axes(several):
+    """Every legend entry (three long vehicle names, each in several entries) is inside the figure, no wider than
+    the axes, and below the axes' x label."""
+    sol, ax = several
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    axes = ax.get_window_extent(renderer)
+    label = ax.xaxis.label.get_window_extent(renderer)
+    legend = ax.get_legend()
+    assert legend.get_window_extent(renderer).y1 <= label.y0
+    for text in legend.get_texts():
+        box = text.get_window_extent(renderer)
+        assert axes.x0 - 1 <= box.x0 and box.x1 <= axes.x1 + 1 and box.y0 >= 0, text.get_text()
+    texts = [s.replace("\n  ", " ") for s in legend_texts(ax)]
+    for name in sol.case.vehicle_names[:3]:
+        assert sum(s.startswith(name) for s in texts) == 4  # at first contact, at the exchange, path, at rest
+
+
+def test_eight_vehicles_have_eight_colours_apart_from_the_contacts():
+    """One colour per vehicle of a case (at most 8), none of them the red of the plane and normal, the cyan of the
+    cone, the navy of a sliding edge, the black of the centroids or the grey of the overlap and fixed objects."""
+    colours = [to_rgba(c) for c in COLORS]
+    assert len(COLORS) == 8 and len(set(colours)) == 8
+    reserved = [to_rgba(c) for c in ("red", "tab:cyan", "darkcyan", "navy", "black", "0.6", "0.75", "0.25")]
+    assert all(np.linalg.norm(np.subtract(c, r)) > 0.2 for c in colours for r in reserved)
