@@ -227,23 +227,25 @@ def _exchange_rows(sol):
     names = sol.body_names()
     n = sol.case.vehicle_count
     lines = ["", f"  exchanges ({len(exchanges)}; the manual's \"next contact\")"]
+    # each row's SI and US columns are whole (a panel in one unit system shows one of them): the pair on a row of
+    # its own, a PDOF beside the delta-V in both
     for ex in exchanges:
         pair = " and ".join(names[b if isinstance(b, int) else n + int(b[6:-1])][0] for b in ex["between"])
         j, e = ex["impulse_magnitude"], ex["energy_loss"]
-        lines.append(_row(f"#{ex['index']} at {_fmt(ex['time'])} s, interaction {ex['interaction']}",
-                          f"{pair}: impulse {_fmt(j)} N s, energy {_fmt(e)} J",
-                          f"{_fmt(j / U.LBF)} lbf s, {_fmt(e / U.FT_LBF)} ft lbf"))
+        lines.append(_row(f"#{ex['index']} at {_fmt(ex['time'])} s, interaction {ex['interaction']}", pair))
+        lines.append(_row("    impulse, energy", f"{_fmt(j)} N s, {_fmt(e)} J",
+                          f"{_fmt(j / U.LBF_S)} lbf s, {_fmt(e / U.FT_LBF)} ft lbf"))
         for v in ex["vehicles"]:
-            pdof = "undefined" if v["pdof"] is None else f"{angle_text(v['pdof'])} deg"
-            lines.append(_row(f"    vehicles[{v['vehicle']}] delta-V, PDOF", f"{_fmt(v['delta_v_magnitude'])} m/s, "
-                              f"{pdof}", f"{_fmt(v['delta_v_magnitude'] / U.MPH, 2)} mph"))
+            pdof = "PDOF undefined" if v["pdof"] is None else f"PDOF {angle_text(v['pdof'])} deg"
+            dv = v["delta_v_magnitude"]
+            lines.append(_row(f"    vehicles[{v['vehicle']}] delta-V", f"{_fmt(dv)} m/s, {pdof}",
+                              f"{_fmt(dv / U.MPH, 2)} mph, {pdof}"))
     lines += ["", "  cumulative delta-V (first contact interaction, tyre forces between exchanges included)"]
     for k in range(n):
         dv = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_magnitude"))
         pdof = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_pdof"))
-        lines.append(_row(f"vehicles[{k}]", f"{_fmt(dv)} m/s, PDOF "
-                          f"{'undefined' if not math.isfinite(pdof) else angle_text(pdof) + ' deg'}",
-                          f"{_fmt(dv / U.MPH, 2)} mph"))
+        pdof = f"PDOF {'undefined' if not math.isfinite(pdof) else angle_text(pdof) + ' deg'}"
+        lines.append(_row(f"vehicles[{k}]", f"{_fmt(dv)} m/s, {pdof}", f"{_fmt(dv / U.MPH, 2)} mph, {pdof}"))
     return lines
 
 

@@ -165,6 +165,13 @@ def test_the_first_exchange_between_named_bodies_and_a_pair_of_its_own_restituti
     assert out["vehicles"][0]["delta_v_magnitude"] == 0.0  # not in the first exchange
     assert out["vehicles"][1]["delta_v_magnitude"] == pytest.approx(1.5 * 10.0, rel=1e-9)
     assert "vehicles[1] (car 1) and fixed[0] (wall)" in ks_jax.report.text_report(solution)
+    # in each unit system alone, every exchange still names its pair and each vehicle's PDOF
+    for units in ("si", "us"):
+        panel = ks_jax.report.text_report(solution, units=units)
+        assert panel.count("vehicles[1] and fixed[0]") == 2 and panel.count("vehicles[0] and vehicles[1]") == 1
+        rows = [row for row in panel.splitlines() if row.lstrip().startswith("vehicles[") and " delta-V " in row]
+        assert len(rows) == sum(len(ex["vehicles"]) for ex in out["exchanges"]), panel
+        assert all("PDOF" in row and ("mph" if units == "us" else "m/s") in row for row in rows), panel
 
 
 def fitted_line():
