@@ -86,6 +86,16 @@ def constant_text(result, output, shown_in):
     return " ".join(filter(None, (f"{level:.6g}", unit)))
 
 
+def _undefined_everywhere(result, output) -> bool:
+    """Whether ``output`` (a number, not a flag) has no value at any point of ``result`` that was solved: a panel of
+    it would be empty (a vehicle's PDOF where it took no part in the exchange)."""
+    if output == "status" or output not in result.outputs:
+        return False
+    values, status = np.asarray(result[output]), np.asarray(result["status"])
+    solved = status == 0
+    return values.dtype != bool and bool(solved.any()) and not np.isfinite(values[solved]).any()
+
+
 def circular_view(degrees):
     """Directions (deg; a masked array) as drawn: unwrapped about their circular mean, then, as a whole,
     put where they read as plain numbers: in [0, 360) where they fit there, else in (-180, 180] (a PDOF
@@ -328,8 +338,9 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
     ``units``). An output that is the same at every point with a result (``constant_text``: an inline
     impact's PDOF of 180 deg, a contact that sticks everywhere) gets no panel: one line above the panels
     says each with its value ("constant over the sweep: vehicles[0].pdof (Lucid Air) = 180 deg, ..."; "over
-    the points drawn" where ``result`` holds a thinned sweep's points only). Where every output is constant,
-    each has its panel, which says its value. Returns the figure (matplotlib's ``Figure``)."""
+    the points drawn" where ``result`` holds a thinned sweep's points only). An output undefined at every solved
+    point (a PDOF where no impulse reached the vehicle) gets no panel either, and the line names it. Where every
+    output is constant or undefined, each has its panel. Returns the figure (matplotlib's ``Figure``)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -337,10 +348,14 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
     check_kept(result)
     shown_in = display_units(result, units, typed)
     constant = {p: constant_text(result, p, shown_in) for p in outputs if p in result.outputs}
-    drawn = [p for p in outputs if constant.get(p) is None] or outputs
+    nowhere = [p for p in outputs if _undefined_everywhere(result, p)]
+    drawn = [p for p in outputs if constant.get(p) is None and p not in nowhere] or outputs
     names = tuple(visible(n) for n in getattr(result, "names", ()))
-    said = [f"{named(p, names)} = {constant[p]}" for p in outputs if p not in drawn]
+    said = [f"{named(p, names)} = {constant[p]}" for p in outputs if p not in drawn and p not in nowhere]
     over = "the points drawn" if any(k > 1 for k in result.strides) else "the sweep"
+    lines = [f"constant over {over}: {', '.join(said)}"] if said else []
+    if drawn != outputs and nowhere:  # a vehicle not in the exchange has no PDOF at any point: no empty panel
+        lines.append(f"undefined over {over}: {', '.join(named(p, names) for p in nowhere)}")
     if not result.strides:
         result = result.thinned()  # once for every panel
     cols = min(len(drawn), 3)
@@ -352,10 +367,9 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
         sweep_view(result, output, ax, units=units, typed=typed)
     for ax in list(axes.flat)[len(drawn):]:
         ax.set_visible(False)
-    if said:
-        line = f"constant over {over}: {', '.join(said)}"
-        fig.suptitle(wrap_to_width(line, 0.96 * 72.0 * fig.get_figwidth(), CONSTANT_SIZE, indent=""),
-                     fontsize=CONSTANT_SIZE)
+    if lines:
+        fig.suptitle("\n".join(wrap_to_width(line, 0.96 * 72.0 * fig.get_figwidth(), CONSTANT_SIZE, indent="")
+                               for line in lines), fontsize=CONSTANT_SIZE)
     fig.tight_layout()
     return fig
 

@@ -4,6 +4,7 @@ points that have no result marked."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -395,6 +396,13 @@ def test_a_figure_leaves_out_what_is_constant_and_keeps_one_unit_system(case, un
     size = {"m/s": 1.0, "mph": MPH}[unit["velocity"]]
     np.testing.assert_allclose(mesh_of(drawn[f"{DV1} (Lucid Air) [{unit['velocity']}]"]).get_array(), r[DV1] / size,
                                rtol=1e-12)
+    # an output with no value at any solved point (the PDOF of a vehicle no impulse reached, as a third vehicle's
+    # in a case of three) gets no empty panel: the line above names it
+    gone = dataclasses.replace(r, outputs={**r.outputs, "vehicles[1].pdof": np.full(r.shape, np.nan)})
+    fig = plot.sweep_figure(gone, units=units, typed=typed)
+    assert panels(fig).keys() == drawn.keys()
+    assert fig.get_suptitle().splitlines()[-1] == "undefined over the sweep: vehicles[1].pdof (Kia K5)"
+    assert "vehicles[1].pdof (Kia K5) = " not in fig.get_suptitle()
     # only constant outputs: each keeps its panel, which says its value, and no line above them
     only = plot.sweep_figure(r, outputs=["vehicles[0].pdof", "contact.sliding"], units=units)
     assert len(panels(only)) == 2 and not only.get_suptitle()
