@@ -96,6 +96,7 @@ def closed_form(masses, speeds, xs, e, limit, **kw):
 MASSES, SPEEDS, XS, E = [1500.0, 1400.0, 1600.0], [20.0, 0.0, 0.0], [-10.0, 0.0, 6.0], 0.3
 
 
+@pytest.mark.slow
 def test_three_cars_in_line_through_solve_json_meet_the_closed_form(tmp_path, capsys):
     """``ks-jax solve --json`` of three cars in line: the first car strikes the second, which strikes the third, and
     the first catches the second again (a new interaction of that pair); every exchange, place and velocity against
@@ -121,6 +122,7 @@ def test_three_cars_in_line_through_solve_json_meet_the_closed_form(tmp_path, ca
     assert [i["exchanges"] for i in out["vehicles"][0]["interactions"]] == [[0], [2]]
 
 
+@pytest.mark.slow
 def test_an_oblique_three_car_crash_keeps_its_momentum_through_every_exchange():
     """The first car strikes the second, turned 60 deg, off its centre; the second is sent into the third, parked at
     an angle: side-slaps of both pairs follow. On a road of friction 0 nothing acts between exchanges, so the cars'
@@ -143,6 +145,7 @@ def test_an_oblique_three_car_crash_keeps_its_momentum_through_every_exchange():
     np.testing.assert_allclose(after, before, rtol=0, atol=1e-9 * np.linalg.norm(before))
 
 
+@pytest.mark.slow
 def test_the_first_exchange_between_named_bodies_and_a_pair_of_its_own_restitution():
     """Two cars in line, a wall at the end of the line and a pole far away that nothing meets (the fixed objects a
     list, reported as one); ``"between": [1, "fixed[0]"]``: the second car strikes the wall first (the first car,

@@ -169,6 +169,7 @@ sys.exit(code)
 """
 
 
+@pytest.mark.slow
 def test_compile_cache_is_used_and_kept_apart(tmp_path):
     """KS_JAX_CACHE=DIR: the first run stores its compiled programs there and a second run loads
     them (JAX's own cache-hit events) and gives the same report; so with pint's parsed unit definitions

@@ -37,6 +37,7 @@ def two_devices():
     return json.loads(finished(run(devices=2)).strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_two_processes_each_solve_their_share_as_two_devices_do(two_devices, tmp_path):
     """Two processes of one device each (``jax.distributed`` on a free local port), each its share: together
     the values of one process over two devices, where every chunk and every call of the solver is split

@@ -210,6 +210,7 @@ def test_names_are_kept_exactly_and_shown_escaped(tmp_path, capsys):
     assert code == 2 and out == "" and _terminal_safe(err) and f"case '{SHOWN[1]}': contact.restitution" in err
 
 
+@pytest.mark.slow
 def test_a_fit_carries_names_exactly_in_json_and_escaped_in_text(tmp_path, capsys):
     d = json.loads(FIT_CASE.read_text())
     d["name"] = NAMES[0] + NAMES[1]

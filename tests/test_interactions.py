@@ -31,6 +31,7 @@ def solved(raw):
     return ks_jax.solve(case_from_dict(raw)).to_dict()
 
 
+@pytest.mark.slow
 def test_a_case_of_one_exchange_reports_it_as_its_exchanges():
     """Without a road, and with one that parts the cars for good, the one exchange is ``exchanges[0]``: its results
     are the contact's, the energy total its energy loss, each vehicle's cumulative delta-V its delta-V."""
@@ -51,6 +52,7 @@ def test_a_case_of_one_exchange_reports_it_as_its_exchanges():
             np.testing.assert_allclose(inter["delta_v"], v["delta_v"], rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_momentum_is_kept_through_every_exchange_on_a_frictionless_road():
     """The spin-out on a road of friction 0: the pickup pushes into the sedan again after the first exchange. Nothing
     acts between exchanges, so the vehicles' total horizontal momentum after their last exchanges (read from the
@@ -75,6 +77,7 @@ def test_momentum_is_kept_through_every_exchange_on_a_frictionless_road():
         np.testing.assert_allclose(first["delta_v_impulses"][:2], first["delta_v"][:2], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_cumulative_delta_v_is_the_velocity_change_across_the_interaction():
     """The spin-out on its dry road: the watched motion's own cumulative delta-V (traced, a path for sweeps and fits)
     is the change of velocity across the vehicle's first interaction that the exchanges' records give (after the
@@ -91,6 +94,7 @@ def test_cumulative_delta_v_is_the_velocity_change_across_the_interaction():
         assert np.linalg.norm(np.asarray(v["interactions"][0]["delta_v_impulses"]) - change) > 1e-3
 
 
+@pytest.mark.slow
 def test_a_sedan_glancing_off_a_wall_slaps_it_with_its_rear():
     """The shipped wall case: after the first exchange the sedan's rear swings into the wall, a new contact
     interaction. Every exchange is with the wall, at its face (x = 6 m: an overlap with a wall lies between its
@@ -107,6 +111,7 @@ def test_a_sedan_glancing_off_a_wall_slaps_it_with_its_rear():
     assert out["energy_loss_total"] == pytest.approx(sum(ex["energy_loss"] for ex in exchanges), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_later_exchanges_are_output_paths(capsys):
     """``exchanges[k].field``, the cumulative delta-V and the energy total read from a result as the JSON gives them;
     a sweep carries them, NaN in rows with fewer exchanges than k + 1."""
@@ -140,6 +145,7 @@ def test_later_exchanges_are_output_paths(capsys):
     assert code == 0 and "next contact" in text and "#1 at" in text
 
 
+@pytest.mark.slow
 def test_a_fit_reads_cumulative_delta_v_as_evidence():
     """Without a road the cumulative delta-V is the exchange's delta-V: a fit to it finds what a fit to the delta-V
     finds (the seed reconstruction's unknown speed)."""
@@ -188,6 +194,7 @@ def test_an_interaction_without_a_road_or_an_unknown_field_is_ignored_with_a_war
         case_from_dict(raw)
 
 
+@pytest.mark.slow
 def test_running_out_of_exchanges_and_ending_inside_each_other_are_said():
     """The Kia pushes the Lucid in small exchanges until both rest: with room for 2 exchanges only, the count stops
     while they still push, and the JSON and the panel say so; where they rest, their outlines overlap by their

@@ -123,6 +123,7 @@ def test_reference_table_columns_stay_apart(tmp_path):
     assert len(starts) == 1  # the ks-jax column is aligned
 
 
+@pytest.mark.slow
 def test_long_notes_are_wrapped_and_the_label_column_keeps_its_width(tmp_path):
     """A vehicle still moving at the time limit: the remark on its rest position goes under the row, the notes
     are wrapped to lines of at most 100 characters, the columns stay where an ordinary panel has them (US

@@ -119,6 +119,7 @@ def test_rest_positions_of_an_inline_crash_cannot_separate_speed_from_road_frict
     assert res.unidentified and "vehicles[1].speed" in said and "road.friction" in said, res.unidentified
 
 
+@pytest.mark.slow
 def test_front_wheels_locked_slide_at_the_deceleration_their_load_transfer_gives():
     """The second seed chapter's Kia brakes its front wheels only, its rears rolling: braking moves load m a h / L
     onto the locked fronts, so the deceleration a solves m a = (mu - f) (m g (L - c) / L + m a h / L) + f m g, c the

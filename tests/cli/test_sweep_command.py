@@ -200,6 +200,7 @@ def test_cli_bad_path_is_a_clear_error(tmp_path, capsys):
     assert code == 2 and "unknown file type" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 130)])
 def test_a_killed_sweep_leaves_the_earlier_file(tmp_path, sig, code):
     """``ks-jax sweep`` stopped by a kill (a batch system's SIGTERM) or Ctrl-C while it writes: the points

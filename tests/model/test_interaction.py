@@ -27,6 +27,9 @@ from ks_jax.model.interaction import APPROACH_TOLERANCE, Bodies, Interactions, W
 from ks_jax.model.types import Contact, State, Vehicle
 from samples import reference_jit
 
+# every test reads the one program of the module's cases (``results``), which takes most of the file's time: slow
+pytestmark = pytest.mark.slow
+
 DT, LIMIT, SLOTS = M.TIME_STEP, 4.0, 8  # the step, the time limit (s) and the exchange slots of every case
 STEPS = M.steps_for(LIMIT, DT)
 LENGTH, WIDTH, HEIGHT = 4.5, 1.8, 1.4  # m, every car; the CG in the middle of its box, at half its height

@@ -306,6 +306,7 @@ def later_gids(ax):
     return sorted(a.get_gid() for a in artists if (a.get_gid() or "").startswith("exchange-"))
 
 
+@pytest.mark.slow
 def test_later_exchanges_are_drawn_where_they_happened(wall_slap):
     sol, ax = wall_slap
     exchanges = sol.exchange_list()

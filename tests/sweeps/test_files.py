@@ -62,6 +62,7 @@ def test_cli_streams_the_same_file_as_a_kept_sweep(tmp_path, capsys, suffix):
     assert_no_flag_on_invalid_rows(a, kept)
 
 
+@pytest.mark.slow
 def test_csv_is_the_same_file_with_or_without_pyarrow(tmp_path, monkeypatch):
     """A .csv is written by pyarrow where it is installed, else by ks-jax's own formatting: the two files are
     the same bytes, in a grid, in zipped samples with invalid rows, in float32, in US units, and in a grid

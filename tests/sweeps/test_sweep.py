@@ -546,6 +546,7 @@ def _moved(d, dx, dy):
     return d
 
 
+@pytest.mark.slow
 def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
     """In float32 (JAX's default) a position 512 km out keeps ~3 cm, which once gave the seed chapter's
     Pontiac an EES of 2.90 mph instead of 2.21. The exchange is the same in a translated scene (docs/model.md
