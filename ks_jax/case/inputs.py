@@ -167,6 +167,11 @@ class Case:
         n = self.vehicle_count
         return f"vehicles[{b}]" if b < n else f"fixed[{b - n}]"
 
+    def body_entry(self, b: int):
+        """How a case file and the JSON name body ``b`` in a pair ("between"): a vehicle by its index, a fixed
+        object as "fixed[k]"."""
+        return b if b < self.vehicle_count else self.body_path(b)
+
 def as_arrays(inputs: CaseInputs, dtype=None) -> CaseInputs:
     """Every leaf as a jnp array (of ``dtype``, default: JAX's default float)."""
     dtype = dtype or jnp.result_type(float)

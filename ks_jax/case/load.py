@@ -238,8 +238,9 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
                         "exchanges after the first happen while the bodies move on (add \"road\": {\"friction\": "
                         "0.7}; docs/model.md, \"Contact interactions\")")
     road, motion = _road(d, bodies, len(veh), name)
-    interaction, motion = _interaction(d, motion, objects, len(veh), name)
-    pairs, motion = _pairs(d, motion, interaction, len(veh), len(objects), name)
+    interaction, motion = _interaction(d, motion, contact, objects, len(veh), name)
+    pairs, motion = _pairs(d, motion, contact if interaction is None else interaction, len(veh), len(objects),
+                          name)
     inputs = CaseInputs(bodies, contact, road, interaction, pairs)
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
                   for i, v in enumerate(vehicles))
@@ -329,7 +330,7 @@ def _road(d, bodies, vehicles, case_name):
 MAX_EXCHANGES_LIMIT = 64  # a case's max_exchanges at most (each is a slot of results in every solved row)
 
 
-def _interaction(d, motion, objects, vehicles, case_name):
+def _interaction(d, motion, contact, objects, vehicles, case_name):
     """(``InteractionInputs`` or None, the ``Motion`` with the watched motion's settings) of a case's
     ``interaction`` entry (docs/model.md, "Contact interactions"): the later exchanges' restitution, friction and
     penetration time (default: the first contact's), ``approach_tolerance`` and ``max_exchanges``. Later
@@ -359,9 +360,7 @@ def _interaction(d, motion, objects, vehicles, case_name):
     own = [k for k in InteractionInputs._fields if k in values]
     if not own:
         return None, motion
-    c = d["contact"]
-    first = _contact_inputs(c, case_name)[0]
-    return InteractionInputs(*(values.get(k, getattr(first, k)) for k in InteractionInputs._fields)), motion
+    return InteractionInputs(*(values.get(k, getattr(contact, k)) for k in InteractionInputs._fields)), motion
 
 
 _EXCHANGE_RULES = {"restitution": (lambda x: -1 <= x <= 1, "must be in [-1, 1]"),
@@ -385,10 +384,11 @@ def _exchange_values(entry, fields, where, case_name) -> dict:
 PAIR_FIELDS = ("between", "restitution", "friction", "penetration_time")
 
 
-def _pairs(d, motion, interaction, vehicles, objects, case_name):
+def _pairs(d, motion, later, vehicles, objects, case_name):
     """(a ``PairInputs`` per entry, the ``Motion`` with their pairs) of a case's ``pairs`` (docs/model.md, "Contact
     interactions"): the later exchanges of one pair with values of their own; what an entry does not give is the
-    case's (``interaction``, else the first contact's). Without a road the entry is ignored, with a warning."""
+    case's (``later``: its ``InteractionInputs``, else its first ``ContactInputs``). Without a road the entry is
+    ignored, with a warning."""
     if "pairs" not in d:
         return (), motion
     entries = d["pairs"]
@@ -400,8 +400,6 @@ def _pairs(d, motion, interaction, vehicles, objects, case_name):
     if not isinstance(entries, list):
         raise CaseError(f"{_where(case_name, 'pairs')} = {_shown(entries)}: must be a list of pairs, e.g. "
                         "[{\"between\": [1, 2], \"restitution\": 0.1}]")
-    if interaction is None:
-        interaction = _contact_inputs(d["contact"], case_name)[0]
     out, which = [], []
     for n, entry in enumerate(entries):
         where = f"pairs[{n}]"
@@ -418,7 +416,7 @@ def _pairs(d, motion, interaction, vehicles, objects, case_name):
             raise CaseError(f"{_where(case_name, where + '.between')} = {_shown(between)}: "
                             f"pairs[{which.index((i, j))}] names the same pair")
         values = _exchange_values(entry, PairInputs._fields, where, case_name)
-        out.append(PairInputs(*(values.get(k, getattr(interaction, k)) for k in PairInputs._fields)))
+        out.append(PairInputs(*(values.get(k, getattr(later, k)) for k in PairInputs._fields)))
         which.append((i, j))
     return tuple(out), dataclasses.replace(motion, pairs=tuple(which))
 

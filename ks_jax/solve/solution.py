@@ -114,7 +114,7 @@ class Solution:
                                  "delta_v_magnitude": _plain(v.delta_v_magnitude),
                                  "pdof": _plain(defined_output(ex, f"vehicles[{side}].pdof")),
                                  "energy_share": _plain(share), "velocity_after": _plain(v.velocity_after)})
-            between = [b if b < n else self.case.body_path(b) for b in pair]
+            between = [self.case.body_entry(b) for b in pair]
             out.append({"index": k, "between": between,
                         "interaction": 0 if inter is None else int(inter.interaction[k]), **contact,
                         "vehicles": vehicles})
@@ -180,8 +180,7 @@ class Solution:
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
             d["interactions"] = self.interactions_of(i, exchanges)
             vehicles.append(d)
-        n = self.case.vehicle_count
-        out = {"name": self.case.name, "between": [b if b < n else self.case.body_path(b) for b in self.case.between],
+        out = {"name": self.case.name, "between": [self.case.body_entry(b) for b in self.case.between],
                "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
                "energy_loss_total": _plain(defined_output(r, "energy_loss_total"))}
         notes = self.notes()
