@@ -38,6 +38,7 @@ from ks_jax.case import (
     CaseError,
     PathError,
     automatic_part,
+    follows_tow,
     on_fixed_object,
     check_output_path,
     input_ties,
@@ -166,7 +167,7 @@ def unknown_path(case: Case, path: str) -> None:
     except PathError as err:
         raise CaseError(f"case '{name}': unknowns: {err}") from None
     field = _field(path)
-    if why := on_fixed_object(case, path) or without_road(case, path):
+    if why := on_fixed_object(case, path) or without_road(case, path) or follows_tow(case, path):
         raise CaseError(f"case '{name}': unknowns: {why}")
     if automatic_part(case, path):
         raise CaseError(f"case '{name}': unknowns: {path}: contact.{field} is automatic in this case; "
@@ -258,7 +259,7 @@ def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> U
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
-    if why := on_fixed_object(case, path) or without_road(case, path):
+    if why := on_fixed_object(case, path) or without_road(case, path) or follows_tow(case, path):
         raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)

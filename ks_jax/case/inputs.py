@@ -87,18 +87,30 @@ class PairInputs(NamedTuple):
     friction: Any
     penetration_time: Any
 
+class HitchInputs(NamedTuple):
+    """One hitch (docs/model.md, "Articulated vehicles"), SI: ``point`` (2,) m, the hitch in the towed vehicle's
+    body frame; ``point_on_tow`` (2,) m, the same hitch in its tow's body frame; ``max_angle`` () rad, the largest
+    articulation (the towed vehicle's yaw minus its tow's) either way, inf for none. Which vehicles it couples, and
+    how, is ``Motion.links``."""
+
+    point: Any
+    point_on_tow: Any
+    max_angle: Any
+
 class CaseInputs(NamedTuple):
     """``vehicles``: a ``VehicleInputs`` per body, the case's vehicles (1 to 8) and then its fixed objects (0 to 8,
     each a box at rest of infinite mass, ``case.fixed.object_inputs``); ``contact``: ``ContactInputs``; ``road``:
     ``RoadInputs``, or None for a case without motion to rest; ``interaction``: ``InteractionInputs`` where the case
     sets the later exchanges' own values, None where they are the first contact's; ``pairs``: a ``PairInputs`` for
-    each pair of ``Motion.pairs``, whose own values take the place of the case's."""
+    each pair of ``Motion.pairs``, whose own values take the place of the case's; ``hitches``: a ``HitchInputs`` for
+    each link of ``Motion.links``."""
 
     vehicles: tuple
     contact: ContactInputs
     road: Any = None
     interaction: Any = None
     pairs: tuple = ()
+    hitches: tuple = ()
 
 @dataclass(frozen=True)
 class Motion:
@@ -109,7 +121,10 @@ class Motion:
     needs it False. The watched motion's settings (docs/model.md, "Contact interactions";
     ``model.interaction.interact``): ``max_exchanges`` per case, the first included; ``approach_tolerance`` m/s;
     ``poles``: the bodies that automatic contact meets as a pole's disc; ``pairs``: the pairs of bodies (i, j),
-    i < j, whose later exchanges have values of their own (``CaseInputs.pairs``)."""
+    i < j, whose later exchanges have values of their own (``CaseInputs.pairs``); ``links``: the hitches
+    (docs/model.md, "Articulated vehicles"), each ``(towed, tow, kind)``: the two vehicles' indices and "drawbar"
+    (the towed vehicle stands on its own wheels) or "fifth_wheel" (its front is carried by the tow at the hitch),
+    a tow always listed before the vehicles it tows; their points are ``CaseInputs.hitches``."""
 
     time_step: float
     time_limit: float
@@ -119,6 +134,7 @@ class Motion:
     approach_tolerance: float = 0.05
     poles: tuple = ()
     pairs: tuple = ()
+    links: tuple = ()
 
 @dataclass(frozen=True)
 class Case:

@@ -18,39 +18,22 @@ from pathlib import Path
 import numpy as np
 
 from .. import units as U
-from .errors import CaseError, CaseWarning, visible
+from .errors import CaseError, CaseWarning
 from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
+from .fields import LongInteger
+from .fields import both as _both, check_keys as _check_keys, given as _given, limit as _limit, number as _number
+from .fields import positive as _positive, require as _require, shown as _shown, typed_scale as _typed_scale
+from .fields import vector as _vector, where as _where
 from .fixed import KINDS, OBJECT_HEIGHT, FixedObject, object_inputs
+from .hitch import check_between, check_fifth_wheels, check_pairs, follow_vehicles, need_road, read_hitches
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, Motion, PairInputs, RoadInputs
 from .inputs import VehicleInputs
 from .paths import check_output_path, output_kind
 from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, INTERACTION_FIELDS, ROAD_FIELDS, TEXT_FIELDS
 from .schema import VEHICLE_FIELDS
 
-
-def _where(case_name, path):
-    """Where a message points: the case (its name as the terminal shows it, ``visible``) and the field."""
-    return f"case '{visible(case_name)}': {path}"
-
-def _number(value, kind, path, case_name):
-    if isinstance(value, LongInteger):
-        raise CaseError(f"{_where(case_name, path)} = {value[:20]}... (an integer of "
-                        f"{len(value.lstrip('-'))} digits): larger than any finite number")
-    try:
-        x = U.parse_orientation(value) if kind == "angle" else U.parse_quantity(value, kind)
-    except U.UnitError as err:
-        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: {err}") from None
-    if not math.isfinite(x):
-        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be a finite number")
-    return x
-
-def _vector(value, kind, path, case_name, sizes):
-    if not isinstance(value, (list, tuple)) or len(value) not in sizes:
-        want = " or ".join(str(s) for s in sizes)
-        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be a list of {want} quantities")
-    return [_number(v, kind, f"{path}[{i}]", case_name) for i, v in enumerate(value)]
 
 def _inertia(value, path, case_name):
     if isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(r, (list, tuple)) for r in value):
@@ -83,24 +66,6 @@ def _at_least(x, least, raw, path, case_name, unit, kind=None):
         raise CaseError(f"{_where(case_name, path)} = {shown}: must be at least {least:g} {unit}; the exchange "
                         "divides by it")
 
-def _check_keys(d, allowed, path, case_name):
-    """A table must be a dict; an unknown field (a typo, or a key of another tool) is ignored with
-    a CaseWarning naming it, so that a misspelt optional field does not pass silently."""
-    if not isinstance(d, dict):
-        raise CaseError(f"{_where(case_name, path)}: must be a table/object, got {d!r}")
-    for k in d:
-        if k not in allowed:
-            warnings.warn(CaseWarning(f"{_where(case_name, path + '.' + k if path else k)}: unknown field, ignored "
-                                      f"(known: {', '.join(sorted(allowed - {'...'}))})"), stacklevel=2)
-
-def _require(d, key, path, case_name):
-    if key not in d:
-        raise CaseError(f"{_where(case_name, path + '.' + key)}: missing field")
-    return d[key]
-
-def _positive(x, raw, path, case_name, rule):
-    if not x > 0:
-        raise CaseError(f"{_where(case_name, path)} = {raw!r}: {rule}")
 
 def _vehicle_inputs(d, i, case_name):
     path = f"vehicles[{i}]"
@@ -129,7 +94,9 @@ def _vehicle_inputs(d, i, case_name):
         if not 0 <= dims[k] <= dims[whole]:
             raise CaseError(f"{_where(case_name, f'{path}.{k}')} = {_given(d[k], dims[k], 'length')}: must be "
                             f"between 0 and {_limit('the ' + whole, d[whole], dims[whole], 'length')}")
-    pos = _vector(_require(d, "position", path, case_name), "length", f"{path}.position", case_name, (2, 3))
+    towed = "hitch" in d  # its position and velocity follow its tow's (``hitch.follow_vehicles``): optional here
+    pos = [math.nan, math.nan] if towed and "position" not in d else \
+        _vector(_require(d, "position", path, case_name), "length", f"{path}.position", case_name, (2, 3))
     if len(pos) == 2:
         pos.append(dims["cg_height"])
     yaw = num("yaw") if "yaw" in d else None
@@ -150,6 +117,12 @@ def _vehicle_inputs(d, i, case_name):
                             "(reverse the course for backwards travel)")
         course = num("course") if "course" in d else yaw
         vz = 0.0
+    elif towed:
+        if "course" in d:
+            raise CaseError(f"{_where(case_name, path + '.course')} = {_shown(d['course'])}: given without speed; a "
+                            "towed vehicle's speed and course follow its tow's: give both (checked against what "
+                            "follows) or neither")
+        speed, course, vz = math.nan, math.nan, 0.0
     else:
         raise CaseError(f"{_where(case_name, path + '.speed')}: missing field (give speed or velocity)")
     if "yaw_rate" in d and "angular_velocity" in d:
@@ -227,9 +200,13 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     if "contact" not in d:
         raise CaseError(f"{_where(name, 'contact')}: missing field")
     veh = tuple(_vehicle_inputs(v, i, name) for i, v in enumerate(vehicles))
+    links, hitches = read_hitches(vehicles, name)
+    need_road(d, links, name)
+    veh = follow_vehicles(vehicles, veh, links, hitches, name)
     objects = tuple(_fixed_object(o, name, where(k)) for k, o in enumerate(objects_raw))
     bodies = veh + tuple(object_inputs(o, veh) for o in objects)
     between = _between(d.get("between"), len(veh), len(objects), name)
+    check_between(d.get("between"), between, links, name)
     contact, auto_point, auto_normal = _contact_inputs(d["contact"], name)
     if "reference" in d:
         _check_reference(d["reference"], name)
@@ -238,10 +215,14 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
                         "exchanges after the first happen while the bodies move on (add \"road\": {\"friction\": "
                         "0.7}; docs/model.md, \"Contact interactions\")")
     road, motion = _road(d, bodies, len(veh), name)
+    check_fifth_wheels(vehicles, links, hitches, name)
     interaction, motion = _interaction(d, motion, contact, objects, len(veh), name)
     pairs, motion = _pairs(d, motion, contact if interaction is None else interaction, len(veh), len(objects),
                           name)
-    inputs = CaseInputs(bodies, contact, road, interaction, pairs)
+    if links:
+        check_pairs(d.get("pairs"), motion.pairs, links, name)
+        motion = dataclasses.replace(motion, links=links)
+    inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches)
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
                   for i, v in enumerate(vehicles))
     names += tuple(str(o.get("name", o["kind"])) for o in objects_raw)
@@ -537,11 +518,6 @@ MAX_CASES = 100_000
 MAX_INTEGER_DIGITS = 400  # a longer integer literal is kept as its text: no float holds it
 
 
-class LongInteger(str):
-    """An integer literal of a case file too long for any float (more than ``MAX_INTEGER_DIGITS`` digits),
-    kept as its text so that its case, not the file, is refused (``units.parse_quantity`` names it)."""
-
-
 def _json_integer(text):
     return LongInteger(text) if len(text) > MAX_INTEGER_DIGITS else int(text)
 
@@ -592,46 +568,6 @@ def _depth(data) -> int:
             if d <= MAX_DEPTH:  # deeper is refused anyway: no need to walk it all
                 stack.extend((v, d + 1) for v in (x.values() if isinstance(x, dict) else x))
     return deepest
-
-
-def _shown(value, most: int = 80) -> str:
-    """``repr(value)``, cut to ``most`` characters with the count of the rest (a value of thousands of
-    digits or a long list would bury the message)."""
-    text = repr(value)
-    return text if len(text) <= most else f"{text[:most - 20]}... ({len(text)} characters)"
-
-def _typed_scale(raw, kind):
-    """(SI value of one unit, the unit) of a quantity typed with a unit ("15.95 ft" -> (0.3048, "ft")), or
-    None for a bare number, or a unit the same as the SI one shown (``units.SI_DISPLAY``)."""
-    unit = U.typed_unit(raw)
-    if unit is None or unit == U.SI_DISPLAY[kind][1]:
-        return None
-    try:
-        return U.parse_quantity(f"1 {unit}", kind), unit
-    except U.UnitError:
-        return None
-
-
-def _given(raw, x, kind) -> str:
-    """A value as a message shows it: as typed, and where typed in a unit, in SI too ("'20 ft' (6.096 m)"),
-    so that it can be set beside a limit given in SI."""
-    scale, label = U.SI_DISPLAY[kind]
-    return _shown(raw) + (f" ({x / scale:.4g} {label})".rstrip() if _typed_scale(raw, kind) else "")
-
-
-def _both(raw, x, kind) -> str:
-    """``x`` (SI) in the unit ``raw`` was typed in and in SI ("15.95 ft, 4.862 m"), or in SI alone where
-    ``raw`` was a bare number ("4.862 m")."""
-    scale, label = U.SI_DISPLAY[kind]
-    typed = _typed_scale(raw, kind) if raw is not None else None
-    as_typed = f"{x / typed[0]:.4g} {typed[1]}, " if typed else ""
-    return f"{as_typed}{x / scale:.4g} {label}"
-
-
-def _limit(what, raw, x, kind) -> str:
-    """A limit that another input sets, named, in the unit that input was typed in and in SI: "the length
-    (15.95 ft, 4.862 m)"; "the length (4.862 m)" where it was a bare number."""
-    return f"{what} ({_both(raw, x, kind)})"
 
 
 def cases_from_data(data, source=None) -> list[Case]:

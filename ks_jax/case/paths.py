@@ -12,7 +12,7 @@ import numpy as np
 
 from ..model.motion import RestResult
 from ..model.types import ContactResult, VehicleResult
-from .errors import CaseError
+from .errors import CaseError, visible
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, VehicleInputs
 from .schema import INPUT_KINDS, OUTPUT_KINDS
 
@@ -123,10 +123,15 @@ def get_input(inputs: CaseInputs, path: str):
         return leaf[(..., *idx)]
     return jnp.asarray(leaf)[(..., *idx)]
 
-def set_input(inputs: CaseInputs, path: str, value) -> CaseInputs:
+def set_input(inputs: CaseInputs, path: str, value, *, links=()) -> CaseInputs:
     """A copy of ``inputs`` with the number at ``path`` replaced by ``value`` (SI; traceable). A
-    product of inertia (``inertia[i][j]``, i != j) sets [j][i] too: the tensor stays symmetric."""
+    product of inertia (``inertia[i][j]``, i != j) sets [j][i] too: the tensor stays symmetric. ``links``: the
+    case's hitches (``Motion.links``), which ``inputs`` does not hold: a towed vehicle's position (x, y), speed and
+    course follow its tow's (``case.hitch.follow_tows``), and a path to them is refused."""
     group, vi, name, idx = input_leaf(path)
+    tow = next((w for t, w, _ in links if t == vi), None) if group == "vehicles" else None
+    if tow is not None and _followed(name, idx):
+        raise PathError(f"set_input '{path}': vehicles[{vi}] is towed by vehicles[{tow}]: {FOLLOWS}")
     try:
         dtype = None if value is None else jnp.result_type(value)
     except TypeError:
@@ -176,6 +181,28 @@ def _holder(inputs: CaseInputs, group, vi, path):
     return inputs.road if vi is None else inputs.road.vehicles[vi]
 
 
+FOLLOWS = ("its position (x, y), speed and course follow its tow's through the hitch (docs/model.md, \"Articulated "
+           "vehicles: the case file\"); vary its tow's, or its own yaw and yaw rate")
+
+
+def _followed(name, idx) -> bool:
+    """``name``[``idx``] of a towed vehicle is set by its hitch: its position's x or y, its speed or course."""
+    return name in ("speed", "course") or (name == "position" and idx[:1] != (2,))
+
+
+def follows_tow(case: "Case", path) -> str | None:
+    """Where ``path`` names an input of ``case`` that a hitch sets (a towed vehicle's position x or y, speed or
+    course: ``case.hitch.follow_tows``), so that a sweep or a fit cannot vary it (nor evidence read it): the words
+    saying so, naming the tow; else None."""
+    group, vi, name, idx = parse_path(path)
+    links = () if case.motion is None else case.motion.links
+    tow = next((w for t, w, _ in links if t == vi), None) if group == "vehicles" else None
+    if tow is None or not _followed(name, idx):
+        return None
+    return (f"{path}: vehicles[{vi}] is towed by vehicles[{tow}] ('{visible(case.vehicle_names[tow])}'): "
+            f"{FOLLOWS}")
+
+
 REST_OUTPUTS = tuple(f for f in RestResult._fields if f != "path")  # a kept path is for pictures, not a number
 NO_ROAD = ("the case has no road, so no motion to rest: give it one, e.g. \"road\": {\"friction\": 0.7} "
            "(docs/model.md, \"Motion to rest\")")
@@ -212,14 +239,15 @@ def on_fixed_object(case: "Case", path) -> str | None:
 
 
 def path_key(case: "Case") -> tuple:
-    """All that ``get_input``, ``without_road``, ``automatic_part`` and ``on_fixed_object`` read of ``case`` to
-    accept or refuse a path: how many vehicles it has, its fixed objects' kinds, which of the road and its vehicles
-    are missing, and which contact parts are automatic. Cases with one key accept and refuse the same paths, so a
-    batch of cases checks each path once per key."""
+    """All that ``get_input``, ``without_road``, ``automatic_part``, ``on_fixed_object`` and ``follows_tow`` read of
+    ``case`` to accept or refuse a path: how many vehicles it has, its fixed objects' kinds, which of the road and its
+    vehicles are missing, which contact parts are automatic, and which vehicles are towed (by which). Cases with one
+    key accept and refuse the same paths, so a batch of cases checks each path once per key."""
     road = None if case.inputs is None else case.inputs.road
+    towed = () if case.motion is None else tuple((t, w) for t, w, _ in case.motion.links)
     return (case.vehicle_count, tuple(o.kind for o in case.fixed), road is None,
             () if road is None else tuple(v is None for v in road.vehicles), bool(case.auto_point),
-            bool(case.auto_normal))
+            bool(case.auto_normal), towed)
 
 
 def input_ties(case: "Case", paths) -> tuple:
@@ -228,11 +256,13 @@ def input_ties(case: "Case", paths) -> tuple:
     - a vehicle's course defaults to its yaw: where the case gives neither ``course`` nor ``velocity``
       for vehicle i, its course is still its yaw (not changed since, e.g. by ``set_input``) and
       ``vehicles[i].course`` is not among ``paths``, turning the vehicle turns its travel too;
-    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position, its z
-      is still its ``cg_height`` and neither ``vehicles[i].position[2]`` nor ``vehicles[i].position`` is
-      among ``paths``, a new ``cg_height`` moves the CG to it.
-    So a sweep or fit at the case's own values solves the case as it is."""
+    - a CG's height z defaults to ``cg_height``: where the case gives vehicle i a 2-D position (or none, where it
+      is towed), its z is still its ``cg_height`` and neither ``vehicles[i].position[2]`` nor
+      ``vehicles[i].position`` is among ``paths``, a new ``cg_height`` moves the CG to it.
+    So a sweep or fit at the case's own values solves the case as it is. A towed vehicle's course follows its tow
+    (``follows_tow``), not its yaw: no tie."""
     paths = [canonical_path(p) for p in paths]
+    towed = set() if case.motion is None else {t for t, _, _ in case.motion.links}
     ties = []
     vehicles = case.raw.get("vehicles") if isinstance(case.raw, dict) else None
     for k, path in enumerate(paths):
@@ -242,11 +272,12 @@ def input_ties(case: "Case", paths) -> tuple:
         raw = vehicles[vi] if isinstance(vehicles, list) and vi < len(vehicles) else {}
         raw = raw if isinstance(raw, dict) else {}
         v = case.inputs.vehicles[vi]
-        if name == "yaw" and "course" not in raw and "velocity" not in raw and f"vehicles[{vi}].course" not in paths \
-                and np.array_equal(np.asarray(v.course), np.asarray(v.yaw)):
+        if name == "yaw" and vi not in towed and "course" not in raw and "velocity" not in raw \
+                and f"vehicles[{vi}].course" not in paths and np.array_equal(np.asarray(v.course), np.asarray(v.yaw)):
             ties.append((k, f"vehicles[{vi}].course"))
         position = raw.get("position")
-        if name == "cg_height" and isinstance(position, list) and len(position) == 2 \
+        flat = isinstance(position, list) and len(position) == 2 or position is None and vi in towed
+        if name == "cg_height" and flat \
                 and not {f"vehicles[{vi}].position[2]", f"vehicles[{vi}].position"} & set(paths) \
                 and np.array_equal(np.asarray(v.position)[..., 2], np.asarray(v.cg_height)):
             ties.append((k, f"vehicles[{vi}].position[2]"))

@@ -25,6 +25,15 @@ VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
     "track": ("length", None),
     "cg_to_front_axle": ("length", None),
     "after": ("table", None),
+    "hitch": ("table", None),
+}
+
+HITCH_FIELDS = {  # a towed vehicle's "hitch" (docs/model.md, "Articulated vehicles: the case file")
+    "to": ("index", None),
+    "point": ("length", "vec2"),
+    "point_on_tow": ("length", "vec2"),
+    "max_angle": ("angle", None),
+    "kind": ("text", None),
 }
 
 AFTER_FIELDS = {  # a vehicle's "after": how its wheels run from the exchange to rest

@@ -19,7 +19,7 @@ from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
-from ..case import input_kind, input_ties, on_fixed_object, set_input, undefined_kind, without_road
+from ..case import follows_tow, input_kind, input_ties, on_fixed_object, set_input, undefined_kind, without_road
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiled, compiler_options
@@ -286,7 +286,7 @@ def _checked_over(case, over):
     over = {canonical_path(p): v for p, v in over.items()}  # "vehicles[0]. yaw" is "vehicles[0].yaw"
     for p in over:
         name = automatic_part(case, p)  # raises PathError (a CaseError) naming a bad path
-        if why := on_fixed_object(case, p) or without_road(case, p):
+        if why := on_fixed_object(case, p) or without_road(case, p) or follows_tow(case, p):
             raise CaseError(f"sweep over {why}")
         if name:
             raise CaseError(f"sweep over '{p}': contact.{name} is automatic in this case (the file gives no "
