@@ -42,11 +42,14 @@ sequence of exchanges does not change; reverse mode with ``reverse=True`` (every
 
 from __future__ import annotations
 
+import functools
+import operator
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
+from . import joint
 from . import linalg as la
 from . import motion
 from .collision import Prepared, exchange, impulse
@@ -140,10 +143,13 @@ class _Loop(NamedTuple):
     exhausted: jnp.ndarray
 
 
-def pairs_of(vehicles: int, fixed: int):
-    """The pairs watched (static): every pair of vehicles (i < j), then every vehicle with every fixed object."""
+def pairs_of(vehicles: int, fixed: int, links=()):
+    """The pairs watched (static): every pair of vehicles (i < j), then every vehicle with every fixed object; a
+    pair coupled by a hitch (``links``: (towed, tow) pairs) is not watched: its footprints may overlap (a
+    semi-trailer over its tow's fifth wheel)."""
     n = vehicles + fixed
-    return tuple((i, j) for i in range(vehicles) for j in range(i + 1, n))
+    hitched = {tuple(sorted(link)) for link in links}
+    return tuple((i, j) for i in range(vehicles) for j in range(i + 1, n) if (i, j) not in hitched)
 
 
 def _state3(position, yaw, velocity, yaw_rate, z):
@@ -325,16 +331,18 @@ def _record(loop: _Loop, states: State, contact: Contact, when, pair, interactio
 
 
 def _cumulate(loop: _Loop, before, after, pair, yaws, interaction, do, vehicles: int):
-    """The vehicles' first-interaction bookkeeping after an exchange between ``pair`` (whose velocities were
-    ``before`` (2, 3) and are ``after`` (2, 3), whose yaws were ``yaws``), of ``interaction``, where ``do``."""
+    """The vehicles' first-interaction bookkeeping after an exchange between the bodies ``pair`` (whose velocities
+    were ``before`` (n, 3) and are ``after`` (n, 3), whose yaws were ``yaws``), of ``interaction``, where ``do`` (a
+    flag, or one per body). The bodies are the exchange's two, and the vehicles a hitch's impulse then moved."""
     first, start, end, impulses = loop.first_interaction, loop.before, loop.after, loop.impulses
     heading = loop.heading
-    for side in range(2):
+    for side in range(len(pair)):
         b = pair[side]
+        do_side = do if jnp.ndim(do) == 0 else do[side]
         is_vehicle = b < vehicles
         b = jnp.minimum(b, vehicles - 1)
-        starts = do & is_vehicle & (first[b] < 0)
-        adds = do & is_vehicle & ((first[b] < 0) | (first[b] == interaction))
+        starts = do_side & is_vehicle & (first[b] < 0)
+        adds = do_side & is_vehicle & ((first[b] < 0) | (first[b] == interaction))
         start = start.at[b].set(jnp.where(starts, before[side], start[b]))
         heading = heading.at[b].set(jnp.where(starts, yaws[side], heading[b]))
         end = end.at[b].set(jnp.where(adds, after[side], end[b]))
@@ -368,11 +376,38 @@ def _states(bodies: Bodies, carry: motion.Carry):
     return jax.vmap(_state3)(*_planes(bodies, carry), bodies.z)
 
 
-def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, advance) -> _Loop:
-    """One step of the motion, and every pair watched after it (the module's docstring, 1-2): which pairs overlap,
-    their centroids and normals, which are engaged and which are due for an exchange."""
-    carry = jax.vmap(lambda b, c: advance(b, c, dt))(bodies.motion, loop.carry)
+def _coupled(bodies: Bodies, carry: motion.Carry, time, hitches, links, since=None) -> motion.Carry:
+    """``carry`` with every hitch's impulse given (``joint.couple``), and where ``since`` (the carry before the step)
+    is given the hitch points put together again: a vehicle at rest that the joint sets moving moves again from
+    ``time``. A hitched vehicle's path then grows by the chord of its step, the joint's correction included (its
+    own step and the correction may go opposite ways, and their sum would count both)."""
+    if not links:
+        return carry
+    new = joint.couple(carry.state, bodies.motion.mass, bodies.motion.izz, hitches, links,
+                       positions=since is not None)
+    woken = (carry.moving < 1.0) & (jnp.any(new.velocity != 0, axis=-1) | (new.yaw_rate != 0))
+    distance = carry.distance
+    if since is not None:
+        hitched = jnp.asarray([any(v in link for link in links) for v in range(carry.distance.shape[0])])
+        chord = since.distance + la.safe_norm(new.position - since.state.position)
+        distance = jnp.where(hitched, chord, distance)
+    return carry._replace(state=new, moving=jnp.where(woken, 1.0, carry.moving),
+                          time=jnp.where(woken, time, carry.time), distance=distance)
+
+
+def _planar3(velocity, like):
+    """(3,) the planar ``velocity`` (2,) with the vertical component of ``like`` (3,)."""
+    return jnp.concatenate([velocity, like[2:]])
+
+
+def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, advance, hitches=None,
+                links=()) -> _Loop:
+    """One step of the motion, the hitches' joints (``_coupled``), and every pair watched after it (the module's
+    docstring, 1-2): which pairs overlap, their centroids and normals, which are engaged and which are due for an
+    exchange."""
     time = loop.time + dt
+    carry = jax.vmap(lambda b, c: advance(b, c, dt))(bodies.motion, loop.carry)
+    carry = _coupled(bodies, carry, time, hitches, links, since=loop.carry)
     gap, point, normal, un = _watch_pairs(bodies, _states(bodies, carry), carry.moving >= 1.0, pairs, poles)
     overlap = gap < 0
     # engaged: at the first touch within the step where the footprints did not overlap before it, else now
@@ -385,18 +420,22 @@ def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, 
                          normal=normal, current=jnp.where(overlap, loop.current, -1))
 
 
-def _fire(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing) -> _Loop:
+def _fire(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, hitches=None,
+          links=()) -> _Loop:
     """The exchange of the due pair engaged first, if any (the module's docstring, 3): recorded, its impulse given to
     the pair's vehicles, the pair no longer engaged. Computed, for a whole batch, only at a step where some row has a
     pair due (``_any_row``)."""
     return jax.lax.cond(_any_row(jnp.any(loop.due)),
                         lambda lp: _exchange_due(bodies, watch, lp, pairs=pairs, poles=poles, dt=dt,
-                                                 smoothing=smoothing),
+                                                 smoothing=smoothing, hitches=hitches, links=links),
                         lambda lp: lp, loop)
 
 
-def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing) -> _Loop:
-    """``_fire``'s exchange (a row with no pair due is returned unchanged)."""
+def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, hitches=None,
+                  links=()) -> _Loop:
+    """``_fire``'s exchange (a row with no pair due is returned unchanged), and right after it the hitches' joint
+    impulses (``_coupled``), which the exchange's own results leave out and its vehicles' cumulative delta-V
+    counts."""
     vehicles = loop.carry.time.shape[0]
     time, engaged, current, carry = loop.time, loop.engaged, loop.current, loop.carry
     p = jnp.argmin(jnp.where(loop.due, engaged, jnp.inf))
@@ -422,7 +461,6 @@ def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt
     interaction = jnp.where(new, loop.interactions, current[p])
     loop = loop._replace(exhausted=loop.exhausted | (fire & ~slots_left))
     loop = _record(loop, pair_states, contact, when, jnp.stack([i, j]).astype(jnp.int32), interaction, do)
-    loop = _cumulate(loop, pair_states.velocity, velocity, (i, j), (s1.yaw, s2.yaw), interaction, do, vehicles)
     # the impulse's planar part on each vehicle of the pair; a vehicle at rest moves again from now
     s = carry.state
     pos, yaw, vel, rate, moving, clock = s.position, s.yaw, s.velocity, s.yaw_rate, carry.moving, carry.time
@@ -437,6 +475,25 @@ def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt
         clock = clock.at[b].set(jnp.where(hit & (carry.moving[b] < 1.0), time, clock[b]))
         moving = moving.at[b].set(jnp.where(hit, 1.0, moving[b]))
     carry = carry._replace(state=motion.Planar(pos, yaw, vel, rate), moving=moving, time=clock)
+    coupled = jax.tree_util.tree_map(lambda a, b: jnp.where(do, a, b),
+                                     _coupled(bodies, carry, time, hitches, links), carry)
+    bodies_moved, before, after, yaws = [i, j], [pair_states.velocity[0], pair_states.velocity[1]], [], []
+    for side, b in enumerate((i, j)):  # the pair's velocities after the exchange and the joints
+        b = jnp.minimum(b, vehicles - 1)
+        after.append(jnp.where((i, j)[side] < vehicles, _planar3(coupled.state.velocity[b], velocity[side]),
+                               velocity[side]))
+    yaws += [s1.yaw, s2.yaw]
+    moved = [do, do]
+    for v in sorted({u for link in links for u in link}):  # the vehicles a joint moved with the pair
+        group = joint.components(links, vehicles)[v]
+        moved.append(do & (v != i) & (v != j) & functools.reduce(operator.or_, [(i == u) | (j == u) for u in group]))
+        bodies_moved.append(v)
+        before.append(_planar3(vel[v], jnp.zeros(3, vel.dtype)))
+        after.append(_planar3(coupled.state.velocity[v], jnp.zeros(3, vel.dtype)))
+        yaws.append(yaw[v])
+    loop = _cumulate(loop, jnp.stack(before), jnp.stack(after), bodies_moved, yaws, interaction, jnp.stack(moved),
+                     vehicles)
+    carry = coupled
     cleared = (jnp.arange(len(pairs)) == p) & fire
     # the separations the next step interpolates its touches from: those of the positions the exchange left
     gap = jnp.where(do, _gaps(bodies, _states(bodies, carry), pairs, poles), loop.gap)
@@ -479,7 +536,7 @@ def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smo
 def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_pair, watch: Watch, *,
              max_exchanges: int = MAX_EXCHANGES, dt: float = motion.TIME_STEP,
              time_limit: float = motion.TIME_LIMIT, poles=(), smoothing=0.0, path: bool = False,
-             reverse: bool = False) -> Interactions:
+             reverse: bool = False, hitches: joint.Hitch | None = None, links=()) -> Interactions:
     """The watched motion from the first exchange (``Interactions``).
 
     ``bodies``: the case's bodies (``Bodies``); ``start``: a ``motion.Planar`` of (V, ...) leaves, each vehicle at the
@@ -488,15 +545,23 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     ``watch``: the later exchanges' settings per pair (``pairs_of`` order). Static: ``max_exchanges`` (slots, the
     first exchange's included), ``dt``, ``time_limit`` s, ``poles`` (indices of the bodies that are poles),
     ``smoothing`` (of the exchanges), ``path`` (each vehicle's rest result keeps its path) and ``reverse``
-    (``motion.drive``)."""
+    (``motion.drive``). ``hitches`` (a ``joint.Hitch`` of (H, ...) leaves) and ``links`` (static: each hitch's
+    (towed, tow) vehicles): the joints (``model.joint``), whose impulse right after the first exchange is given to
+    ``start``; a hitched pair is not watched."""
     vehicles = start.yaw.shape[0]
     fixed = bodies.fixed.yaw.shape[0]
-    pairs = pairs_of(vehicles, fixed)
+    links = tuple(tuple(link) for link in links)
+    pairs = pairs_of(vehicles, fixed, links)
     watched = tuple(sorted(first_pair))  # the pair as ``pairs_of`` lists it; its exchange's vehicle 1 may be either
     if watched not in pairs or first_pair[0] >= vehicles:
         raise ValueError(f"interact: the first exchange's pair {tuple(first_pair)} is not one of the pairs {pairs} "
                          "with a vehicle first")
     dtype = start.yaw.dtype
+    exchanged = first.contact.status == OK
+    unjoined = start
+    if links:  # the joints' impulse right after the first exchange, and the hitch points together from there on
+        coupled = joint.couple(start, bodies.motion.mass, bodies.motion.izz, hitches, links)
+        start = jax.tree_util.tree_map(lambda a, b: jnp.where(exchanged, a, b), coupled, start)
     carry = jax.vmap(motion.start_carry)(start)
     position, yaw, velocity, yaw_rate = _planes(bodies, carry)
     states = jax.vmap(_state3)(position, yaw, velocity, yaw_rate, bodies.z)
@@ -517,18 +582,27 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                  jnp.zeros(k, jnp.int32), jnp.zeros((), jnp.int32), jnp.full((vehicles,), -1, jnp.int32),
                  jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype),
                  jnp.zeros(vehicles, dtype), jnp.zeros((), bool))
-    exchanged = first.contact.status == OK
     # slot 0 is the first exchange, whose results are given (its states are not needed again)
     loop = loop._replace(count=jnp.ones((), jnp.int32), slot_between=loop.slot_between.at[0].set(pair0))
-    after = jnp.stack([v.velocity_after for v in first.vehicles])
-    loop = _cumulate(loop, after - jnp.stack([v.delta_v for v in first.vehicles]), after, pair0,
-                     (states.yaw[first_pair[0]], states.yaw[first_pair[1]]), jnp.zeros((), jnp.int32), exchanged,
+    after = [v.velocity_after for v in first.vehicles]
+    before = [a - v.delta_v for a, v in zip(after, first.vehicles)]
+    moved, yaws = list(first_pair), [states.yaw[first_pair[0]], states.yaw[first_pair[1]]]
+    after = [_planar3(start.velocity[b], a) if b < vehicles else a for b, a in zip(first_pair, after)]
+    group = set()
+    for b in first_pair:  # the vehicles the joints moved with the pair
+        group |= set(joint.components(links, vehicles)[b]) if b < vehicles else set()
+    for v in sorted(group - set(first_pair)):
+        moved.append(v)
+        yaws.append(states.yaw[v])
+        before.append(_planar3(unjoined.velocity[v], jnp.zeros(3, dtype)))
+        after.append(_planar3(start.velocity[v], jnp.zeros(3, dtype)))
+    loop = _cumulate(loop, jnp.stack(before), jnp.stack(after), moved, yaws, jnp.zeros((), jnp.int32), exchanged,
                      vehicles)
     advance = motion.step_function(reverse and not path)
     watch_step = lambda lp: _watch_step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
-                                        advance=advance)
+                                        advance=advance, hitches=hitches, links=links)
     fire = lambda lp: _fire(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
-                            smoothing=smoothing)
+                            smoothing=smoothing, hitches=hitches, links=links)
     sample = (lambda lp: jax.vmap(motion.path_sample)(lp.carry)) if path else None
     final, samples = _run(watch_step, fire, loop, motion.steps_for(time_limit, dt), len(pairs), sample, reverse)
     rest = tuple(motion.rest_result(_pick(start, v), _pick(final.carry, v),

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 
 from ..batch.stages import blocked, run_row
-from ..case import CaseInputs, Motion, body_states, to_pytrees
+from ..case import CaseInputs, Motion, body_states, follow_tows, to_pytrees
 from ..model import collision
 from ..model import linalg as la
 from ..model.contact import advance, automatic_stage, exchange_at_contact
@@ -69,7 +69,20 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
             result = to_rest(inputs, result, states, motion, smoothing, between)
         return in_body_order(result, between, states)
 
-    return (*first, blocked(exchange_and_rest) if motion is not None else exchange_and_rest)
+    every = (*first, exchange_and_rest)
+    links = () if motion is None else motion.links
+    if links:  # a towed vehicle's position and velocity follow its tow's in every row (a sweep or fit of the tow's)
+        every = tuple(_following(stage, links) for stage in every)
+    return (*every[:-1], blocked(every[-1]) if motion is not None else every[-1])
+
+
+def _following(stage, links):
+    """``stage`` on inputs whose towed vehicles follow their tows (``case.follow_tows``)."""
+
+    def run(inputs, *earlier):
+        return stage(follow_tows(inputs, links), *earlier)
+
+    return run
 
 
 def in_body_order(result: ExchangeResult, between, states) -> ExchangeResult:

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 
 from ..case import CaseInputs, Motion
 from ..model.interaction import Bodies, Watch, interact, pairs_of
+from ..model.joint import Hitch, carried
 from ..model.motion import Chassis, Planar, Wheels, body
 from ..model.results import mask_invalid
 from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult, Vehicle
@@ -61,10 +62,16 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
         wheels = Wheels(after.brake, after.steer, after.rolling_resistance)
         bodies.append(body(vehicles[-1].mass, jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0),
                            vehicles[-1].cg_height, chassis, wheels, friction, motion.time_step))
+    hitches = [Hitch(*(jnp.where(ok, jnp.asarray(x, friction.dtype), d) for x, d in zip(h, (0.0, 0.0, jnp.inf))))
+               for h in inputs.hitches]
+    for (towed, tow, kind), hitch in zip(motion.links, hitches):
+        if kind == "fifth_wheel":  # the towed vehicle's front carried by its tow (the vehicles come first in order)
+            bodies[tow], bodies[towed] = carried(bodies[tow], bodies[towed], hitch)
+    links = tuple((towed, tow) for towed, tow, _ in motion.links)
     stack = lambda parts: jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *parts)  # noqa: E731
     no_fixed = Planar(jnp.zeros((0, 2)), jnp.zeros(0), jnp.zeros((0, 2)), jnp.zeros(0))
     everything = Bodies(stack(vehicles), jnp.stack(z), stack(bodies), stack(fixed) if fixed else no_fixed)
-    pairs = pairs_of(len(moving), len(order) - len(moving))
+    pairs = pairs_of(len(moving), len(order) - len(moving), links)
     later = inputs.interaction if inputs.interaction is not None else inputs.contact
     own = {pairs.index(tuple(sorted((order.index(i), order.index(j))))): values
            for (i, j), values in zip(motion.pairs, inputs.pairs)}  # pairs with values of their own
@@ -78,7 +85,8 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
     first = (order.index(between[0]), order.index(between[1]))
     out = interact(everything, stack(starts), result, first, watch, max_exchanges=motion.max_exchanges,
                    dt=motion.time_step, time_limit=motion.time_limit, poles=tuple(order.index(k) for k in motion.poles),
-                   smoothing=smoothing, path=motion.path, reverse=motion.reverse)
+                   smoothing=smoothing, path=motion.path, reverse=motion.reverse,
+                   hitches=stack(hitches) if hitches else None, links=links)
     rest = [None] * len(order)
     for m, k in enumerate(moving):
         rest[k] = mask_invalid(out.rest[m], ok)

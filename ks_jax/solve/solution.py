@@ -66,7 +66,8 @@ class Solution:
                          "raise interaction.max_exchanges (up to 64)")
         names = self.body_names()
         n = self.case.vehicle_count
-        for (i, j), overlapping, depth in zip(pairs_of(n, len(names) - n),
+        links = tuple((towed, tow) for towed, tow, _ in self.case.motion.links)
+        for (i, j), overlapping, depth in zip(pairs_of(n, len(names) - n, links),
                                               np.asarray(inter.overlapping), np.asarray(inter.overlap_depth)):
             if overlapping:
                 notes.append(f"{_label(names[i])} and {_label(names[j])} overlap where they end, by {float(depth):.3g} "
@@ -138,7 +139,42 @@ class Solution:
             dv = after_last - before_first
             out.append({"interaction": index, "exchanges": [k for k, _ in items], "delta_v": _plain(dv),
                         "delta_v_magnitude": _plain(np.linalg.norm(dv)), "delta_v_impulses": _plain(impulses)})
-        return out
+        return self._joined(vehicle, out)
+
+    def _hitch(self, vehicle: int) -> dict:
+        """{"hitch": ...} for a towed vehicle (docs/model.md, "Articulated vehicles"): its tow's index, the kind, the
+        two points (m) and ``max_angle`` (rad, None for none) as the case gives them, and ``articulation_at_rest``
+        (deg in (-180, 180]: its rest yaw minus its tow's); {} for any other vehicle."""
+        motion = self.case.motion
+        for (towed, tow, kind), h in zip(() if motion is None else motion.links, self.case.inputs.hitches):
+            if towed != vehicle:
+                continue
+            rest = self.result.rest
+            turn = float(rest[towed].rest_yaw) - float(rest[tow].rest_yaw)
+            return {"hitch": {"to": tow, "kind": kind, "point": _plain(h.point), "point_on_tow": _plain(h.point_on_tow),
+                              "max_angle": _plain(h.max_angle),
+                              "articulation_at_rest": _plain(-((-turn + 180.0) % 360.0 - 180.0))}}
+        return {}
+
+    def _joined(self, vehicle: int, interactions: list) -> list:
+        """A hitched vehicle's ``interactions`` with its first one as the watched motion worked it: the joints'
+        impulses right after each exchange included (docs/model.md, "Articulated vehicles"), and listed with no
+        exchanges of its own where only its hitch took part (a tractor whose trailer was struck)."""
+        inter = self.result.interactions
+        if inter is None or not any(vehicle in link[:2] for link in self.case.motion.links):
+            return interactions
+        first = int(inter.first_interaction[vehicle])
+        if first < 0:
+            return interactions
+        dv, impulses = np.asarray(inter.delta_v_cumulative[vehicle]), np.asarray(inter.delta_v_impulses[vehicle])
+        joined = {"delta_v": _plain(dv), "delta_v_magnitude": _plain(np.linalg.norm(dv)),
+                  "delta_v_impulses": _plain(impulses)}
+        for entry in interactions:
+            if entry["interaction"] == first:
+                entry.update(joined)
+                return interactions
+        return sorted(interactions + [{"interaction": first, "exchanges": [], **joined}],
+                      key=lambda entry: entry["interaction"])
 
     def _moving_notes(self) -> list:
         rest = self.result.rest
@@ -179,6 +215,7 @@ class Solution:
                 d.update({k: _plain(x) for k, x in r.rest[i]._asdict().items() if k != "path"})
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
             d["interactions"] = self.interactions_of(i, exchanges)
+            d.update(self._hitch(i))
             vehicles.append(d)
         out = {"name": self.case.name, "between": [self.case.body_entry(b) for b in self.case.between],
                "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
