@@ -188,19 +188,22 @@ def _vehicle_rows(sol):
                                                       "sqrt(2 E / m))" if struck else ")")]
             continue
         if k not in case.between:
-            lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)"]
+            lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)", *_hitch_rows(sol, k)]
             if sol.result.rest is not None and sol.result.rest[k] is not None:
                 lines += _rest_rows(sol.result.rest[k], case.motion)
+            lines += _articulation_rows(sol, k)
             continue
         lines += [
             "",
             # as the output paths (sweeps, fits, --json) name it
             f"  vehicle {case.between.index(k) + 1} = vehicles[{k}]: {visible(name)}",
+            *_hitch_rows(sol, k),
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
             _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
                  else f"{angle_text(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
+            *_joint_delta_v_rows(sol, k),
             _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
             _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
@@ -214,7 +217,67 @@ def _vehicle_rows(sol):
         ]
         if sol.result.rest is not None and sol.result.rest[k] is not None:
             lines += _rest_rows(sol.result.rest[k], sol.case.motion)
+        lines += _articulation_rows(sol, k)
     return lines
+
+
+HITCH_KINDS = {"drawbar": "drawbar", "fifth_wheel": "fifth wheel"}  # a hitch's kind as the panel words it
+
+
+def _hitch_rows(sol, k):
+    """Vehicle ``k``'s hitches (docs/model.md, "Articulated vehicles"): what tows it and how (the hitch's kind and
+    its articulation limit), what it tows; then, where the joint moved it (``_joint_delta_v_rows``) and it took no
+    part in the first exchange, its cumulative delta-V: a tractor whose trailer was struck."""
+    case, rows = sol.case, []
+    for (towed, tow, kind), hitch in zip(_links(case), case.inputs.hitches):
+        if towed == k:
+            limit = float(hitch.max_angle)
+            limit = f"max {_fmt(math.degrees(limit), 1)} deg" if math.isfinite(limit) else "no articulation limit"
+            rows.append(_row("hitch", f"towed by {_named(case, tow)}, {HITCH_KINDS.get(kind, kind)}; {limit}"))
+        elif tow == k:
+            rows.append(_row("hitch", f"tows {_named(case, towed)}, {HITCH_KINDS.get(kind, kind)}"))
+    if k not in case.between:
+        rows += _joint_delta_v_rows(sol, k)
+    return rows
+
+
+def _links(case):
+    """The case's hitches, each ``(towed, tow, kind)`` (``Motion.links``; a hitch needs a road): none without one."""
+    return case.motion.links if case.motion is not None else ()
+
+
+def _named(case, b):
+    """Body ``b`` as the panel names it: its path and its name, escaped."""
+    return f"{case.body_path(b)} ({visible(case.vehicle_names[b])})"
+
+
+def _joint_delta_v_rows(sol, k):
+    """Where vehicle ``k`` is hitched and its cumulative delta-V differs from its first exchange's delta-V by what
+    the panel shows (the joint's impulse right after the exchange moved it: a vehicle of the pair, or the other
+    vehicle of the hitch), its cumulative delta-V and PDOF; none where the case had several exchanges, whose list
+    ends with every vehicle's cumulative delta-V (``_exchange_rows``)."""
+    inter = sol.result.interactions
+    if not any(k in link[:2] for link in _links(sol.case)) or inter is None or int(inter.count) > 1:
+        return []
+    cumulative = np.asarray(inter.delta_v_cumulative[k], float)
+    first = np.asarray(sol.result.vehicles[k].delta_v, float) if k in sol.case.between else np.zeros_like(cumulative)
+    if not np.max(np.abs(cumulative - first)) >= 0.5e-3:  # rounds to what the delta-V row shows already
+        return []
+    dv = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_magnitude"))
+    pdof = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_pdof"))
+    pdof = f"PDOF {'undefined' if not math.isfinite(pdof) else angle_text(pdof) + ' deg'}"
+    return [_row("cumulative delta-V (with hitch)", f"{_fmt(dv)} m/s, {pdof}", f"{_fmt(dv / U.MPH, 2)} mph, {pdof}")]
+
+
+def _articulation_rows(sol, k):
+    """Where vehicle ``k`` is towed and both it and its tow have a rest result: its articulation at rest (its rest
+    yaw minus its tow's, in (-180, 180] deg)."""
+    angle = sol.articulation_at_rest(k)
+    if not math.isfinite(angle):
+        return []
+    angle = round(angle, 1)
+    angle += 360.0 if angle <= -180.0 else 0.0  # as shown: -179.97 to one digit is 180.0, not -180.0
+    return [_row("articulation at rest", f"{_fmt(angle, 1)} deg (its yaw minus its tow's)")]
 
 
 def _exchange_rows(sol):
@@ -240,7 +303,9 @@ def _exchange_rows(sol):
             dv = v["delta_v_magnitude"]
             lines.append(_row(f"    vehicles[{v['vehicle']}] delta-V", f"{_fmt(dv)} m/s, {pdof}",
                               f"{_fmt(dv / U.MPH, 2)} mph, {pdof}"))
-    lines += ["", "  cumulative delta-V (first contact interaction, tyre forces between exchanges included)"]
+    joints = ", the hitches' impulses" if _links(sol.case) else ""
+    lines += ["", _wrapped(f"cumulative delta-V (first contact interaction, tyre forces between exchanges{joints} "
+                           "included)", "  ", "  ")]
     for k in range(n):
         dv = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_magnitude"))
         pdof = float(defined_output(sol.result, f"vehicles[{k}].delta_v_cumulative_pdof"))

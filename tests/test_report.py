@@ -2,8 +2,10 @@
 numbers, its numbers are the solution's, and it names each vehicle as the output paths do."""
 
 import json
+import math
 import re
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,3 +168,88 @@ def test_the_panel_in_one_unit_system_alone():
         [line for line in si.splitlines() if "deg" in line and "rad" not in line]
     with pytest.raises(ValueError, match="units"):
         text_report(sol, units="imperial")
+
+
+SEMI = Path(__file__).resolve().parents[1] / "docs" / "examples" / "semi_trailer_side_impact.json"
+
+
+@pytest.fixture(scope="module")
+def semi():
+    """docs/examples/semi_trailer_side_impact.json (a sedan into a semi-trailer on its tractor's fifth wheel) solved
+    once, its JSON, and its panel in each unit system."""
+    sol = ks_jax.solve(ks_jax.load_case(SEMI))
+    assert sol.status == "ok" and sol.case.between == (0, 1) and len(sol.exchange_list()) == 1
+    return sol, sol.to_dict(), {u: text_report(sol, units=u) for u in ("both", "si", "us")}
+
+
+def vehicle_block(panel, k):
+    """The panel's block of vehicles[k]: its header line and its rows, up to the next blank line."""
+    return re.search(rf"^  (?:vehicle \d = )?vehicles\[{k}\]: .*?(?=\n\n|\Z)", panel, re.M | re.S).group(0)
+
+
+def row_text(block, label):
+    """The text after ``label`` on its row of ``block``, or None where the block has no such row."""
+    found = re.search(rf"^  {re.escape(label)}  +(.*)$", block, re.M)
+    return None if found is None else found.group(1)
+
+
+def pdof_by_hand(delta_v, yaw):
+    """A PDOF worked from a delta-V vector (m/s, global) and the heading ``yaw`` (deg): the direction the force came
+    from, clockwise from the vehicle's front, in [0, 360)."""
+    return (yaw - math.degrees(math.atan2(delta_v[1], delta_v[0])) - 180.0) % 360.0
+
+
+@pytest.mark.slow
+def test_a_towed_vehicle_names_its_tow_and_a_tow_what_it_tows(semi):
+    """The trailer's block says what tows it, how and how far it may turn (the file's hitch: to 2, "fifth_wheel",
+    90 deg); the tractor's what it tows; the sedan's nothing of hitches."""
+    sol, d, panels = semi
+    hitch = json.loads(SEMI.read_text())["vehicles"][1]["hitch"]
+    assert (hitch["to"], hitch["kind"], hitch["max_angle"]) == (2, "fifth_wheel", "90 deg")
+    for panel in panels.values():  # words and degrees: alike in every unit system
+        assert row_text(vehicle_block(panel, 1), "hitch") == "towed by vehicles[2] (Tractor), fifth wheel; max 90.0 deg"
+        assert row_text(vehicle_block(panel, 2), "hitch") == "tows vehicles[1] (Semi-trailer), fifth wheel"
+        assert row_text(vehicle_block(panel, 0), "hitch") is None
+    assert vehicle_block(panels["both"], 2).startswith("  vehicles[2]: Tractor (not in the first exchange)")
+
+
+@pytest.mark.slow
+def test_the_cumulative_delta_v_of_each_vehicle_the_joint_moved(semi):
+    """Trailer and tractor: a "cumulative delta-V (with hitch)" row whose magnitude is the length of the JSON's
+    ``delta_v_cumulative`` and whose PDOF is that vector's direction against the vehicle's heading (90 deg), in m/s
+    and in mph; the tractor's, from the joint alone (no exchange of its own), is not 0. The sedan's cumulative delta-V
+    is its exchange's delta-V: no such row."""
+    sol, d, panels = semi
+    label = "cumulative delta-V (with hitch)"
+    tractor = d["vehicles"][2]
+    assert [entry["exchanges"] for entry in tractor["interactions"]] == [[]]
+    assert np.linalg.norm(tractor["delta_v_cumulative"]) > 0.1
+    assert row_text(vehicle_block(panels["both"], 0), label) is None
+    for k in (1, 2):
+        dv = np.asarray(d["vehicles"][k]["delta_v_cumulative"])
+        pdof = pdof_by_hand(dv, 90.0)
+        assert d["vehicles"][k]["delta_v_cumulative_pdof"] == pytest.approx(pdof, abs=1e-4)
+        for units, scale in (("si", 1.0), ("us", U.MPH)):
+            text = row_text(vehicle_block(panels[units], k), label)
+            size, direction = re.fullmatch(r"([\d.,]+) (?:m/s|mph), PDOF ([\d.]+) deg", text).groups()
+            assert number(size) == pytest.approx(np.linalg.norm(dv) / scale, abs=5e-3 if units == "us" else 5e-4)
+            assert float(direction) == pytest.approx(pdof, abs=0.05)
+    assert len(two_column_rows(panels["both"])[label]) == 2  # SI beside US in the panel of both, apart
+
+
+@pytest.mark.slow
+def test_the_articulation_at_rest(semi):
+    """The trailer's "articulation at rest" is its rest yaw minus the tractor's (the JSON's), wrapped to
+    (-180, 180] deg; no other vehicle has one."""
+    sol, d, panels = semi
+    angle = (d["vehicles"][1]["rest_yaw"] - d["vehicles"][2]["rest_yaw"] + 180.0) % 360.0 - 180.0
+    assert abs(angle) > 1.0  # the struck trailer turned on the fifth wheel
+    text = row_text(vehicle_block(panels["both"], 1), "articulation at rest")
+    assert float(re.fullmatch(r"(-?[\d.]+) deg \(its yaw minus its tow's\)", text).group(1)) == pytest.approx(
+        angle, abs=0.05)
+    assert all(row_text(vehicle_block(panels["both"], k), "articulation at rest") is None for k in (0, 2))
+
+
+def test_a_panel_without_hitches_has_no_hitch_rows():
+    panel = text_report(ks_jax.solve(ks_jax.load_case(SEED1)))
+    assert not re.search(r"hitch|articulation", panel)

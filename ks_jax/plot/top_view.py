@@ -32,6 +32,9 @@ What the top view draws (global frame, metres; a second axis in feet):
   pair (on the first's scale: one scale for every exchange's arrows), the smaller ones only a dot (a push of many
   small exchanges stays readable); the legend says how many exchanges there were, and how many of each kind are
   drawn;
+- where a vehicle is towed (docs/model.md, "Articulated vehicles"), each hitch at the first exchange and, for a
+  case with a road, at rest: a diamond at the tow's hitch point (its CG plus ``point_on_tow`` turned by its yaw)
+  and a thin line from the tow's CG to it and on to the towed vehicle's CG, whose bend is the articulation;
 - given ``evidence`` (result path -> measured value, SI), each vehicle's measured rest position where both
   of its coordinates are given (rest_position[0] and [1]): an x, "measured rest" in the legend, and with
   ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
@@ -43,7 +46,9 @@ Artists a program may look for carry a gid (i a body's index, 0-based, as in ``c
 object's, as in ``case.fixed``): "outline-i" (vehicle i's closed outline at the first exchange),
 "first-contact-outline-i" (at first contact), "fixed-k" (fixed object k's patch), "impulse-i" (the first exchange's
 impulse arrow on vehicle i), "rest-path-i" (the CG path of vehicle i), "path-outline-i" (its outlines on the way),
-"rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and "measured-rest-sigma-i"; and, for a
+"rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and "measured-rest-sigma-i";
+"hitch-i" and "hitch-line-i" (the marker and the line of the hitch that tows vehicle i, at the first exchange),
+"rest-hitch-i" and "rest-hitch-line-i" (at rest); and, for a
 case with more than one exchange, "exchange-k" (the marker at the centroid of exchange k >= 1), "exchange-number-k"
 (the text "#k", k = 0 included), "exchange-normal-k" and "exchange-impulse-k-i" (the impulse arrow of exchange k on
 vehicle i).
@@ -146,15 +151,16 @@ def vehicle_color(i):
 
 def _vehicle_boxes(inputs, t):
     """Footprint corners of every body after free motion for ``t`` s (a fixed object, at rest, stays where it is),
-    and their CGs (2,)."""
-    boxes, cgs = [], []
+    their CGs (2,) and their yaws (rad)."""
+    boxes, cgs, yaws = [], [], []
     for v in inputs.vehicles:
         vel = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
         xy = np.asarray(v.position, float)[:2] + vel * t
         yaw = float(v.yaw) + float(np.asarray(v.angular_velocity)[2]) * t
         boxes.append(_box(float(v.length), float(v.width), float(v.cg_to_front), xy, yaw))
         cgs.append(xy)
-    return boxes, cgs
+        yaws.append(yaw)
+    return boxes, cgs, yaws
 
 
 def _draw_box(ax, corners, color, style, label=None, alpha=1.0, lw=1.4, gid=None):
@@ -205,6 +211,7 @@ class _Scene(NamedTuple):
     extent: float  # the largest vehicle's length or width, m: the scale of the arrows and the contact
     boxes: list  # each body's footprint corners at the first exchange (4, 2)
     cgs: list  # each body's CG at the first exchange (2,)
+    yaws: list  # each body's yaw at the first exchange, rad
 
 
 def _title(ax, solution, solved):
@@ -233,11 +240,11 @@ def _draw_outlines(ax, solution, names, exchanges):
     count = case.vehicle_count  # the fixed objects after the vehicles are drawn as what they are, once
     many = len(inputs.vehicles) > 2
     if auto and not no_contact:
-        first, _ = _vehicle_boxes(inputs, t_i)
+        first, _, _ = _vehicle_boxes(inputs, t_i)
         for i in range(count):
             _draw_box(ax, first[i], vehicle_color(i), "--", alpha=0.6, gid=f"first-contact-outline-{i}",
                       label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
-    boxes, cgs = _vehicle_boxes(inputs, t_x)
+    boxes, cgs, yaws = _vehicle_boxes(inputs, t_x)
     exchange = "the first exchange" if many else "the exchange"
     when = ("at the case state (no contact)" if no_contact else f"at {exchange}, t = {t_x:.4f} s" if auto
             else "at the case state (explicit contact)")
@@ -252,7 +259,7 @@ def _draw_outlines(ax, solution, names, exchanges):
         mine = [q for q in mine if np.all(np.isfinite(q))]
         near = mine[0] if mine else _unstruck_near(obj, cgs[:count])
         _draw_fixed(ax, obj, names[b], boxes[b], near, extent, mine[1:], gid=f"fixed-{k}")
-    return _Scene(inputs, res, names, count, tuple(case.between), many, no_contact, extent, boxes, cgs)
+    return _Scene(inputs, res, names, count, tuple(case.between), many, no_contact, extent, boxes, cgs, yaws)
 
 
 def _unstruck_near(obj, cgs):
@@ -500,6 +507,7 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
     if solution.result.rest is not None:
         _draw_motion_to_rest(ax, solution, scene.count)
+    _draw_hitches(ax, solution, scene)
     _draw_measured_rest(ax, names, evidence, sigma)
     _finish_axes(ax)
     return ax
@@ -541,6 +549,38 @@ def _draw_motion_to_rest(ax, solution, count):
                   label=f"{names[i]} {where}: CG ({xy[0]:.2f}, {xy[1]:.2f}) m, yaw {yaw:.1f} deg "
                         f"(turned {float(rest.rotation_to_rest):+.1f} deg)")
         ax.plot(*xy, "o", color=vehicle_color(i), ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
+
+
+def hitch_point(position, yaw, point_on_tow):
+    """(2,) m: a tow's hitch point, its CG ``position`` (2,) plus ``point_on_tow`` (2,), its body frame point, turned
+    by its ``yaw`` (rad): where the joint holds the towed vehicle's hitch point."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    p = np.asarray(point_on_tow, float)
+    return np.asarray(position, float)[:2] + np.array([c * p[0] - s * p[1], s * p[0] + c * p[1]])
+
+
+def _draw_hitches(ax, solution, scene):
+    """Each hitch (``case.motion.links``, its points ``case.inputs.hitches``) at the first exchange (where the
+    outlines are, ``scene``) and at rest (the rest results, where the case has a road): a diamond at the tow's hitch
+    point (filled in the towed vehicle's colour) and a thin dark line from the tow's CG through it to the towed
+    vehicle's CG, so that the line's bend shows the articulation. One legend entry for all of them."""
+    case, rest = solution.case, solution.result.rest
+    if case.motion is None:  # a hitch needs a road: none without one
+        return
+    label = "hitch: the tow's hitch point (diamond), joined to the two CGs"
+    for (towed, tow, _), hitch in zip(case.motion.links, case.inputs.hitches):
+        poses = [("", scene.cgs[tow], scene.yaws[tow], scene.cgs[towed])]
+        if rest is not None and rest[tow] is not None and rest[towed] is not None:
+            poses.append(("rest-", rest[tow].rest_position, math.radians(float(rest[tow].rest_yaw)),
+                          rest[towed].rest_position))
+        for prefix, cg, yaw, towed_cg in poses:
+            cg, towed_cg = np.asarray(cg, float)[:2], np.asarray(towed_cg, float)[:2]
+            point = hitch_point(cg, yaw, hitch.point_on_tow)
+            ax.plot(*np.stack([cg, point, towed_cg]).T, "-", color="0.15", lw=0.9, zorder=5.5,
+                    gid=f"{prefix}hitch-line-{towed}")
+            ax.plot(*point, "D", ms=6, mfc=vehicle_color(towed), mec="0.15", mew=1.0, zorder=6,
+                    gid=f"{prefix}hitch-{towed}", label=label)
+            label = None  # one legend entry for every hitch
 
 
 def _draw_measured_rest(ax, names, evidence, sigma):

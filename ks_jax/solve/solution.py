@@ -149,12 +149,20 @@ class Solution:
         for (towed, tow, kind), h in zip(() if motion is None else motion.links, self.case.inputs.hitches):
             if towed != vehicle:
                 continue
-            rest = self.result.rest
-            turn = float(rest[towed].rest_yaw) - float(rest[tow].rest_yaw)
             return {"hitch": {"to": tow, "kind": kind, "point": _plain(h.point), "point_on_tow": _plain(h.point_on_tow),
                               "max_angle": _plain(h.max_angle),
-                              "articulation_at_rest": _plain(-((-turn + 180.0) % 360.0 - 180.0))}}
+                              "articulation_at_rest": _plain(self.articulation_at_rest(towed))}}
         return {}
+
+    def articulation_at_rest(self, vehicle: int) -> float:
+        """A towed vehicle's articulation at rest, deg in (-180, 180]: its rest yaw minus its tow's; NaN for a vehicle
+        no hitch tows."""
+        motion, rest = self.case.motion, self.result.rest
+        tows = [tow for towed, tow, _ in (() if motion is None else motion.links) if towed == vehicle]
+        if not tows or rest is None:
+            return math.nan
+        turn = float(rest[vehicle].rest_yaw) - float(rest[tows[0]].rest_yaw)
+        return -((-turn + 180.0) % 360.0 - 180.0)
 
     def _joined(self, vehicle: int, interactions: list) -> list:
         """A hitched vehicle's ``interactions`` with its first one as the watched motion worked it: the joints'

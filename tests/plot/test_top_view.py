@@ -7,7 +7,8 @@ import math
 import re
 import warnings
 from contextlib import redirect_stdout
-from importlib import resources
+from importlib import import_module, resources
+from pathlib import Path
 
 import jax
 
@@ -628,3 +629,61 @@ def test_eight_vehicles_have_eight_colours_apart_from_the_contacts():
     assert len(COLORS) == 8 and len(set(colours)) == 8
     reserved = [to_rgba(c) for c in ("red", "tab:cyan", "darkcyan", "navy", "black", "0.6", "0.75", "0.25")]
     assert all(np.linalg.norm(np.subtract(c, r)) > 0.2 for c in colours for r in reserved)
+
+
+SEMI = Path(__file__).resolve().parents[2] / "docs" / "examples" / "semi_trailer_side_impact.json"
+
+
+@pytest.fixture(scope="module")
+def semi():
+    """docs/examples/semi_trailer_side_impact.json (a sedan into a semi-trailer on its tractor's fifth wheel, 8 ft
+    behind the tractor's CG) solved once and its top view as drawn, the rest results kept but not the paths to rest
+    (which would solve it again; the hitch at rest is drawn from the rest results)."""
+    sol = ks_jax.solve(ks_jax.load_case(SEMI))
+    assert sol.status == "ok" and sol.case.motion.links == ((1, 2, "fifth_wheel"),)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(import_module("ks_jax.plot.top_view"), "motion_paths", lambda solution: None)
+        ax = draw(sol)
+    return sol, ax
+
+
+def drawn_points(line):
+    return np.column_stack([line.get_xdata(), line.get_ydata()])
+
+
+@pytest.mark.slow
+def test_the_hitch_is_drawn_at_the_tractors_fifth_wheel(semi):
+    """At the first exchange the hitch's marker is 8 ft behind the tractor's CG moved freely from the case state (both
+    head north: 8 ft south of it), at rest 8 ft behind the tractor's rest CG along its rest yaw; each marker's line
+    runs from the tractor's CG through it to the trailer's CG. One legend entry for the hitch."""
+    sol, ax = semi
+    d, inputs = sol.to_dict(), sol.case.inputs
+    t_x = float(sol.result.contact.time) + float(inputs.contact.penetration_time)
+    tractor, _ = free_pose(inputs.vehicles[2], t_x)
+    trailer, _ = free_pose(inputs.vehicles[1], t_x)
+    at_exchange = tractor + np.array([0.0, -8.0 * U.FT])
+    rest_yaw = math.radians(d["vehicles"][2]["rest_yaw"])
+    at_rest = np.asarray(d["vehicles"][2]["rest_position"]) - 8.0 * U.FT * np.array([math.cos(rest_yaw),
+                                                                                     math.sin(rest_yaw)])
+    for prefix, hitch, cgs in (("", at_exchange, (tractor, trailer)),
+                               ("rest-", at_rest, (d["vehicles"][2]["rest_position"],
+                                                   d["vehicles"][1]["rest_position"]))):
+        (marker,) = by_gid(ax, f"{prefix}hitch-1")
+        np.testing.assert_allclose(drawn_points(marker), [hitch], rtol=0, atol=1e-9)
+        (line,) = by_gid(ax, f"{prefix}hitch-line-1")
+        np.testing.assert_allclose(drawn_points(line), [cgs[0], hitch, cgs[1]], rtol=0, atol=1e-9)
+    # where the joint holds them: the trailer's kingpin (21 ft ahead of its CG) on the marker, at rest within 1 mm
+    trailer_yaw = math.radians(d["vehicles"][1]["rest_yaw"])
+    kingpin = np.asarray(d["vehicles"][1]["rest_position"]) + 21.0 * U.FT * np.array([math.cos(trailer_yaw),
+                                                                                       math.sin(trailer_yaw)])
+    assert np.linalg.norm(kingpin - at_rest) < 1e-3
+    np.testing.assert_allclose(trailer + np.array([0.0, 21.0 * U.FT]), at_exchange, rtol=0, atol=1e-9)
+    assert sum(s.startswith("hitch") for s in legend_texts(ax)) == 1
+
+
+@pytest.mark.slow
+def test_a_case_without_hitches_draws_none(several):
+    sol, ax = several
+    artists = [*ax.lines, *ax.patches, *ax.texts]
+    assert not [a for a in artists if "hitch" in (a.get_gid() or "")]
+    assert not [s for s in legend_texts(ax) if "hitch" in s]
