@@ -97,13 +97,26 @@ class HitchInputs(NamedTuple):
     point_on_tow: Any
     max_angle: Any
 
+class ApproachInputs(NamedTuple):
+    """One vehicle's approach phases (docs/model.md, "The approach"), earliest first, SI, stacked (P, ...): ``brake``
+    (P, 4) per wheel in [0, 1] (as ``AfterInputs.brake``), ``steer`` (P,) rad, ``rolling_resistance`` (P,),
+    ``friction`` (P,) the road's in each phase, ``length`` (P,): s for a phase by duration, m for one by distance
+    (which each is, is ``Motion.approach``)."""
+
+    brake: Any
+    steer: Any
+    rolling_resistance: Any
+    friction: Any
+    length: Any
+
 class CaseInputs(NamedTuple):
     """``vehicles``: a ``VehicleInputs`` per body, the case's vehicles (1 to 8) and then its fixed objects (0 to 8,
     each a box at rest of infinite mass, ``case.fixed.object_inputs``); ``contact``: ``ContactInputs``; ``road``:
     ``RoadInputs``, or None for a case without motion to rest; ``interaction``: ``InteractionInputs`` where the case
     sets the later exchanges' own values, None where they are the first contact's; ``pairs``: a ``PairInputs`` for
     each pair of ``Motion.pairs``, whose own values take the place of the case's; ``hitches``: a ``HitchInputs`` for
-    each link of ``Motion.links``."""
+    each link of ``Motion.links``; ``approach``: () for a case without one, else one entry per vehicle, an
+    ``ApproachInputs`` or None for a vehicle without."""
 
     vehicles: tuple
     contact: ContactInputs
@@ -111,6 +124,7 @@ class CaseInputs(NamedTuple):
     interaction: Any = None
     pairs: tuple = ()
     hitches: tuple = ()
+    approach: tuple = ()
 
 @dataclass(frozen=True)
 class Motion:
@@ -124,7 +138,9 @@ class Motion:
     i < j, whose later exchanges have values of their own (``CaseInputs.pairs``); ``links``: the hitches
     (docs/model.md, "Articulated vehicles"), each ``(towed, tow, kind)``: the two vehicles' indices and "drawbar"
     (the towed vehicle stands on its own wheels) or "fifth_wheel" (its front is carried by the tow at the hitch),
-    a tow always listed before the vehicles it tows; their points are ``CaseInputs.hitches``."""
+    a tow always listed before the vehicles it tows; their points are ``CaseInputs.hitches``. ``approach``: () for a
+    case without one, else per vehicle the kinds of its approach phases, each "duration" or "distance" (() for a
+    vehicle without); their values are ``CaseInputs.approach``."""
 
     time_step: float
     time_limit: float
@@ -135,6 +151,7 @@ class Motion:
     poles: tuple = ()
     pairs: tuple = ()
     links: tuple = ()
+    approach: tuple = ()
 
 @dataclass(frozen=True)
 class Case:

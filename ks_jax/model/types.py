@@ -222,12 +222,14 @@ class ExchangeResult(NamedTuple):
     """``contact``: a ContactResult; ``vehicles``: a pair of VehicleResult (vehicle 1, vehicle 2); ``rest``: where a
     case's vehicles move on to rest, a pair of ``model.motion.RestResult`` (None for a fixed object), else None;
     ``interactions``: where they move on, the exchanges that follow the first (``model.interaction.Interactions``,
-    its ``rest`` empty: it is ``rest`` here), else None."""
+    its ``rest`` empty: it is ``rest`` here), else None; ``approach``: where a case's vehicles have an approach, one
+    entry per body, a ``model.approach.ApproachResult`` or None (a body without one), else None."""
 
     contact: ContactResult
     vehicles: tuple
     rest: tuple | None = None
     interactions: Any = None
+    approach: tuple | None = None
 
 
 # Status codes carried per row inside jit (docs/model.md, "status").

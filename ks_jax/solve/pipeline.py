@@ -15,7 +15,7 @@ from ..model.contact import advance, automatic_stage, exchange_at_contact
 from ..model.checks import input_status
 from ..model.results import mask_invalid
 from ..model.types import INVALID_NONFINITE, OK, ExchangeResult, VehicleResult
-from .rest import to_rest
+from .rest import approaches, to_rest
 from .rules import speed_status, with_speed_status
 
 
@@ -67,7 +67,10 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
                            for moved, s in zip(at_exchange, states))
         if motion is not None:
             result = to_rest(inputs, result, states, motion, smoothing, between)
-        return in_body_order(result, between, states)
+        result = in_body_order(result, between, states)
+        if motion is not None and motion.approach:
+            result = result._replace(approach=approaches(inputs, body_states(inputs), motion))
+        return result
 
     every = (*first, exchange_and_rest)
     links = () if motion is None else motion.links

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 from ..case import CaseInputs, Motion
 from ..model.interaction import Bodies, Watch, interact, pairs_of
 from ..model.joint import Hitch, carried
-from ..model.motion import Chassis, Planar, Wheels, body
+from ..model.approach import Phases, approach
+from ..model.motion import MAX_FRICTION, Chassis, Planar, Wheels, body
 from ..model.results import mask_invalid
 from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult, Vehicle
 from .rules import motion_rules
@@ -100,3 +101,46 @@ def _stand_in(after):
     return after._replace(wheelbase=like(after.wheelbase, 2.8), track=like(after.track, 1.6),
                           cg_to_front_axle=like(after.cg_to_front_axle, 1.2), brake=like(after.brake, 0.0),
                           steer=like(after.steer, 0.0), rolling_resistance=like(after.rolling_resistance, 0.015))
+
+
+def approaches(inputs: CaseInputs, states, motion: Motion) -> tuple:
+    """Each body's approach (``model.approach``), worked back from its state in the case (``states``, a
+    ``model.types.State`` per body: the state at the impact), or None for a body without one. A row whose approach
+    breaks a rule (a swept or fitted value can: a negative length, a friction outside [0, 10], a brake fraction
+    outside [0, 1], a non-finite value) has NaN in it, computed from harmless stand-ins."""
+    out = []
+    for k, (kinds, phases) in enumerate(zip(motion.approach, inputs.approach)):
+        if not kinds:
+            out.append(None)
+            continue
+        v, after, state = inputs.vehicles[k], inputs.road.vehicles[k], states[k]
+        ok = _approach_rules(phases) & motion_rules(inputs.road)
+        safe = jax.tree_util.tree_map(lambda x, d: jnp.where(ok, x, d), phases, _phase_stand_in(phases))
+        chassis = Chassis(*(jnp.where(ok, x, d) for x, d in zip((after.wheelbase, after.track, after.cg_to_front_axle),
+                                                                 (2.8, 1.6, 1.2))))
+        impact = Planar(jnp.where(ok, state.position[:2], 0.0), jnp.where(ok, state.yaw, 0.0),
+                        jnp.where(ok, state.velocity[:2], 0.0), jnp.where(ok, state.angular_velocity[2], 0.0))
+        mass, izz = jnp.where(ok, v.mass, 1.0), jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0)
+        found = approach(mass, izz, jnp.where(ok, v.cg_height, 0.5), chassis,
+                         Phases(Wheels(safe.brake, safe.steer, safe.rolling_resistance), safe.friction, safe.length),
+                         kinds, impact, path=motion.path)
+        out.append(mask_invalid(found, ok))
+    return tuple(out)
+
+
+def _approach_rules(phases) -> jnp.ndarray:
+    """Every phase's values within their rules (docs/model.md, "The approach")."""
+    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(jnp.asarray(x))) for x in phases]))
+    brake = jnp.asarray(phases.brake)
+    friction = jnp.asarray(phases.friction)
+    return (finite & jnp.all((brake >= 0) & (brake <= 1)) & jnp.all(jnp.asarray(phases.length) >= 0)
+            & jnp.all((friction >= 0) & (friction <= MAX_FRICTION))
+            & jnp.all(jnp.asarray(phases.rolling_resistance) >= 0))
+
+
+def _phase_stand_in(phases):
+    """Harmless phases of the same shapes: 1 s of free rolling on a road of friction 0.7."""
+    like = lambda x, v: jnp.full_like(jnp.asarray(x, jnp.result_type(float)), v)  # noqa: E731
+    return phases._replace(brake=like(phases.brake, 0.0), steer=like(phases.steer, 0.0),
+                           rolling_resistance=like(phases.rolling_resistance, 0.015),
+                           friction=like(phases.friction, 0.7), length=like(phases.length, 1.0))
