@@ -4,10 +4,10 @@ The approach is a list of phases, earliest first, the last ending at the impact;
 motion to rest (``model.motion``: free, locked, or braked by a fraction, the front ones steered), on a road of the
 phase's friction, for a given duration or over a given distance of the CG's path (a skid mark). From the impact
 state, each phase is worked back step by step: the state one step earlier is the one from which the motion's own
-step (``motion._step``) arrives at the later state. That inverse is found by a fixed-point iteration (the earlier
-state moved by what the step misses, ``INVERSE_ITERATIONS`` times: each pass shrinks the miss by about the step
-times the forces' rate of change with the velocity, a few thousandths), so that running the motion forward from the
-approach's start returns the impact state.
+step (``motion.step_function()``) arrives at the later state. That inverse is found by a fixed-point iteration (the
+earlier state moved by what the step misses, ``INVERSE_ITERATIONS`` times: each pass shrinks the miss by about the
+step times the forces' rate of change with the velocity, a few thousandths), so that running the motion forward from
+the approach's start returns the impact state.
 
 A phase runs ``PHASE_STEPS`` steps (static): of its duration over that number, or, for a distance, each step as long
 as the distance over that number along the CG's path (its time from the step's mean speed). A locked straight skid
@@ -67,7 +67,7 @@ def _unpack(x) -> motion.Planar:
 
 def _step_back(b: motion.Body, later: motion.Planar, accel, size, by_distance: bool, before: motion.Body | None = None):
     """The state one step before ``later`` (and that step's duration and the CG's path over it, and its
-    acceleration): the state from which ``motion._step`` of ``b`` arrives at ``later`` (the module's docstring).
+    acceleration): the state from which the motion's step of ``b`` arrives at ``later`` (the module's docstring).
     ``size``: the step's duration (s), or with ``by_distance`` its length along the CG's path (m). The step's load
     transfer is that of the acceleration at the earlier state, of the wheels of the step before it: ``before``, the
     earlier phase's, for the first step of a phase, else ``b``'s."""
@@ -80,14 +80,14 @@ def _step_back(b: motion.Body, later: motion.Planar, accel, size, by_distance: b
         else:
             dt = size
         carry = motion.Carry(earlier, accel, jnp.zeros_like(dt), jnp.zeros_like(dt), jnp.ones_like(dt))
-        return motion._step(b, carry, dt), dt
+        return motion.step_function()(b, carry, dt), dt
 
     def improve(_, xa):  # one pass: the earlier state moved by what the step misses (a loop: one copy of the step)
         x, accel = xa
         reached, dt = forward(_unpack(x), accel)
         accel = reached.accel  # the load transfer of the forces at the earlier state
         if before is not None:
-            accel = motion._step(before, motion.Carry(_unpack(x), accel, dt, dt, jnp.ones_like(dt)), dt).accel
+            accel = motion.step_function()(before, motion.Carry(_unpack(x), accel, dt, dt, jnp.ones_like(dt)), dt).accel
         return x + (target - _pack(reached.state)), accel
 
     x, accel = jax.lax.fori_loop(0, INVERSE_ITERATIONS, improve, (target, accel))

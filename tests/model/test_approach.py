@@ -104,8 +104,8 @@ def test_the_motion_run_forward_from_the_approachs_start_returns_to_the_impact()
         wheels = jax.tree_util.tree_map(lambda x: x[k], p.wheels)
         b = M.body(MASS, IZZ, CG_HEIGHT, CHASSIS, wheels, p.friction[k], M.TIME_STEP)
         # the approach's first step reads the load transfer of the forces at its start
-        carry = carry._replace(accel=M._step(b, carry, steps[0]).accel) if k == 0 else carry
-        return jax.lax.scan(lambda c, dt: (M._step(b, c, dt), None), carry,
+        carry = carry._replace(accel=M.step_function()(b, carry, steps[0]).accel) if k == 0 else carry
+        return jax.lax.scan(lambda c, dt: (M.step_function()(b, c, dt), None), carry,
                             steps[k * PHASE_STEPS:(k + 1) * PHASE_STEPS])[0]
 
     end = reference_jit(lambda c: phase(phase(c, 0), 1))(carry).state
