@@ -50,6 +50,7 @@ from ks_jax.case import (
     parse_path,
     path_key,
     set_input,
+    without_approach,
     without_road,
 )
 from ks_jax.solve import solve_inputs
@@ -259,7 +260,8 @@ def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> U
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
-    if why := on_fixed_object(case, path) or without_road(case, path) or follows_tow(case, path):
+    if why := on_fixed_object(case, path) or without_road(case, path) or without_approach(case, path) \
+            or follows_tow(case, path):
         raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)

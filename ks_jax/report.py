@@ -188,7 +188,8 @@ def _vehicle_rows(sol):
                                                       "sqrt(2 E / m))" if struck else ")")]
             continue
         if k not in case.between:
-            lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)", *_hitch_rows(sol, k)]
+            lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)", *_hitch_rows(sol, k),
+                      *_approach_rows(sol, k)]
             if sol.result.rest is not None and sol.result.rest[k] is not None:
                 lines += _rest_rows(sol.result.rest[k], case.motion)
             lines += _articulation_rows(sol, k)
@@ -198,6 +199,7 @@ def _vehicle_rows(sol):
             # as the output paths (sweeps, fits, --json) name it
             f"  vehicle {case.between.index(k) + 1} = vehicles[{k}]: {visible(name)}",
             *_hitch_rows(sol, k),
+            *_approach_rows(sol, k),
             _row("delta-V", f"{_fmt(v.delta_v_magnitude)} m/s", f"{_fmt(v.delta_v_magnitude / U.MPH, 2)} mph"),
             _row("  longitudinal / lateral", f"{_fmt(v.delta_v_body[0])} / {_fmt(v.delta_v_body[1])} m/s",
                  f"{_fmt(v.delta_v_body[0] / U.MPH, 2)} / {_fmt(v.delta_v_body[1] / U.MPH, 2)} mph"),
@@ -238,6 +240,23 @@ def _hitch_rows(sol, k):
             rows.append(_row("hitch", f"tows {_named(case, towed)}, {HITCH_KINDS.get(kind, kind)}"))
     if k not in case.between:
         rows += _joint_delta_v_rows(sol, k)
+    return rows
+
+
+def _approach_rows(sol, k):
+    """Vehicle ``k``'s approach (docs/model.md, "The approach"), where it has one: at the start of each phase, earliest
+    first, the time before the impact, the speed and the CG's path from there to the impact."""
+    approach = getattr(sol.result, "approach", None)
+    if approach is None or k >= len(approach) or approach[k] is None:
+        return []
+    a = approach[k]
+    rows = [_row("approach (each phase's start)", "time, speed, distance to the impact")]
+    for p, (t, v, d) in enumerate(zip(np.atleast_1d(a.time), np.atleast_1d(a.speed), np.atleast_1d(a.distance))):
+        if not all(math.isfinite(float(x)) for x in (t, v, d)):
+            rows.append(_row(f"  approach[{p}]", "undefined"))
+            continue
+        rows.append(_row(f"  approach[{p}]", f"{_fmt(t)} s, {_fmt(v)} m/s, {_fmt(d)} m",
+                         f"{_fmt(t)} s, {_fmt(v / U.MPH, 2)} mph, {_fmt(d / U.FT)} ft"))
     return rows
 
 

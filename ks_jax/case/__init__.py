@@ -3,6 +3,8 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 
 - ``load``: reading files into ``Case`` objects, every number converted to SI;
 - ``fixed``: a wall, pole or barrier struck in place of a second vehicle;
+- ``approach``: a vehicle's approach before the impact, its phases read (``inputs.ApproachInputs``);
+- ``wheels``: how a vehicle's wheels run (its ``after``, an approach phase);
 - ``hitch``: articulated vehicles, a towed vehicle's ``hitch`` read, and its position and velocity followed from its
   tow's (``follow_tows``);
 - a ``road`` (``inputs.RoadInputs``): the vehicles move on from the exchange to rest;
@@ -17,8 +19,8 @@ inputs and results (docs/model.md, "Case files" and "Paths").
 
 from .errors import CaseError, CaseWarning, visible, visible_lines
 from .hitch import follow_tows
-from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, HitchInputs, InteractionInputs, Motion, PairInputs
-from .inputs import RoadInputs, VehicleInputs
+from .inputs import AfterInputs, ApproachInputs, Case, CaseInputs, ContactInputs, HitchInputs, InteractionInputs
+from .inputs import Motion, PairInputs, RoadInputs, VehicleInputs
 from .inputs import as_arrays, body_states, to_pytrees
 from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
@@ -27,11 +29,12 @@ from .paths import CUMULATIVE_OUTPUTS, PathError, automatic_part, canonical_path
 from .paths import get_input
 from .paths import get_output
 from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, path_key
-from .paths import set_input, without_road
+from .paths import set_input, without_approach, without_road
 
 __all__ = [
     "CUMULATIVE_OUTPUTS",
-    "AfterInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case", "CaseError", "CaseInputs",
+    "AfterInputs", "ApproachInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case",
+    "CaseError", "CaseInputs",
     "CaseWarning", "ContactInputs", "HitchInputs", "InteractionInputs", "PairInputs", "PathError", "VehicleInputs",
     "as_arrays",
     "at_rest_after", "automatic_part", "body_states",
@@ -39,5 +42,5 @@ __all__ = [
     "follows_tow", "get_input",
     "get_output", "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases",
     "on_fixed_object", "output_kind", "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees",
-    "undefined_kind", "visible", "visible_lines", "without_road",
+    "undefined_kind", "visible", "visible_lines", "without_approach", "without_road",
 ]

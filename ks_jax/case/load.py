@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import units as U
+from .approach import read_approach
 from .errors import CaseError, CaseWarning
 from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
@@ -33,6 +34,7 @@ from .inputs import VehicleInputs
 from .paths import check_output_path, output_kind
 from .schema import AFTER_FIELDS, CASE_FIELDS, CONTACT_FIELDS, INTERACTION_FIELDS, ROAD_FIELDS, TEXT_FIELDS
 from .schema import VEHICLE_FIELDS
+from .wheels import running
 
 
 def _inertia(value, path, case_name):
@@ -222,7 +224,9 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     if links:
         check_pairs(d.get("pairs"), motion.pairs, links, name)
         motion = dataclasses.replace(motion, links=links)
-    inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches)
+    approach, kinds = read_approach(vehicles, road, links, name)
+    motion = dataclasses.replace(motion, approach=kinds) if kinds else motion
+    inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches, approach)
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
                   for i, v in enumerate(vehicles))
     names += tuple(str(o.get("name", o["kind"])) for o in objects_raw)
@@ -267,8 +271,6 @@ def _between(value, vehicles, objects, case_name) -> tuple:
 # proportions
 WHEELBASE_SHARE = 0.6  # of the length
 TRACK_SHARE = 0.85  # of the width
-ROLLING_RESISTANCE = 0.015
-MAX_STEER = 60.0  # deg
 MAX_STEPS = 1_000_000  # time_limit / time_step
 
 
@@ -433,37 +435,8 @@ def _after(d, v: VehicleInputs, i, friction, case_name) -> AfterInputs:
                         f"(front axle at most {ahead} ahead of the CG, rear axle at most {behind} behind it)")
     after = d.get("after", {})
     _check_keys(after, set(AFTER_FIELDS) | TEXT_FIELDS, path + ".after", case_name)
-    brake = _wheels(after.get("wheels", "free"), f"{path}.after.wheels", case_name)
-    steer = _number(after["steer"], "angle", f"{path}.after.steer", case_name) if "steer" in after else 0.0
-    if abs(steer) > math.radians(MAX_STEER):
-        raise CaseError(f"{_where(case_name, path + '.after.steer')} = {_given(after['steer'], steer, 'angle')}: must "
-                        f"be within +-{MAX_STEER:g} deg")
-    # on a frictionless road (friction 0) the wheels roll without resistance unless the file says otherwise
-    f = (_number(after["rolling_resistance"], "dimensionless", f"{path}.after.rolling_resistance", case_name)
-         if "rolling_resistance" in after else min(ROLLING_RESISTANCE, friction))
-    if not (0 <= f < friction or f == friction == 0):
-        raise CaseError(f"{_where(case_name, path + '.after.rolling_resistance')} = "
-                        f"{_shown(after['rolling_resistance'])}"
-                        f": must be >= 0 and below the road's friction ({friction:.4g}), or 0 on a road of "
-                        "friction 0")
+    brake, steer, f = running(after, path + ".after", friction, case_name)
     return AfterInputs(wheelbase, track, a, np.array(brake, dtype=float), steer, f)
-
-
-def _wheels(value, path, case_name):
-    """"free" (0, 0, 0, 0), "locked" (1, 1, 1, 1) or four brake fractions in [0, 1]."""
-    if value == "free":
-        return [0.0] * 4
-    if value == "locked":
-        return [1.0] * 4
-    if not isinstance(value, (list, tuple)) or len(value) != 4:
-        raise CaseError(f"{_where(case_name, path)} = {_shown(value)}: must be \"free\", \"locked\" or four brake "
-                        "fractions in [0, 1] (front left, front right, rear left, rear right)")
-    out = [_number(b, "dimensionless", f"{path}[{k}]", case_name) for k, b in enumerate(value)]
-    for k, b in enumerate(out):
-        if not 0 <= b <= 1:
-            raise CaseError(f"{_where(case_name, f'{path}[{k}]')} = {_shown(value[k])}: a brake fraction must be in "
-                            "[0, 1] (0 free rolling, 1 locked)")
-    return out
 
 
 FIXED_FIELDS = {"wall": {"point": ("length", "vec2"), "normal": ("angle", None)},

@@ -15,7 +15,8 @@ from ..model.types import NO_CONTACT
 from .paths import get_output, output_leaf, parse_path
 
 
-CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw", "delta_v_cumulative_pdof"})
+CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw", "delta_v_cumulative_pdof",
+                              "approach.yaw"})
 
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
 _CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*

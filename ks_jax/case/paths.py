@@ -18,12 +18,14 @@ from .schema import INPUT_KINDS, OUTPUT_KINDS
 
 _PATH = re.compile(r"^(vehicles|exchanges)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$"
                    r"|^(contact|road|interaction)\.(\w+)((?:\[\d+\])*)$|^(energy_loss_total)$")
+_APPROACH = re.compile(r"^vehicles\[(\d+)\]\.approach\[(\d+)\]\.(\w+)((?:\[\d+\])*)$")
 
 class PathError(CaseError):
     pass
 
 
 MAX_VEHICLES = 8  # a case's vehicles at most (``case.load``)
+MAX_PHASES = 8  # an approach's phases at most (``case.approach``)
 
 def canonical_path(path: str) -> str:
     """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
@@ -32,7 +34,9 @@ def canonical_path(path: str) -> str:
 def parse_path(path: str):
     """'vehicles[1].speed' -> ('vehicles', 1, 'speed', ()); 'contact.point[0]' -> ('contact', None, 'point', (0,));
     'road.friction' -> ('road', None, 'friction', ()); 'exchanges[2].impulse_magnitude' -> ('exchanges', 2,
-    'impulse_magnitude', ()); 'energy_loss_total' -> ('case', None, 'energy_loss_total', ()).
+    'impulse_magnitude', ()); 'energy_loss_total' -> ('case', None, 'energy_loss_total', ()); a result at the start
+    of an approach phase, 'vehicles[0].approach[1].position[0]' -> ('vehicles', 0, 'approach.position', (1, 0)): the
+    phase's index first.
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     if not isinstance(path, str):
         raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
@@ -41,10 +45,19 @@ def parse_path(path: str):
 
 @functools.lru_cache(maxsize=4096)
 def _parse_path(path: str):
+    a = _APPROACH.match(canonical_path(path))
+    if a:
+        vi, k = int(a.group(1)), int(a.group(2))
+        if vi >= MAX_VEHICLES or k >= MAX_PHASES:
+            raise PathError(f"path '{path}': vehicle index must be 0 to {MAX_VEHICLES - 1} (a case has at most "
+                            f"{MAX_VEHICLES} vehicles)" if vi >= MAX_VEHICLES else
+                            f"path '{path}': phase index must be 0 to {MAX_PHASES - 1} (an approach has at most "
+                            f"{MAX_PHASES} phases)")
+        return "vehicles", vi, f"approach.{a.group(3)}", (k, *(int(j) for j in re.findall(r"\d+", a.group(4))))
     m = _PATH.match(canonical_path(path))
     if not m:
         raise PathError(f"path '{path}': not of the form vehicles[i].field[k], contact.field[k], road.friction, "
-                        "exchanges[k].field or energy_loss_total")
+                        "exchanges[k].field, vehicles[i].approach[k].field or energy_loss_total")
     if m.group(8):
         return "case", None, m.group(8), ()
     if m.group(1) == "exchanges":
@@ -83,10 +96,14 @@ def input_leaf(path):
             if name != "brake" and idx:
                 raise PathError(f"path '{path}': '{name}' is a number and takes no index")
             return "road", vi, name, idx
+        if name.split(".")[0] == "approach":
+            raise PathError(f"path '{path}': a result of vehicles[{vi}]'s approach (its speed, time, position, yaw and "
+                            "distance at a phase's start), not an input: an approach's phases are not inputs to vary")
         if name not in VehicleInputs._fields:
             hint = {"velocity": " (vary speed and course instead)",
                     "weight": f" (a case's weight sets its mass: use vehicles[{vi}].mass, in lb where weights "
                               "are in lbf)"}.get(name, "")
+
             raise PathError(f"path '{path}': '{name}' is not a vehicle input{hint}; "
                             f"inputs are {', '.join(VehicleInputs._fields + AfterInputs._fields)}, yaw_rate")
     elif group == "road":
@@ -216,6 +233,27 @@ def without_road(case: "Case", path) -> str | None:
         or (group == "exchanges" and k > 0)
     return f"{path}: {NO_ROAD}" if motion and case.inputs is not None and case.inputs.road is None else None
 
+
+APPROACH_OUTPUTS = ("speed", "time", "position", "yaw", "distance")  # at the start of each phase
+NO_APPROACH = ("give it one, e.g. \"approach\": [{\"wheels\": \"locked\", \"distance\": \"48 ft\"}] (docs/model.md, "
+               "\"The approach: the case file\")")
+
+
+def without_approach(case: "Case", path) -> str | None:
+    """Where ``path`` names a result of an approach phase (vehicles[i].approach[k].speed, ...) that ``case`` does not
+    have (vehicle i has no approach, or fewer phases than k + 1): the words saying so; else None."""
+    group, vi, name, idx = parse_path(path)
+    if group != "vehicles" or not name.startswith("approach.") or case.inputs is None:
+        return None
+    kinds = () if case.motion is None else case.motion.approach
+    phases = len(kinds[vi]) if vi < len(kinds) else 0
+    if not phases:
+        return f"{path}: vehicles[{vi}] has no approach: {NO_APPROACH}"
+    if idx[0] >= phases:
+        return (f"{path}: vehicles[{vi}]'s approach has {phases} phase{'s' if phases > 1 else ''} (approach[0]"
+                f"{f' to approach[{phases - 1}]' if phases > 1 else ''}, earliest first)")
+    return None
+
 def automatic_part(case: "Case", path) -> str | None:
     """"point" or "normal" if ``path`` names the part of the contact that automatic contact computes
     in ``case`` (not an input there: a sweep or a fit refuses to vary it), else None."""
@@ -239,15 +277,17 @@ def on_fixed_object(case: "Case", path) -> str | None:
 
 
 def path_key(case: "Case") -> tuple:
-    """All that ``get_input``, ``without_road``, ``automatic_part``, ``on_fixed_object`` and ``follows_tow`` read of
-    ``case`` to accept or refuse a path: how many vehicles it has, its fixed objects' kinds, which of the road and its
-    vehicles are missing, which contact parts are automatic, and which vehicles are towed (by which). Cases with one
-    key accept and refuse the same paths, so a batch of cases checks each path once per key."""
+    """All that ``get_input``, ``without_road``, ``without_approach``, ``automatic_part``, ``on_fixed_object`` and
+    ``follows_tow`` read of ``case`` to accept or refuse a path: how many vehicles it has, its fixed objects' kinds,
+    which of the road and its vehicles are missing, which contact parts are automatic, which vehicles are towed (by
+    which), and how many approach phases each vehicle has. Cases with one key accept and refuse the same paths, so a
+    batch of cases checks each path once per key."""
     road = None if case.inputs is None else case.inputs.road
     towed = () if case.motion is None else tuple((t, w) for t, w, _ in case.motion.links)
     return (case.vehicle_count, tuple(o.kind for o in case.fixed), road is None,
             () if road is None else tuple(v is None for v in road.vehicles), bool(case.auto_point),
-            bool(case.auto_normal), towed)
+            bool(case.auto_normal), towed,
+            () if case.motion is None else tuple(len(kinds) for kinds in case.motion.approach))
 
 
 def input_ties(case: "Case", paths) -> tuple:
@@ -297,6 +337,8 @@ def check_output_path(path: str):
         raise PathError(f"path '{path}': {group}.{name} is an input, not a result")
     if group == "case":
         return group, vi, name, idx
+    if group == "vehicles" and name.split(".")[0] == "approach":
+        return _check_approach_path(path, vi, name, idx)
     fields = VehicleResult._fields + REST_OUTPUTS + CUMULATIVE_OUTPUTS if group == "vehicles" else ContactResult._fields
     kind = {"vehicles": "vehicle", "contact": "contact", "exchanges": "exchange"}[group]
     if group != "vehicles" and name == "status":
@@ -315,6 +357,26 @@ def check_output_path(path: str):
         raise PathError(f"path '{path}': '{name}' is a number and takes no index")
     return group, vi, name, idx
 
+def _check_approach_path(path, vi, name, idx):
+    """``check_output_path`` of a result of an approach phase (``parse_path``: ``name`` "approach.<field>", ``idx``
+    the phase's index, then the component of a vector)."""
+    field = name.partition(".")[2]
+    named = ", ".join(f"vehicles[{vi}].approach[k].{f}" for f in APPROACH_OUTPUTS if f != "position")
+    if not field:
+        raise PathError(f"path '{path}': an approach's results are named by phase (k = 0 the earliest) and result: "
+                        f"{named}, vehicles[{vi}].approach[k].position[0] or position[1]")
+    if field not in APPROACH_OUTPUTS:
+        raise PathError(f"path '{path}': '{field}' is not a result of an approach phase; results are "
+                        f"{', '.join(APPROACH_OUTPUTS)} (at the phase's start)")
+    if field == "position" and (len(idx) != 2 or idx[1] > 1):
+        raise PathError(f"path '{path}': 'position' is a vector: name a component, e.g. "
+                        f"vehicles[{vi}].approach[{idx[0]}].position[0]" if len(idx) != 2
+                        else f"path '{path}': index out of range (0..1)")
+    if field != "position" and len(idx) != 1:
+        raise PathError(f"path '{path}': '{field}' is a number and takes no index")
+    return "vehicles", vi, name, idx
+
+
 def get_output(result, path: str):
     """The number at an output path of a (possibly batched) ExchangeResult."""
     group, vi, name, idx = check_output_path(path)
@@ -323,12 +385,13 @@ def get_output(result, path: str):
 
 
 def output_leaf(result, path: str):
-    """The whole result that ``path`` names a part of ("vehicles[0].rest_position[1]": the (2,) rest position).
+    """The whole result that ``path`` names a part of ("vehicles[0].rest_position[1]": the (2,) rest position;
+    "vehicles[0].approach[1].speed": the speed at the start of every phase of the vehicle's approach, (P,)).
 
     The results of contact interactions (docs/model.md, "Contact interactions") where a case has no road, so one
     exchange: ``exchanges[0]`` is ``contact`` (its ``time`` 0), a vehicle's cumulative delta-V its delta-V, and
     ``energy_loss_total`` the energy loss."""
-    group, vi, name, _ = parse_path(path)
+    group, vi, name, idx = parse_path(path)
     inter = getattr(result, "interactions", None)
     if group == "case":
         return result.contact.energy_loss if inter is None else inter.energy_loss_total
@@ -346,6 +409,8 @@ def output_leaf(result, path: str):
         return jnp.take(whole, vi, axis=axis) if isinstance(whole, jax.Array) else np.take(whole, vi, axis=axis)
     if name in CUMULATIVE_OUTPUTS:
         return _cumulative(result, inter, vi, name)
+    if name.startswith("approach."):  # the result at the start of every phase: (..., P) or (..., P, 2)
+        return getattr(_approach_holder(result, vi, idx[0], path), name.partition(".")[2])
     return getattr(_result_holder(result, group, vi, name, path), name)
 
 
@@ -375,6 +440,18 @@ def _result_holder(result, group, vi, name, path):
                             f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")
         return result.rest[vi]
     return result.vehicles[vi]
+
+
+def _approach_holder(result, vi, k, path):
+    """Vehicle ``vi``'s ``model.approach.ApproachResult`` in ``result``, which must have phase ``k``."""
+    approach = getattr(result, "approach", None)
+    if approach is None or vi >= len(approach) or approach[vi] is None:
+        raise PathError(f"path '{path}': vehicles[{vi}] has no approach: {NO_APPROACH}")
+    phases = approach[vi].time.shape[-1]
+    if k >= phases:
+        raise PathError(f"path '{path}': vehicles[{vi}]'s approach has {phases} phase{'s' if phases > 1 else ''} "
+                        f"(approach[0] to approach[{phases - 1}])")
+    return approach[vi]
 
 
 def output_kind(path: str) -> str:

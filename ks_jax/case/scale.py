@@ -60,8 +60,10 @@ def move_scene(inputs: CaseInputs, origin, auto_point=False) -> CaseInputs:
 
 def xy_index(path: str):
     """0 or 1 where ``path`` is the x or y of a CG position or of the impulse centroid (an input, or
-    the output contact.point[k] or vehicles[i].rest_position[k]), else None."""
+    the output contact.point[k], vehicles[i].rest_position[k] or vehicles[i].approach[j].position[k]), else None."""
     _, _, name, idx = parse_path(path)
+    if name == "approach.position":
+        return idx[1] if len(idx) == 2 and idx[1] in (0, 1) else None
     return idx[0] if name in ("position", "point", "rest_position") and idx[:1] in ((0,), (1,)) else None
 
 def origin_offset(path: str, origin):

@@ -26,6 +26,7 @@ VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
     "cg_to_front_axle": ("length", None),
     "after": ("table", None),
     "hitch": ("table", None),
+    "approach": ("list", None),
 }
 
 HITCH_FIELDS = {  # a towed vehicle's "hitch" (docs/model.md, "Articulated vehicles: the case file")
@@ -40,6 +41,13 @@ AFTER_FIELDS = {  # a vehicle's "after": how its wheels run from the exchange to
     "wheels": ("dimensionless", "wheels"),
     "steer": ("angle", None),
     "rolling_resistance": ("dimensionless", None),
+}
+
+APPROACH_FIELDS = {  # a phase of a vehicle's "approach" (docs/model.md, "The approach: the case file")
+    **AFTER_FIELDS,
+    "duration": ("time", None),
+    "distance": ("length", None),
+    "friction": ("dimensionless", None),
 }
 
 ROAD_FIELDS = {
@@ -95,4 +103,7 @@ OUTPUT_KINDS = {
     "energy_loss_total": "energy",
     "rest_position": "length", "rest_yaw": "degrees", "rotation_to_rest": "degrees", "time_to_rest": "time",
     "distance_to_rest": "length", "at_rest": "dimensionless",
+    # at the start of an approach phase (``paths.parse_path`` names them "approach.<field>")
+    "approach.speed": "velocity", "approach.time": "time", "approach.position": "length", "approach.yaw": "degrees",
+    "approach.distance": "length",
 }

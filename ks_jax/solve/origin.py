@@ -21,7 +21,7 @@ def about_midpoint(stacked, auto_point):
 
 def moved_back(res, origin):
     """The results ``res`` (NumPy) of a group solved about ``origin`` with its positions (the centroid, the rest
-    positions) moved back, in float64."""
+    positions, the approach's positions) moved back, in float64."""
     if origin is None:
         return res
     point = res.contact.point.astype(np.float64)
@@ -30,4 +30,7 @@ def moved_back(res, origin):
     if res.rest is not None:
         res = res._replace(rest=tuple(None if r is None else r._replace(
             rest_position=r.rest_position.astype(np.float64) + origin) for r in res.rest))
+    if getattr(res, "approach", None) is not None:  # (rows, P, 2) about (rows, 2)
+        res = res._replace(approach=tuple(None if a is None else a._replace(
+            position=a.position.astype(np.float64) + origin[:, None, :]) for a in res.approach))
     return res

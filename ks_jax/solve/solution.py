@@ -154,6 +154,19 @@ class Solution:
                               "articulation_at_rest": _plain(self.articulation_at_rest(towed))}}
         return {}
 
+    def _approach(self, vehicle: int) -> dict:
+        """{"approach": [...]} for a vehicle with an approach (docs/model.md, "The approach"): at the start of each
+        phase, earliest first, its "speed" (m/s), "time" (s from the impact, <= 0), "position" ([x, y] m of the CG),
+        "yaw" (deg in [0, 360)) and "distance" (m, the CG's path from there to the impact); {} for any other
+        vehicle."""
+        approach = self.result.approach
+        if approach is None or vehicle >= len(approach) or approach[vehicle] is None:
+            return {}
+        a = approach[vehicle]
+        return {"approach": [{"speed": _plain(a.speed[k]), "time": _plain(a.time[k]), "position": _plain(a.position[k]),
+                              "yaw": _plain(a.yaw[k]), "distance": _plain(a.distance[k])}
+                             for k in range(np.shape(a.time)[-1])]}
+
     def articulation_at_rest(self, vehicle: int) -> float:
         """A towed vehicle's articulation at rest, deg in (-180, 180]: its rest yaw minus its tow's; NaN for a vehicle
         no hitch tows."""
@@ -195,8 +208,9 @@ class Solution:
 
     def to_dict(self) -> dict:
         """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, the result names of docs/model.md,
-        (a vehicle's per case vehicle, in order; with fixed objects, "fixed": each as the file gives it, SI, angles in
-        rad, one object or a list as in the file; "between": the first exchange's bodies;
+        (a vehicle's per case vehicle, in order, with its "approach" where it has one; with fixed objects,
+        "fixed": each as the file gives it, SI, angles in rad, one object or a list as in the file; "between": the
+        first exchange's bodies;
         where ``notes`` has something to say, "notes": its list of sentences),
         the status in words, NaN as None: what ``ks-jax solve --json`` prints for the case. An invalid case
         has only its status. What the model leaves undefined is None too (``case.defined_output``): the
@@ -224,6 +238,7 @@ class Solution:
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
             d["interactions"] = self.interactions_of(i, exchanges)
             d.update(self._hitch(i))
+            d.update(self._approach(i))
             vehicles.append(d)
         out = {"name": self.case.name, "between": [self.case.body_entry(b) for b in self.case.between],
                "contact": contact, "vehicles": vehicles, "exchanges": exchanges,
