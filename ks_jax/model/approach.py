@@ -55,6 +55,21 @@ class ApproachResult(NamedTuple):
     velocity: jnp.ndarray
     yaw_rate: jnp.ndarray
     path: jnp.ndarray | None = None
+    at: StateAt | None = None
+
+
+class StateAt(NamedTuple):
+    """The vehicle's state at given times (T, ...) before the impact (``approach(at=...)``), each interpolated within
+    its step: ``speed`` m/s, ``position`` (T, 2) m, ``yaw`` deg in [0, 360), ``velocity`` (T, 2) m/s, ``yaw_rate``
+    rad/s, ``distance`` m (the CG's path from there to the impact). A time before the approach's first phase is
+    reached by that phase run further back; a time after the impact is not the approach's (NaN)."""
+
+    speed: jnp.ndarray
+    position: jnp.ndarray
+    yaw: jnp.ndarray
+    velocity: jnp.ndarray
+    yaw_rate: jnp.ndarray
+    distance: jnp.ndarray
 
 
 def _pack(p: motion.Planar):
@@ -95,33 +110,49 @@ def _step_back(b: motion.Body, later: motion.Planar, accel, size, by_distance: b
     return _unpack(x), dt, reached.distance, reached.accel
 
 
+def _catch(at, found, values, later, earlier, t, dt, d, travelled):
+    """``found`` (T,) and ``values`` (T, 7) with the times ``at`` (T,) that the step from ``earlier`` (at t - dt, the
+    CG's path d + travelled from the impact) to ``later`` (at t, d) spans: the state there, interpolated."""
+    inside = (at >= t - dt) & (at <= t) & ~found
+    w = la.safe_div(at - (t - dt), dt, 1.0)[:, None]  # 0 at the earlier state, 1 at the later
+    a = jnp.concatenate([_pack(earlier), (d + travelled)[None]])
+    b = jnp.concatenate([_pack(later), d[None]])
+    return found | inside, jnp.where(inside[:, None], a + w * (b - a), values)
+
+
 def approach(mass, izz, cg_height, chassis: motion.Chassis, phases: Phases, kinds, impact: motion.Planar, *,
-             path: bool = False) -> ApproachResult:
+             path: bool = False, at=None) -> ApproachResult:
     """The approach (``ApproachResult``) that ends at ``impact`` (a ``motion.Planar``: the vehicle's state at the
-    impact). ``kinds`` (static): per phase "duration" or "distance"; ``path`` (static): keep every step's state."""
+    impact). ``kinds`` (static): per phase "duration" or "distance"; ``path`` (static): keep every step's state;
+    ``at``: None, or times (T,) s from the impact (<= 0) at which the result's ``at`` gives the state (``StateAt``):
+    one beyond the approach's start is reached by its first phase run further back."""
     count = len(kinds)
     state, accel = impact, jnp.zeros_like(impact.velocity)
     time = jnp.zeros_like(impact.yaw)
     distance = jnp.zeros_like(impact.yaw)
     starts, samples = [], []
+    at = None if at is None else jnp.asarray(at, impact.yaw.dtype)
+    caught = None if at is None else (jnp.zeros(at.shape, bool), jnp.full(at.shape + (7,), jnp.nan, at.dtype))
+
     def body(k):
         wheels = jax.tree_util.tree_map(lambda x: x[k], phases.wheels)
         return motion.body(mass, izz, cg_height, chassis, wheels, phases.friction[k], motion.TIME_STEP)
 
+    def one(c, _, b, size, by_distance, before=None):
+        s, a, t, d, got = c
+        earlier, dt, travelled, a = _step_back(b, _unpack(s), a, size, by_distance, before)
+        if got is not None:
+            got = _catch(at, *got, _unpack(s), earlier, t, dt, d, travelled)
+        c = (_pack(earlier), a, t - dt, d + travelled, got)
+        return c, jnp.stack([c[2], earlier.position[0], earlier.position[1], earlier.yaw])
+
     for k in reversed(range(count)):
         b = body(k)
-        by_distance = kinds[k] == "distance"
-        size = phases.length[k] / PHASE_STEPS
-
-        def one(c, _, b=b, size=size, by_distance=by_distance, before=None):
-            s, a, t, d = c
-            earlier, dt, travelled, a = _step_back(b, _unpack(s), a, size, by_distance, before)
-            c = (_pack(earlier), a, t - dt, d + travelled)
-            return c, jnp.stack([c[2], earlier.position[0], earlier.position[1], earlier.yaw])
-
-        carry, sampled = jax.lax.scan(one, (_pack(state), accel, time, distance), None, length=PHASE_STEPS - 1)
+        step = dict(b=b, size=phases.length[k] / PHASE_STEPS, by_distance=kinds[k] == "distance")
+        carry, sampled = jax.lax.scan(lambda c, x: one(c, x, **step), (_pack(state), accel, time, distance, caught),
+                                      None, length=PHASE_STEPS - 1)
         # the phase's first step: its load transfer is that of the phase before's wheels
-        (packed, accel, time, distance), first = one(carry, None, before=body(k - 1) if k else None)
+        (packed, accel, time, distance, caught), first = one(carry, None, **step, before=body(k - 1) if k else None)
         sampled = jnp.concatenate([sampled, first[None]])
         state = _unpack(packed)
         yaw = la.degrees_0_360(la.safe_atan2(*la.sincos(state.yaw)))
@@ -134,4 +165,14 @@ def approach(mass, izz, cg_height, chassis: motion.Chassis, phases: Phases, kind
     if path:
         end = jnp.stack([jnp.zeros_like(impact.yaw), impact.position[0], impact.position[1], impact.yaw])
         kept = jnp.concatenate([*samples[::-1], end[None]], axis=0)
-    return ApproachResult(*stacked, kept)
+    found = None
+    if at is not None:  # the times before the approach's start: its first phase run further back, by duration
+        reach = jnp.maximum(jnp.max(time - at), 0.0) * (1.0 + 1e-9)  # a hair further: the earliest time is inside
+        further = dict(b=body(0), size=reach / PHASE_STEPS, by_distance=False)
+        (_, _, _, _, (_, values)), _ = jax.lax.scan(lambda c, x: one(c, x, **further),
+                                                    (_pack(state), accel, time, distance, caught), None,
+                                                    length=PHASE_STEPS)
+        position, yaw, velocity, rate, path_to = values[:, :2], values[:, 2], values[:, 3:5], values[:, 5], values[:, 6]
+        found = StateAt(la.safe_norm(velocity), position, la.degrees_0_360(la.safe_atan2(*la.sincos(yaw))), velocity,
+                        rate, path_to)
+    return ApproachResult(*stacked, kept, found)

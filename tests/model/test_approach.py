@@ -155,3 +155,25 @@ def test_derivatives_of_the_approach_match_central_differences(mode):
                         for i in range(4)], axis=1)
     assert np.all(np.isfinite(derivative))
     np.testing.assert_allclose(derivative, central, rtol=1e-4, atol=1e-5)
+
+
+def test_the_state_at_given_times_is_the_closed_form_and_reaches_back_beyond_the_first_phase():
+    """Free rolling for 2 s, then a locked skid of 20 m to the impact at 12 m/s: the speed at the impact, within the
+    skid (v + mu g t back from it), at the skid's start, and within and beyond the free phase (the free phase run
+    further back: v_start + f g t), and the path back to each; a time after the impact is not the approach's (NaN)."""
+    f, mu, v, d = 0.015, 0.7, 12.0, 20.0
+    p = phases([0.0, 1.0], [mu, mu], [2.0, d], f=f)
+    start = np.sqrt(v * v + 2 * mu * G0 * d)
+    skid = (start - v) / (mu * G0)
+    at = np.array([0.0, -0.5, -skid, -skid - 1.0, -skid - 3.5, 0.3])
+    program = reference_jit(lambda p, s, a: approach(MASS, IZZ, CG_HEIGHT, CHASSIS, p, ("duration", "distance"), s,
+                                                     at=a))
+    out = jax.tree_util.tree_map(np.asarray, program(p, impact(v), at)).at
+    speeds = [v, v + mu * G0 * 0.5, start, start + f * G0 * 1.0, start + f * G0 * 3.5]
+    np.testing.assert_allclose(out.speed[:5], speeds, rtol=1e-6)
+    paths = [0.0, v * 0.5 + 0.5 * mu * G0 * 0.25, d, d + start + 0.5 * f * G0,
+             d + start * 3.5 + 0.5 * f * G0 * 3.5 ** 2]
+    # within a step the state is interpolated linearly: a path quadratic in time is met to a dt^2 / 8, 0.1 mm
+    np.testing.assert_allclose(out.distance[:5], paths, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(out.position[:5, 0], -np.array(paths), rtol=0, atol=1e-4)
+    assert np.isnan(out.speed[5]) and np.isnan(out.position[5]).all()
