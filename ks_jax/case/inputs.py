@@ -140,7 +140,8 @@ class Motion:
     (the towed vehicle stands on its own wheels) or "fifth_wheel" (its front is carried by the tow at the hitch),
     a tow always listed before the vehicles it tows; their points are ``CaseInputs.hitches``. ``approach``: () for a
     case without one, else per vehicle the kinds of its approach phases, each "duration" or "distance" (() for a
-    vehicle without); their values are ``CaseInputs.approach``."""
+    vehicle without); their values are ``CaseInputs.approach``. ``times``: () or per vehicle the times (s from the
+    impact, sorted) at which the result's ``at`` gives its state (docs/model.md, "The approach")."""
 
     time_step: float
     time_limit: float
@@ -152,6 +153,7 @@ class Motion:
     pairs: tuple = ()
     links: tuple = ()
     approach: tuple = ()
+    times: tuple = ()
 
 @dataclass(frozen=True)
 class Case:

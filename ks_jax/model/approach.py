@@ -70,6 +70,7 @@ class StateAt(NamedTuple):
     velocity: jnp.ndarray
     yaw_rate: jnp.ndarray
     distance: jnp.ndarray
+    time: jnp.ndarray | None = None  # (T,) s from the impact, where a case's result carries them
 
 
 def _pack(p: motion.Planar):
@@ -172,7 +173,12 @@ def approach(mass, izz, cg_height, chassis: motion.Chassis, phases: Phases, kind
         (_, _, _, _, (_, values)), _ = jax.lax.scan(lambda c, x: one(c, x, **further),
                                                     (_pack(state), accel, time, distance, caught), None,
                                                     length=PHASE_STEPS)
-        position, yaw, velocity, rate, path_to = values[:, :2], values[:, 2], values[:, 3:5], values[:, 5], values[:, 6]
-        found = StateAt(la.safe_norm(velocity), position, la.degrees_0_360(la.safe_atan2(*la.sincos(yaw))), velocity,
-                        rate, path_to)
+        found = state_at(values)
     return ApproachResult(*stacked, kept, found)
+
+
+def state_at(values) -> StateAt:
+    """A ``StateAt`` from the states (..., 7): x, y, yaw rad, vx, vy, yaw rate, path."""
+    yaw, velocity = values[..., 2], values[..., 3:5]
+    return StateAt(la.safe_norm(velocity), values[..., :2], la.degrees_0_360(la.safe_atan2(*la.sincos(yaw))),
+                   velocity, values[..., 5], values[..., 6])

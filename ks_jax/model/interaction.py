@@ -44,12 +44,13 @@ from __future__ import annotations
 
 import functools
 import operator
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from . import joint
+from .approach import state_at
 from . import linalg as la
 from . import motion
 from .collision import Prepared, exchange, impulse
@@ -100,7 +101,10 @@ class Interactions(NamedTuple):
     ``energy_loss_total`` () J over every exchange; ``exhausted`` () bool, a pair was due for an exchange when every
     slot was taken; ``overlapping`` (P,) bool, each pair's footprints overlap at the end, and ``overlap_depth`` (P,)
     m by how much (the least push that would part them, 0 where apart); ``rest``: a tuple of V
-    ``motion.RestResult``, each vehicle's motion from the first exchange."""
+    ``motion.RestResult``, each vehicle's motion from the first exchange; ``at``: None, or where ``interact`` was given
+    times, each vehicle's state at them (``approach.StateAt`` of (V, T, ...) leaves): interpolated within the step
+    that spans the time, the state where the motion ended for a time after its end, NaN for a time not after the
+    first exchange."""
 
     exchanges: ExchangeResult
     time: jnp.ndarray
@@ -116,6 +120,7 @@ class Interactions(NamedTuple):
     overlapping: jnp.ndarray
     overlap_depth: jnp.ndarray
     rest: tuple
+    at: Any = None
 
 
 class _Loop(NamedTuple):
@@ -141,6 +146,7 @@ class _Loop(NamedTuple):
     impulses: jnp.ndarray  # (V, 3) its impulses over the mass
     heading: jnp.ndarray  # (V,) rad, the yaw at the first exchange of the first interaction
     exhausted: jnp.ndarray
+    caught: Any = None  # None, or (times (V, T), found (V, T), the states there (V, T, 7)): ``_catch``
 
 
 def pairs_of(vehicles: int, fixed: int, links=()):
@@ -400,6 +406,24 @@ def _planar3(velocity, like):
     return jnp.concatenate([velocity, like[2:]])
 
 
+def _row(c: motion.Carry):
+    """(V, 7) each vehicle's x, y, yaw, vx, vy, yaw rate and path so far."""
+    s = c.state
+    return jnp.concatenate([s.position, s.yaw[:, None], s.velocity, s.yaw_rate[:, None], c.distance[:, None]], axis=1)
+
+
+def _catch(caught, before: motion.Carry, after: motion.Carry, t0, t1):
+    """``caught`` (``_Loop.caught``) with the times that the step from ``before`` (at ``t0``) to ``after`` (at ``t1``)
+    spans: each vehicle's state there, interpolated. None stays None."""
+    if caught is None:
+        return None
+    times, found, values = caught
+    inside = (times > t0) & (times <= t1) & ~found
+    w = la.safe_div(times - t0, t1 - t0, 1.0)[..., None]
+    a, b = _row(before)[:, None], _row(after)[:, None]
+    return times, found | inside, jnp.where(inside[..., None], a + w * (b - a), values)
+
+
 def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, advance, hitches=None,
                 links=()) -> _Loop:
     """One step of the motion, the hitches' joints (``_coupled``), and every pair watched after it (the module's
@@ -408,6 +432,7 @@ def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, 
     time = loop.time + dt
     carry = jax.vmap(lambda b, c: advance(b, c, dt))(bodies.motion, loop.carry)
     carry = _coupled(bodies, carry, time, hitches, links, since=loop.carry)
+    loop = loop._replace(caught=_catch(loop.caught, loop.carry, carry, loop.time, time))
     gap, point, normal, un = _watch_pairs(bodies, _states(bodies, carry), carry.moving >= 1.0, pairs, poles)
     overlap = gap < 0
     # engaged: at the first touch within the step where the footprints did not overlap before it, else now
@@ -536,7 +561,7 @@ def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smo
 def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_pair, watch: Watch, *,
              max_exchanges: int = MAX_EXCHANGES, dt: float = motion.TIME_STEP,
              time_limit: float = motion.TIME_LIMIT, poles=(), smoothing=0.0, path: bool = False,
-             reverse: bool = False, hitches: joint.Hitch | None = None, links=()) -> Interactions:
+             reverse: bool = False, hitches: joint.Hitch | None = None, links=(), at=None) -> Interactions:
     """The watched motion from the first exchange (``Interactions``).
 
     ``bodies``: the case's bodies (``Bodies``); ``start``: a ``motion.Planar`` of (V, ...) leaves, each vehicle at the
@@ -547,7 +572,8 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     ``smoothing`` (of the exchanges), ``path`` (each vehicle's rest result keeps its path) and ``reverse``
     (``motion.drive``). ``hitches`` (a ``joint.Hitch`` of (H, ...) leaves) and ``links`` (static: each hitch's
     (towed, tow) vehicles): the joints (``model.joint``), whose impulse right after the first exchange is given to
-    ``start``; a hitched pair is not watched."""
+    ``start``; a hitched pair is not watched. ``at``: None, or times (V, T) s from the first exchange at which the
+    result's ``at`` gives each vehicle's state (NaN where a vehicle has fewer)."""
     vehicles = start.yaw.shape[0]
     fixed = bodies.fixed.yaw.shape[0]
     links = tuple(tuple(link) for link in links)
@@ -582,6 +608,9 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                  jnp.zeros(k, jnp.int32), jnp.zeros((), jnp.int32), jnp.full((vehicles,), -1, jnp.int32),
                  jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype), jnp.zeros((vehicles, 3), dtype),
                  jnp.zeros(vehicles, dtype), jnp.zeros((), bool))
+    if at is not None:
+        at = jnp.asarray(at, dtype)
+        loop = loop._replace(caught=(at, jnp.zeros(at.shape, bool), jnp.full(at.shape + (7,), jnp.nan, dtype)))
     # slot 0 is the first exchange, whose results are given (its states are not needed again)
     loop = loop._replace(count=jnp.ones((), jnp.int32), slot_between=loop.slot_between.at[0].set(pair0))
     after = [v.velocity_after for v in first.vehicles]
@@ -618,6 +647,11 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                       cumulative[:, 2]], axis=-1)
     pdof = jax.vmap(pdof_degrees)(body)
     end = _gaps(bodies, _states(bodies, final.carry), pairs, tuple(poles))
+    states_at = None
+    if at is not None:  # a time after the motion's end: the state it ended in; one not after the exchange: none
+        times, found, values = final.caught
+        values = jnp.where((~found & (times > 0))[..., None], _row(final.carry)[:, None], values)
+        states_at = state_at(values)
     return Interactions(exchanges, final.slot_time, final.slot_between, final.slot_interaction, final.count,
                         cumulative, final.impulses, final.first_interaction, pdof, energy, final.exhausted,
-                        end < 0, jnp.maximum(-end, 0.0), rest)
+                        end < 0, jnp.maximum(-end, 0.0), rest, states_at)

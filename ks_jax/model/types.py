@@ -223,13 +223,16 @@ class ExchangeResult(NamedTuple):
     case's vehicles move on to rest, a pair of ``model.motion.RestResult`` (None for a fixed object), else None;
     ``interactions``: where they move on, the exchanges that follow the first (``model.interaction.Interactions``,
     its ``rest`` empty: it is ``rest`` here), else None; ``approach``: where a case's vehicles have an approach, one
-    entry per body, a ``model.approach.ApproachResult`` or None (a body without one), else None."""
+    entry per body, a ``model.approach.ApproachResult`` or None (a body without one), else None; ``at``: where a
+    case asks for states at given times (``case.Motion.times``), one entry per body, a ``model.approach.StateAt``
+    (with its ``time``) or None, else None."""
 
     contact: ContactResult
     vehicles: tuple
     rest: tuple | None = None
     interactions: Any = None
     approach: tuple | None = None
+    at: tuple | None = None
 
 
 # Status codes carried per row inside jit (docs/model.md, "status").

@@ -15,7 +15,7 @@ from ..model.contact import advance, automatic_stage, exchange_at_contact
 from ..model.checks import input_status
 from ..model.results import mask_invalid
 from ..model.types import INVALID_NONFINITE, OK, ExchangeResult, VehicleResult
-from .rest import approaches, to_rest
+from .rest import approaches, states_at, to_rest
 from .rules import speed_status, with_speed_status
 
 
@@ -70,6 +70,8 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
         result = in_body_order(result, between, states)
         if motion is not None and motion.approach:
             result = result._replace(approach=approaches(inputs, body_states(inputs), motion))
+        if motion is not None and motion.times:
+            result = result._replace(at=states_at(result, body_states(inputs), motion))
         return result
 
     every = (*first, exchange_and_rest)

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from ..case import CaseInputs, Motion
 from ..model.interaction import Bodies, Watch, interact, pairs_of
 from ..model.joint import Hitch, carried
-from ..model.approach import Phases, approach
+from ..model.approach import Phases, approach, state_at
 from ..model.motion import MAX_FRICTION, Chassis, Planar, Wheels, body
 from ..model.results import mask_invalid
 from ..model.types import INVALID_MOTION, INVALID_NONFINITE, ExchangeResult, Vehicle
@@ -84,15 +84,55 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
     watch = Watch(*(jnp.where(ok, per_pair(f), 0.0) for f in ("restitution", "friction", "penetration_time")),
                   jnp.asarray(motion.approach_tolerance))
     first = (order.index(between[0]), order.index(between[1]))
+    at = None
+    if motion.times:  # the times at which each vehicle's state is asked for (the motion's are those after 0)
+        at = jnp.stack([times_of(motion, k, friction.dtype) for k in range(len(moving))])
     out = interact(everything, stack(starts), result, first, watch, max_exchanges=motion.max_exchanges,
                    dt=motion.time_step, time_limit=motion.time_limit, poles=tuple(order.index(k) for k in motion.poles),
                    smoothing=smoothing, path=motion.path, reverse=motion.reverse,
-                   hitches=stack(hitches) if hitches else None, links=links)
+                   hitches=stack(hitches) if hitches else None, links=links, at=at)
     rest = [None] * len(order)
     for m, k in enumerate(moving):
         rest[k] = mask_invalid(out.rest[m], ok)
     interactions = mask_invalid(out._replace(rest=()), ok)
     return result._replace(rest=tuple(rest), interactions=interactions)
+
+
+def times_of(motion: Motion, k: int, dtype):
+    """(T,) the times of vehicle ``k`` (``motion.times``), padded with NaN to the case's most, or None for none."""
+    if not motion.times:
+        return None
+    count = max(len(t) for t in motion.times)
+    times = motion.times[k] if k < len(motion.times) else ()
+    return jnp.asarray(list(times) + [jnp.nan] * (count - len(times)), dtype)
+
+
+def states_at(result: ExchangeResult, states, motion: Motion) -> tuple:
+    """Each vehicle's state at its times (``motion.times``): before the impact from its approach (``result.approach``;
+    at the impact, 0, its state there, ``states``), after it from the watched motion (``result.interactions.at``): a
+    ``StateAt`` with its ``time``, or None for a body without times. A time before the impact of a vehicle without an
+    approach has NaN."""
+    out = []
+    for k, times in enumerate(motion.times):
+        if not times:
+            out.append(None)
+            continue
+        s = states[k]
+        t = times_of(motion, k, s.yaw.dtype)
+        impact = jnp.concatenate([s.position[:2], s.yaw[None], s.velocity[:2], s.angular_velocity[2:], jnp.zeros(1)])
+        approach_k = None if result.approach is None else result.approach[k]
+        before = (_rows(approach_k.at) if approach_k is not None
+                  else jnp.where((t == 0)[:, None], impact[None], jnp.nan))
+        after = jax.tree_util.tree_map(lambda x: x[k], result.interactions.at)
+        rows = jnp.where((t > 0)[:, None], _rows(after), before)[:len(times)]
+        out.append(state_at(rows)._replace(time=t[:len(times)]))
+    return tuple(out)
+
+
+def _rows(state) -> jnp.ndarray:
+    """(T, 7) x, y, yaw rad, vx, vy, yaw rate, path of a ``StateAt``."""
+    return jnp.concatenate([state.position, jnp.radians(state.yaw)[:, None], state.velocity,
+                            state.yaw_rate[:, None], state.distance[:, None]], axis=1)
 
 
 def _stand_in(after):
@@ -123,7 +163,7 @@ def approaches(inputs: CaseInputs, states, motion: Motion) -> tuple:
         mass, izz = jnp.where(ok, v.mass, 1.0), jnp.where(ok, jnp.asarray(v.inertia)[2, 2], 1.0)
         found = approach(mass, izz, jnp.where(ok, v.cg_height, 0.5), chassis,
                          Phases(Wheels(safe.brake, safe.steer, safe.rolling_resistance), safe.friction, safe.length),
-                         kinds, impact, path=motion.path)
+                         kinds, impact, path=motion.path, at=times_of(motion, k, impact.yaw.dtype))
         out.append(mask_invalid(found, ok))
     return tuple(out)
 
