@@ -50,8 +50,10 @@ from ks_jax.case import (
     parse_path,
     path_key,
     set_input,
+    with_times,
     without_approach,
     without_road,
+    without_time,
 )
 from ks_jax.solve import solve_inputs
 
@@ -261,7 +263,7 @@ def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
     if why := on_fixed_object(case, path) or without_road(case, path) or without_approach(case, path) \
-            or follows_tow(case, path):
+            or follows_tow(case, path) or without_time(case, path):
         raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)
@@ -409,17 +411,50 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
         if not isinstance(e, dict):
             raise CaseError(f"case '{case.name}': evidence[{k}] = {e!r}: must be "
                             "{\"quantity\", \"value\", \"sigma\"}")
-        extra = set(e) - {"quantity", "path", "value", "sigma", "note", "source"}
+        extra = set(e) - {"quantity", "path", "value", "sigma", "note", "source", "time"}
         if extra:
             raise CaseError(f"case '{case.name}': evidence[{k}].{sorted(extra)[0]}: unknown field "
-                            "(known: quantity, value, sigma, note, source)")
+                            "(known: quantity, value, sigma, time, note, source)")
         path = e.get("quantity", e.get("path"))
         if path is None or "value" not in e or "sigma" not in e:
             raise CaseError(f"case '{case.name}': evidence[{k}]: needs quantity, value and sigma")
-        checks.evidence(case, path)  # a clear error for a bad path first
-        value = _evidence_value(case, path, e["value"], f"evidence: {path}.value")
-        sigma = _evidence_value(case, path, e["sigma"], f"evidence: {path}.sigma")
-        out.append(check_evidence(case, Evidence(path, value, sigma), checks))
+        for path, value, sigma in _at_times(case, k, path, e):
+            checks.evidence(case, path)  # a clear error for a bad path first
+            value = _evidence_value(case, path, value, f"evidence: {path}.value")
+            sigma = _evidence_value(case, path, sigma, f"evidence: {path}.sigma")
+            out.append(check_evidence(case, Evidence(path, value, sigma), checks))
+    return out
+
+
+MAX_TABLE = 200  # rows of one evidence table at most (an event data recorder's pre-crash table has 5 to 50)
+
+
+def _at_times(case: Case, k: int, path, e: dict):
+    """The (path, value, sigma) of an evidence entry: itself, or with a ``time`` (s from the impact) its quantity at
+    that time ("vehicles[0].speed@-2.5"), or with a list of times (a table, an event data recorder's pre-crash speeds)
+    one for each, ``value`` a list as long and ``sigma`` one for all or a list as long."""
+    if "time" not in e:
+        return [(path, e["value"], e["sigma"])]
+    where = f"case '{case.name}': evidence[{k}]"
+    times, values, sigmas = e["time"], e["value"], e["sigma"]
+    table = isinstance(times, (list, tuple))
+    if not table:
+        times, values, sigmas = [times], [values], [sigmas]
+    elif not (0 < len(times) <= MAX_TABLE) or not isinstance(values, (list, tuple)) or len(values) != len(times):
+        raise CaseError(f"{where}: a table: time and value must be lists of the same length (1 to {MAX_TABLE}), "
+                        f"got {len(times)} time(s) and {len(values) if isinstance(values, (list, tuple)) else 'one'} "
+                        "value(s)")
+    if table and not isinstance(sigmas, (list, tuple)):
+        sigmas = [sigmas] * len(times)
+    if len(sigmas) != len(times):
+        raise CaseError(f"{where}.sigma: one sigma for the whole table, or a list as long as its times "
+                        f"({len(times)})")
+    if "@" in str(path):
+        raise CaseError(f"{where}: {path}: give the time once, either after '@' in the quantity or as \"time\"")
+    out = []
+    for j, (t, value, sigma) in enumerate(zip(times, values, sigmas)):
+        at = _num(t, "time", f"evidence[{k}].time" + (f"[{j}]" if table else ""), case.name)
+        out.append((f"{str(path).replace(' ', '')}@{at!r}", value, sigma))
     return out
 
 
@@ -487,8 +522,8 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
                 x = unknowns[j]
                 unknowns[j] = Unknown(x.path, float(lo[k]), float(hi[k]), x.start, x.prior)
         ties = input_ties(case, list(paths)) if ties_matter else ()
-        key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole), case.motion,
-               case.between)
+        key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole),
+               with_times(case.motion, evidence_paths), case.between)
         if key not in problems:
             evidence = tuple((p, *kind) for p, kind in zip(evidence_paths, kinds[key[0]]))
             problems[key] = Problem(paths, ties, evidence, *key[2:])
@@ -504,7 +539,7 @@ def make_problem(case: Case, unknowns: list[Unknown], evidence: list[Evidence],
     checks = checks or PathChecks()
     ev = tuple((e.path, *checks.evidence(case, e.path)) for e in evidence)
     return Problem(tuple(u.path for u in unknowns), ties, ev, bool(case.auto_point), bool(case.auto_normal),
-                   bool(case.pole), case.motion, case.between)
+                   bool(case.pole), with_times(case.motion, [e.path for e in evidence]), case.between)
 
 
 # ---------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from .paths import get_output, output_leaf, parse_path
 
 
 CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw", "delta_v_cumulative_pdof",
-                              "approach.yaw"})
+                              "approach.yaw", "at.yaw"})
 
 _IMPULSE_DIRECTIONS = ("pdof", "pdof_clock", "impulse_azimuth", "impulse_elevation")
 _CONTACT_ONLY = ("time", "point", "normal", "closing_velocity", "separation_velocity")  # contact.*

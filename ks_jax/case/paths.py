@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import re
 
@@ -14,11 +15,15 @@ from ..model.motion import RestResult
 from ..model.types import ContactResult, VehicleResult
 from .errors import CaseError, visible
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, VehicleInputs
+from ..units import UnitError, parse_quantity
 from .schema import INPUT_KINDS, OUTPUT_KINDS
 
 _PATH = re.compile(r"^(vehicles|exchanges)\[(\d+)\]\.(\w+)((?:\[\d+\])*)$"
                    r"|^(contact|road|interaction)\.(\w+)((?:\[\d+\])*)$|^(energy_loss_total)$")
 _APPROACH = re.compile(r"^vehicles\[(\d+)\]\.approach\[(\d+)\]\.(\w+)((?:\[\d+\])*)$")
+_AT = re.compile(r"^vehicles\[(\d+)\]\.(\w+)((?:\[\d+\])*)@(.+)$")
+# a vehicle's state at a time (s from the impact: "vehicles[0].speed@-2.5"), its components
+AT_OUTPUTS = {"speed": 0, "position": 2, "velocity": 2, "yaw": 0, "yaw_rate": 0, "distance": 0}
 
 class PathError(CaseError):
     pass
@@ -26,6 +31,7 @@ class PathError(CaseError):
 
 MAX_VEHICLES = 8  # a case's vehicles at most (``case.load``)
 MAX_PHASES = 8  # an approach's phases at most (``case.approach``)
+MAX_TIME = 3600.0  # s: a state at a time at most this far from the impact
 
 def canonical_path(path: str) -> str:
     """``path`` as ``parse_path`` reads it, without spaces: "vehicles[0]. yaw" is "vehicles[0].yaw"."""
@@ -36,7 +42,8 @@ def parse_path(path: str):
     'road.friction' -> ('road', None, 'friction', ()); 'exchanges[2].impulse_magnitude' -> ('exchanges', 2,
     'impulse_magnitude', ()); 'energy_loss_total' -> ('case', None, 'energy_loss_total', ()); a result at the start
     of an approach phase, 'vehicles[0].approach[1].position[0]' -> ('vehicles', 0, 'approach.position', (1, 0)): the
-    phase's index first.
+    phase's index first; a vehicle's state at a time, s from the impact (a number, or a time with its unit),
+    'vehicles[0].position[1]@-2.5' -> ('vehicles', 0, 'at.position', (-2.5, 1)): the time first.
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     if not isinstance(path, str):
         raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
@@ -45,6 +52,19 @@ def parse_path(path: str):
 
 @functools.lru_cache(maxsize=4096)
 def _parse_path(path: str):
+    t = _AT.match(canonical_path(path))
+    if t:
+        vi = int(t.group(1))
+        if vi >= MAX_VEHICLES:
+            raise PathError(f"path '{path}': vehicle index must be 0 to {MAX_VEHICLES - 1} (a case has at most "
+                            f"{MAX_VEHICLES} vehicles)")
+        try:
+            when = parse_quantity(t.group(4), "time")
+        except UnitError as err:
+            raise PathError(f"path '{path}': the time after '@' ({t.group(4)}): {err}") from None
+        if not np.isfinite(when) or abs(when) > MAX_TIME:
+            raise PathError(f"path '{path}': the time after '@' must be finite, within +/-{MAX_TIME:g} s of the impact")
+        return "vehicles", vi, f"at.{t.group(2)}", (float(when), *(int(j) for j in re.findall(r"\d+", t.group(3))))
     a = _APPROACH.match(canonical_path(path))
     if a:
         vi, k = int(a.group(1)), int(a.group(2))
@@ -339,6 +359,8 @@ def check_output_path(path: str):
         return group, vi, name, idx
     if group == "vehicles" and name.split(".")[0] == "approach":
         return _check_approach_path(path, vi, name, idx)
+    if group == "vehicles" and name.split(".")[0] == "at":
+        return _check_at_path(path, vi, name, idx)
     fields = VehicleResult._fields + REST_OUTPUTS + CUMULATIVE_OUTPUTS if group == "vehicles" else ContactResult._fields
     kind = {"vehicles": "vehicle", "contact": "contact", "exchanges": "exchange"}[group]
     if group != "vehicles" and name == "status":
@@ -377,9 +399,63 @@ def _check_approach_path(path, vi, name, idx):
     return "vehicles", vi, name, idx
 
 
+def _check_at_path(path, vi, name, idx):
+    """``check_output_path`` of a vehicle's state at a time (``parse_path``: ``name`` "at.<field>", ``idx`` the time,
+    then the component of a vector)."""
+    field = name.partition(".")[2]
+    if field not in AT_OUTPUTS:
+        raise PathError(f"path '{path}': '{field}' is not a state at a time; those are "
+                        f"{', '.join(f + ('[0]' if AT_OUTPUTS[f] else '') for f in AT_OUTPUTS)} (e.g. "
+                        f"vehicles[{vi}].speed@-2.5 s)")
+    size = AT_OUTPUTS[field]
+    if size and (len(idx) != 2 or idx[1] >= size):
+        raise PathError(f"path '{path}': '{field}' is a vector: name a component, e.g. vehicles[{vi}].{field}[0]"
+                        f"@{idx[0]:g}" if len(idx) != 2 else f"path '{path}': index out of range (0..{size - 1})")
+    if not size and len(idx) != 1:
+        raise PathError(f"path '{path}': '{field}' is a number and takes no index")
+    return "vehicles", vi, name, idx
+
+
+def at_time(path: str):
+    """(the vehicle's index, the time in s) of a path to a vehicle's state at a time, else None."""
+    group, vi, name, idx = parse_path(path)
+    return (vi, idx[0]) if name.startswith("at.") else None
+
+
+def with_times(motion, paths):
+    """``motion`` (a ``Motion``) with the times that ``paths`` ask states at (``Motion.times``) added to its own: the
+    result's ``at`` then holds them. None stays None (``without_time`` refuses such paths)."""
+    wanted = [w for w in (at_time(p) for p in paths) if w is not None]
+    if motion is None or not wanted:
+        return motion
+    count = max([len(motion.times)] + [vi + 1 for vi, _ in wanted])
+    times = [set(motion.times[k]) if k < len(motion.times) else set() for k in range(count)]
+    for vi, t in wanted:
+        times[vi].add(t)
+    return dataclasses.replace(motion, times=tuple(tuple(sorted(t)) for t in times))
+
+
+def without_time(case: "Case", path) -> str | None:
+    """Where ``path`` names a vehicle's state at a time that ``case`` cannot give: without a road (the motion holds
+    the times), or before the impact for a vehicle without an approach: the words saying so; else None."""
+    group, vi, name, idx = parse_path(path)
+    if group != "vehicles" or not name.startswith("at.") or case.inputs is None:
+        return None
+    if case.motion is None:
+        return (f"{path}: a state at a time needs a road (the motion before and after the impact is worked on it; "
+                "docs/model.md, \"The approach\")")
+    kinds = case.motion.approach
+    if idx[0] < 0 and not (vi < len(kinds) and kinds[vi]):
+        return (f"{path}: vehicles[{vi}] has no approach: its state {-idx[0]:g} s before the impact is not worked; "
+                "give it an \"approach\" (docs/model.md, \"The approach\")")
+    return None
+
+
 def get_output(result, path: str):
     """The number at an output path of a (possibly batched) ExchangeResult."""
     group, vi, name, idx = check_output_path(path)
+    if name.startswith("at."):
+        return _at_output(result, path, vi, name.partition(".")[2], idx)
     leaf = output_leaf(result, path)
     return leaf[(..., *idx)] if idx else leaf
 
@@ -440,6 +516,28 @@ def _result_holder(result, group, vi, name, path):
                             f"path '{path}': vehicles[{vi}] is a fixed object, which does not move")
         return result.rest[vi]
     return result.vehicles[vi]
+
+
+def _at_output(result, path, vi, field, idx):
+    """Vehicle ``vi``'s ``field`` (component ``idx[1:]``) at the time ``idx[0]`` in ``result.at``."""
+    at = getattr(result, "at", None)
+    if at is None or vi >= len(at) or at[vi] is None:
+        raise PathError(f"path '{path}': the result holds no states at a time of vehicles[{vi}]: solve the case "
+                        "with those times in case.motion.times (ks_jax.case.with_times; a sweep or a fit does so)")
+    time = at[vi].time
+    if isinstance(time, jax.Array):  # inside a program: the times are the case's, the same in every row
+        j = jnp.argmin(jnp.abs(time.reshape(-1, time.shape[-1])[0] - idx[0]))
+    else:
+        times = np.asarray(time).reshape(-1, time.shape[-1])[0]
+        found = np.flatnonzero(times == idx[0])
+        if not found.size:
+            raise PathError(f"path '{path}': vehicles[{vi}]'s states are at {', '.join(f'{t:g}' for t in times)} s, "
+                            f"not at {idx[0]:g} s")
+        j = int(found[0])
+    leaf = getattr(at[vi], field)
+    axis = leaf.ndim - (2 if AT_OUTPUTS[field] else 1)
+    value = jnp.take(leaf, j, axis=axis) if isinstance(leaf, jax.Array) else np.take(leaf, j, axis=axis)
+    return value[..., idx[1]] if AT_OUTPUTS[field] else value
 
 
 def _approach_holder(result, vi, k, path):

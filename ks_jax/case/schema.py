@@ -106,4 +106,7 @@ OUTPUT_KINDS = {
     # at the start of an approach phase (``paths.parse_path`` names them "approach.<field>")
     "approach.speed": "velocity", "approach.time": "time", "approach.position": "length", "approach.yaw": "degrees",
     "approach.distance": "length",
+    # a vehicle's state at a time (``paths.parse_path`` names them "at.<field>")
+    "at.speed": "velocity", "at.position": "length", "at.velocity": "velocity", "at.yaw": "degrees",
+    "at.yaw_rate": "angular_velocity", "at.distance": "length",
 }
