@@ -62,14 +62,15 @@ EDR_TIMES = [-5.0 + 0.5 * k for k in range(10)]
 
 @pytest.mark.slow
 def test_a_fit_from_an_event_data_recorders_pre_crash_table_alone_recovers_the_impact_speed():
-    """The car's pre-crash speeds at -5, -4.5, .. -0.5 s (noise-free, from the case at 14 m/s: within the skid
-    v + mu g |t|, before it v_skid + f g (|t| - t_skid), checked against those closed forms) as one evidence table;
-    the impact speed unknown in [5, 40] m/s: the fit finds 14 m/s."""
+    """The car's pre-crash speeds at -5, -4.5, .. -0.5 s (noise-free, from a sweep of the case's impact speed over 12
+    and 14 m/s with those outputs at a time: within the skid v + mu g |t|, before it v_skid + f g (|t| - t_skid),
+    checked against those closed forms) as one evidence table; the impact speed unknown in [5, 40] m/s: the fit
+    finds 14 m/s."""
     case = case_from_dict(edr_case())
     paths = [f"vehicles[0].speed@{t!r}" for t in EDR_TIMES]
-    case_t = dataclasses.replace(case, motion=ks_jax.case.with_times(case.motion, paths))
-    solved = ks_jax.solve(case_t)
-    speeds = [float(ks_jax.get_output(solved.result, p)) for p in paths]
+    swept = ks_jax.sweep(case, {"vehicles[0].speed": [12.0, 14.0]}, outputs=paths)  # outputs at a time in a sweep
+    speeds = [float(swept.outputs[p][1]) for p in paths]
+    np.testing.assert_allclose(swept.outputs[paths[-1]], np.array([12.0, 14.0]) + 0.7 * G0 * 0.5, rtol=1e-6)
     skid_start = np.sqrt(14.0 ** 2 + 2 * 0.7 * G0 * 12.0)
     skid_time = (skid_start - 14.0) / (0.7 * G0)
     closed = [14.0 + 0.7 * G0 * -t if -t <= skid_time else skid_start + 0.015 * G0 * (-t - skid_time)

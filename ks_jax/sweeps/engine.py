@@ -20,7 +20,7 @@ from ..batch.kernel import row_bytes
 from ..batch.stages import run
 from ..case import Case, as_arrays, automatic_part, canonical_path, check_output_path, defined_output, input_leaf
 from ..case import follows_tow, input_kind, input_ties, on_fixed_object, set_input, undefined_kind, without_road
-from ..case import without_approach
+from ..case import with_times, without_approach, without_time
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiled, compiler_options
@@ -306,7 +306,8 @@ def _checked_outputs(case, outputs, axes):
             raise CaseError(f"output {p!r}: an output path is a string, e.g. 'contact.impulse_magnitude'")
         if p != "status":
             check_output_path(p)
-            if why := on_fixed_object(case, p) or without_road(case, p) or without_approach(case, p):
+            if why := on_fixed_object(case, p) or without_road(case, p) or without_approach(case, p) \
+                    or without_time(case, p):
                 raise CaseError(f"output {why}")
     outputs = tuple(dict.fromkeys(canonical_path(p) for p in outputs if canonical_path(p) != "status"))
     for p in outputs:
@@ -388,7 +389,7 @@ def plan(request: Request, chunk_size=None, devices=None, output_dtype=None) -> 
                            None if one_chunk else sizes, case.auto_point, case.auto_normal, request.smoothing,
                            np.dtype(output_dtype or dtype), devices,
                            n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), on_cpu(),
-                           case.pole, case.motion, case.between)
+                           case.pole, with_times(case.motion, request.outputs), case.between)
     axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
     return Plan(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
 
