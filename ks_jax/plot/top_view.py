@@ -5,7 +5,8 @@ matplotlib is imported only inside the functions (it is the ``plot`` extra). The
 from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints move freely from the case
 state (docs/model.md, "Automatic contact", as ``ks_jax.model.contact`` moves them), so a case without a
 road needs no JAX call. The motion to rest is the one thing the results do not hold step by step: for a case
-with a road, ``ks_jax.solve.motion_paths`` solves the case once more, keeping every step of it.
+with a road, ``ks_jax.solve.cases.trajectories`` solves the case once more, keeping every step of it (the paths to
+rest, and the approaches' paths before the impact).
 
 A case has 1 to 8 vehicles and 0 to 8 fixed objects (its bodies: ``case.inputs.vehicles``, the vehicles and then
 the objects); its first exchange is between two of them, ``case.between`` (its vehicle 1, and its vehicle 2, a
@@ -25,6 +26,10 @@ What the top view draws (global frame, metres; a second axis in feet):
   rest: its CG's path (a thin line), its outline at ``PATH_OUTLINES`` instants evenly spaced in time along the
   way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
   dot at its CG; "at rest" in the legend, or "at the time limit" for one that had not stopped by then);
+- where a vehicle has an approach (docs/model.md, "The approach"; ``solution.result.approach``), its CG's path from
+  the approach's start to the impact (dashed, thin: the same trajectory as its path to rest, before the impact; with
+  automatic contact carried on, moving freely, to its CG at the first exchange), a small open circle at the start of
+  each phase with its time from the impact ("-1.23 s"), and its outline at the approach's start (thin, faded);
 - where the case had more than one exchange (docs/model.md, "Contact interactions"; ``Solution.exchange_list``),
   every later one where it happened, whichever pair of bodies exchanged it, numbered as the panel numbers them
   (#0 is the first, drawn as above): one whose impulse is at least ``LATER_SHARE`` of the largest exchange's gets
@@ -40,18 +45,20 @@ What the top view draws (global frame, metres; a second axis in feet):
   ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
 The legend states each arrow's scale as "1 m = X": an arrow's drawn length in metres is its
 quantity divided by X, X a round number (``round_scale``).
-The axes take in everything drawn: the whole paths, the rest outlines, the fixed objects and the measured positions
-included.
+The axes take in everything drawn: the whole paths (the approaches' too), the rest outlines, the fixed objects and
+the measured positions included.
 Artists a program may look for carry a gid (i a body's index, 0-based, as in ``case.inputs.vehicles``; k a fixed
 object's, as in ``case.fixed``): "outline-i" (vehicle i's closed outline at the first exchange),
 "first-contact-outline-i" (at first contact), "fixed-k" (fixed object k's patch), "impulse-i" (the first exchange's
 impulse arrow on vehicle i), "rest-path-i" (the CG path of vehicle i), "path-outline-i" (its outlines on the way),
 "rest-outline-i" (its closed outline at rest), "rest-cg-i", "measured-rest-i" and "measured-rest-sigma-i";
 "hitch-i" and "hitch-line-i" (the marker and the line of the hitch that tows vehicle i, at the first exchange),
-"rest-hitch-i" and "rest-hitch-line-i" (at rest); and, for a
-case with more than one exchange, "exchange-k" (the marker at the centroid of exchange k >= 1), "exchange-number-k"
-(the text "#k", k = 0 included), "exchange-normal-k" and "exchange-impulse-k-i" (the impulse arrow of exchange k on
-vehicle i).
+"rest-hitch-i" and "rest-hitch-line-i" (at rest); "approach-path-i" (the CG path of vehicle i's approach),
+"approach-phase-i-k" (the marker at the start of its phase k, 0-based, earliest first), "approach-time-i-k" (that
+phase's start time, the text beside it) and "approach-outline-i" (its closed outline at the approach's start); and,
+for a case with more than one exchange, "exchange-k" (the marker at the centroid of exchange k >= 1),
+"exchange-number-k" (the text "#k", k = 0 included), "exchange-normal-k" and "exchange-impulse-k-i" (the impulse arrow
+of exchange k on vehicle i).
 """
 
 from __future__ import annotations
@@ -65,7 +72,7 @@ from .. import units as U
 from ..case import CaseInputs, impulse_exchanged, visible, visible_lines
 from ..case.paths import canonical_path
 from ..model.types import ExchangeResult
-from ..solve import motion_paths
+from ..solve.cases import trajectories
 from .text import wrap_to_width
 
 # one colour per vehicle, by its index (a case has at most 8): tab10 without the red, cyan and grey that draw the
@@ -83,6 +90,7 @@ PANEL_WIDTH = 8.5  # inches, one panel of ``save_top_view``
 PLOT_HEIGHT = 7.2  # inches of a panel above its legend: the axes, its labels and a two-line title
 LATER_SHARE = 0.05  # a later exchange is numbered and drawn whole where its impulse is this share of the largest
 LATER_NORMAL = 0.25  # a later exchange's normal arrow, in units of the larger vehicle's length or width
+PHASE_LABEL = 7.0  # points from a phase's start marker to its time's text, across the vehicle's heading
 
 
 def round_scale(x):
@@ -505,24 +513,26 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     _draw_velocities(ax, scene)
     if scene.no_contact:
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
-    if solution.result.rest is not None:
-        _draw_motion_to_rest(ax, solution, scene.count)
+    paths = None
+    if solution.result.rest is not None or solution.result.approach is not None:
+        paths = trajectories(solution)  # the case solved once more, every step kept: None without a road
+    if solution.result.rest is not None and paths is not None:
+        _draw_motion_to_rest(ax, solution, scene.count, paths.rest)
+    if solution.result.approach is not None and paths is not None and paths.approach is not None:
+        _draw_approaches(ax, solution, scene, paths.approach)
     _draw_hitches(ax, solution, scene)
     _draw_measured_rest(ax, names, evidence, sigma)
     _finish_axes(ax)
     return ax
 
 
-def _draw_motion_to_rest(ax, solution, count):
-    """The path of each of the ``count`` vehicles from the exchange to rest (``motion_paths``: the case solved once
-    more, every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly spaced in time
-    (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
+def _draw_motion_to_rest(ax, solution, count, paths):
+    """The path of each of the ``count`` vehicles from the exchange to rest (``paths``: ``Trajectories.rest``, the
+    case solved once more, every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly
+    spaced in time (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
     results (``rest_position``, ``rest_yaw``) where the path's last step is."""
     from matplotlib.patches import Polygon
 
-    paths = motion_paths(solution)
-    if paths is None:
-        return
     names, inputs = [visible(n) for n in solution.case.vehicle_names], solution.case.inputs
     for i in range(count):
         rest, path = solution.result.rest[i], paths[i]
@@ -549,6 +559,46 @@ def _draw_motion_to_rest(ax, solution, count):
                   label=f"{names[i]} {where}: CG ({xy[0]:.2f}, {xy[1]:.2f}) m, yaw {yaw:.1f} deg "
                         f"(turned {float(rest.rotation_to_rest):+.1f} deg)")
         ax.plot(*xy, "o", color=vehicle_color(i), ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
+
+
+def _draw_approaches(ax, solution, scene, paths):
+    """Each vehicle's approach (``solution.result.approach``; ``paths``: ``Trajectories.approach``, its CG's path,
+    the case solved once more, every step kept), drawn as the start of its trajectory: the CG's path from the
+    approach's start to the impact (dashed, as thin as its path to rest, which goes on from the exchange; with
+    automatic contact the free motion from the case state to the CG at the first exchange, ``scene.cgs``, is added,
+    so that the two join), a small open circle at the start of each phase (its position in the results) with the
+    phase's start time beside it (across the heading, on alternate sides from one phase to the next, so that the
+    times of short phases do not print over each other), and the outline at the approach's start (thin, faded). One
+    legend entry for every approach."""
+    label = "approach (CG path before the impact; marks at each phase's start)"
+    text = dict(textcoords="offset points", fontsize=6, zorder=7,
+                bbox=dict(boxstyle="round,pad=0.1", facecolor="white", edgecolor="none", alpha=0.6))
+    for i in range(scene.count):
+        found, path = solution.result.approach[i], paths[i]
+        if found is None or path is None:
+            continue
+        xy = np.asarray(path, float)[:, 1:3]
+        starts = np.asarray(found.position, float).reshape(-1, 2)
+        if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(starts))):  # a phase that breaks a rule: NaN
+            continue
+        if np.linalg.norm(scene.cgs[i] - xy[-1]) > 0:  # automatic contact: moved freely on to the exchange
+            xy = np.vstack([xy, scene.cgs[i]])
+        color = vehicle_color(i)
+        ax.plot(xy[:, 0], xy[:, 1], "--", color=color, lw=0.9, gid=f"approach-path-{i}")
+        times, yaws = np.asarray(found.time, float).reshape(-1), np.asarray(found.yaw, float).reshape(-1)
+        for k, (point, t, yaw) in enumerate(zip(starts, times, yaws)):
+            ax.plot(*point, "o", ms=4, mfc="white", mec=color, mew=1.0, zorder=6, gid=f"approach-phase-{i}-{k}")
+            side = math.radians(yaw) + (0.5 * math.pi if k % 2 == 0 else -0.5 * math.pi)  # left, then right
+            off = np.array([math.cos(side), math.sin(side)])
+            ax.annotate(f"{t:.2f} s", point, xytext=tuple(PHASE_LABEL * off), color=color, gid=f"approach-time-{i}-{k}",
+                        ha="left" if off[0] > 0.3 else "right" if off[0] < -0.3 else "center",
+                        va="bottom" if off[1] > 0.3 else "top" if off[1] < -0.3 else "center", **text)
+        v = scene.inputs.vehicles[i]
+        _draw_box(ax, _box(float(v.length), float(v.width), float(v.cg_to_front), starts[0], math.radians(yaws[0])),
+                  color, "-", alpha=0.3, lw=0.7, gid=f"approach-outline-{i}")
+        if label is not None:  # one legend entry, in a neutral colour: every vehicle's approach is drawn alike
+            ax.plot([], [], "--", color="0.3", lw=0.9, marker="o", ms=4, mfc="white", mec="0.3", label=label)
+            label = None
 
 
 def hitch_point(position, yaw, point_on_tow):

@@ -8,13 +8,13 @@ case of a file at once.
 - ``rules``: the statuses beyond the exchange's own (a negative speed, the motion's inputs) and a case's
   status in words;
 - ``cases``: ``solve``, the cases of a file grouped by their pipeline, each group in one compiled call, and
-  ``motion_paths``; ``origin``: where a group is solved (about its CGs' midpoint far from the origin in
-  float32);
+  ``motion_paths`` and ``trajectories``; ``origin``: where a group is solved (about its CGs' midpoint far from the
+  origin in float32);
 - ``solution``: ``Solution``, a solved case, its notes and its JSON.
 """
 
-from .cases import motion_paths, solve
+from .cases import motion_paths, solve, trajectories
 from .pipeline import solve_inputs, stages
 from .solution import Solution
 
-__all__ = ["Solution", "motion_paths", "solve", "solve_inputs", "stages"]
+__all__ = ["Solution", "motion_paths", "solve", "solve_inputs", "stages", "trajectories"]

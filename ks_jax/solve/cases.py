@@ -1,9 +1,11 @@
 """``solve``: the cases of a file solved at once, grouped by what their pipeline is made of, each group in one
-compiled call; and ``motion_paths``, each vehicle's path to rest for a picture."""
+compiled call; and ``trajectories`` (``motion_paths``), each vehicle's path to rest and before the impact for a
+picture."""
 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -64,11 +66,20 @@ def solve(cases, smoothing: float = 0.0):
     return out[0] if single else out
 
 
-def motion_paths(solution: Solution):
-    """Each vehicle's path from the exchange to rest, for a picture (the top view): a tuple of (k, 4) NumPy arrays
-    (time s, x m, y m, yaw rad), from the exchange to the step at which it rests (or the time limit), None for a
-    fixed object; None for a case without a road or an invalid one. The case is solved again, keeping every
-    step (``case.Motion.path``)."""
+class Trajectories(NamedTuple):
+    """Every vehicle's path before and after the impact, for a picture (the top view), from one solve of the case
+    with every step kept (``trajectories``). Each path is a (k, 4) NumPy array of time s, x m, y m, yaw rad."""
+
+    rest: tuple  # per body: from the exchange to the step at which it rests (or the time limit); None for a fixed
+    # object (as ``motion_paths``)
+    approach: tuple | None  # per body: from its approach's start to the impact (docs/model.md, "The approach"), time
+    # <= 0 increasing to 0 there; None for a body without an approach; None for a case where no vehicle has one
+
+
+def trajectories(solution: Solution) -> Trajectories | None:
+    """Each vehicle's paths to rest and, where it has an approach, before the impact (``Trajectories``), from one
+    more solve of the case keeping every step (``case.Motion.path``): a picture needs both, and the solve is most of
+    the time. None for a case without a road (which has neither) or an invalid one."""
     case = solution.case
     if case.motion is None or solution.result is None or solution.status.startswith("invalid"):
         return None
@@ -81,4 +92,16 @@ def motion_paths(solution: Solution):
         p = np.asarray(r.path, float)
         end = int(np.argmax(p[:, 0] >= p[-1, 0])) + 1  # the first step at the final time: at rest from there
         paths.append(p[:end])
-    return tuple(paths)
+    approach = again.result.approach
+    if approach is not None:
+        approach = tuple(None if a is None else np.asarray(a.path, float) for a in approach)
+    return Trajectories(tuple(paths), approach)
+
+
+def motion_paths(solution: Solution):
+    """Each vehicle's path from the exchange to rest, for a picture (the top view): a tuple of (k, 4) NumPy arrays
+    (time s, x m, y m, yaw rad), from the exchange to the step at which it rests (or the time limit), None for a
+    fixed object; None for a case without a road or an invalid one. The case is solved again, keeping every
+    step (``case.Motion.path``); ``trajectories`` gives the approaches' paths from the same solve."""
+    found = trajectories(solution)
+    return None if found is None else found.rest

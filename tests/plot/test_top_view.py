@@ -642,7 +642,7 @@ def semi():
     sol = ks_jax.solve(ks_jax.load_case(SEMI))
     assert sol.status == "ok" and sol.case.motion.links == ((1, 2, "fifth_wheel"),)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(import_module("ks_jax.plot.top_view"), "motion_paths", lambda solution: None)
+        patch.setattr(import_module("ks_jax.plot.top_view"), "trajectories", lambda solution: None)
         ax = draw(sol)
     return sol, ax
 
@@ -687,3 +687,71 @@ def test_a_case_without_hitches_draws_none(several):
     artists = [*ax.lines, *ax.patches, *ax.texts]
     assert not [a for a in artists if "hitch" in (a.get_gid() or "")]
     assert not [s for s in legend_texts(ax) if "hitch" in s]
+
+
+# An approach before the impact (docs/model.md, "The approach"): the car skids straight along +x with its wheels
+# locked for SKID_DISTANCE into a parked car, striking it at SKID_SPEED from the case position SKID_AT. Worked back by
+# hand, its CG was SKID_DISTANCE behind the case position at the skid's start, sqrt(v^2 + 2 mu g d) faster,
+# (sqrt(v^2 + 2 mu g d) - v) / (mu g) before the impact.
+
+SKID_AT, SKID_DISTANCE, SKID_SPEED, SKID_FRICTION = (3.0, -2.0), 12.0, 14.0, 0.7
+SKID = {
+    "name": "a straight skid into a parked car",
+    "vehicles": [dict(car("sedan", 1500, 4.5, 1.8, 2.25, SKID_AT, 0, SKID_SPEED),
+                      approach=[{"wheels": "locked", "distance": f"{SKID_DISTANCE} m"}]),
+                 car("parked car", 1500, 4.5, 1.8, 2.25, (SKID_AT[0] + 4.5, SKID_AT[1]), 0, 0.0)],
+    "contact": {"point": [f"{SKID_AT[0] + 2.25} m", f"{SKID_AT[1]} m", "0.5 m"], "normal": 180, "restitution": 0.1,
+                "friction": 0.3},
+    "road": {"friction": SKID_FRICTION, "time_limit": "2 s"},
+}
+
+
+@pytest.fixture(scope="module")
+def skid():
+    """``SKID`` solved once and its top view as ``ks-jax solve --plot`` draws it (``top_view_figure``), drawn so that
+    the equal aspect has set the limits. Solved with every step kept (``Motion.path``), as the top view solves it
+    again for the paths: that solve is then the same compiled program."""
+    case = case_from_dict(SKID)
+    case = dataclasses.replace(case, motion=dataclasses.replace(case.motion, path=True))
+    sol = ks_jax.solve(case)
+    assert sol.status == "ok" and sol.result.approach[1] is None
+    fig = top_view_figure([sol])
+    fig.canvas.draw()
+    return sol, fig.axes[0]
+
+
+@pytest.mark.slow
+def test_the_approach_is_drawn_from_the_skids_start_to_the_impact(skid):
+    """The car's approach path runs straight along +x from SKID_DISTANCE behind the case position to it, where its
+    path to rest goes on; its phase's start is marked there with its time from the impact worked by hand, and its
+    outline drawn at the skid's start; the parked car has none. One legend entry; the view takes the approach in."""
+    sol, ax = skid
+    x0, y0 = SKID_AT
+    start = np.array([x0 - SKID_DISTANCE, y0])
+    (line,) = by_gid(ax, "approach-path-0")
+    xy = drawn_points(line)
+    np.testing.assert_allclose(xy[0], start, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(xy[-1], SKID_AT, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(xy[:, 1], y0, rtol=0, atol=1e-5)  # straight, along +x
+    assert np.all(np.diff(xy[:, 0]) > 0)
+    assert line.get_linestyle() == "--" and to_rgba(line.get_color()) == to_rgba(COLORS[0])
+    (rest,) = by_gid(ax, "rest-path-0")  # one trajectory: the path to rest starts where the approach ends
+    np.testing.assert_allclose(drawn_points(rest)[0], xy[-1], rtol=0, atol=1e-5)
+    (marker,) = by_gid(ax, "approach-phase-0-0")
+    np.testing.assert_allclose(drawn_points(marker), [start], rtol=0, atol=1e-5)
+    assert not by_gid(ax, "approach-phase-0-1")  # one phase
+    mu_g = SKID_FRICTION * U.G0
+    before = (math.sqrt(SKID_SPEED**2 + 2 * mu_g * SKID_DISTANCE) - SKID_SPEED) / mu_g
+    (time,) = by_gid(ax, "approach-time-0-0")
+    assert time.get_text() == f"{-before:.2f} s" == "-0.73 s"
+    np.testing.assert_allclose(time.xy, start, rtol=0, atol=1e-5)
+    (outline,) = by_gid(ax, "approach-outline-0")
+    np.testing.assert_allclose(drawn_polygon(outline), hand_box(sol.case.inputs.vehicles[0], start, 0.0),
+                               rtol=0, atol=1e-5)
+    gids = [a.get_gid() or "" for a in [*ax.lines, *ax.patches, *ax.texts]]
+    assert sorted(g for g in gids if g.startswith("approach-")) == sorted(
+        ["approach-path-0", "approach-phase-0-0", "approach-time-0-0", "approach-outline-0"])  # none for the parked car
+    texts = [s.replace("\n  ", " ") for s in legend_texts(ax)]
+    assert texts.count("approach (CG path before the impact; marks at each phase's start)") == 1
+    (x_min, _), (y_min, y_max) = ax.get_xlim(), ax.get_ylim()
+    assert x_min <= start[0] - (4.5 - 2.25) and y_min <= y0 - 0.9 and y0 + 0.9 <= y_max  # the outline's rear inside
