@@ -1,7 +1,7 @@
 """Articulated vehicles in case files (docs/model.md, "Articulated vehicles: the case file"): a towed vehicle's
 ``hitch`` entry read and checked, the case's links put in order, and a towed vehicle's position and velocity
 followed from its tow's through the hitch (``model.joint.follow``): once when the case is read (``follow_vehicles``,
-float64 on the host: a file may leave them out, and where it gives them they must agree), and in every computation
+on the host: a file may leave them out, and where it gives them they must agree), and in every computation
 (``follow_tows``: pure jnp, so that a sweep or a fit of the tow's speed carries its trailer).
 
 A hitch is given on the towed vehicle, ``"hitch": {"to": i, "point": [x, y], "point_on_tow": [x, y], "max_angle":
@@ -216,20 +216,13 @@ def _pair(xy) -> str:
     return f"{float(xy[0]):.4g}, {float(xy[1]):.4g}"
 
 
-def _turned(yaw, p):
-    s, c = math.sin(yaw), math.cos(yaw)
-    return np.array([c * p[0] - s * p[1], s * p[0] + c * p[1]])
-
-
 def _follow(tow: VehicleInputs, v: VehicleInputs, h: HitchInputs):
-    """``model.joint.follow`` in float64 on the host: ((2,) m, (2,) m/s)."""
-    r_w, r_t = _turned(float(tow.yaw), h.point_on_tow), _turned(float(v.yaw), h.point)
+    """``model.joint.follow`` of the file's numbers, as host arrays: ((2,) m, (2,) m/s)."""
     tow_velocity = float(tow.speed) * np.array([math.cos(float(tow.course)), math.sin(float(tow.course))])
-    perp = lambda r: np.array([-r[1], r[0]])  # noqa: E731
-    position = np.asarray(tow.position[:2], dtype=float) + r_w - r_t
-    velocity = (tow_velocity + float(tow.angular_velocity[2]) * perp(r_w)
-                - float(v.angular_velocity[2]) * perp(r_t))
-    return position, velocity
+    position, velocity = follow(np.asarray(tow.position[:2], dtype=float), float(tow.yaw), tow_velocity,
+                                float(tow.angular_velocity[2]), float(v.yaw), float(v.angular_velocity[2]),
+                                Hitch(*(np.asarray(x, dtype=float) for x in h)))
+    return np.asarray(position, dtype=float), np.asarray(velocity, dtype=float)
 
 
 def follow_tows(inputs: CaseInputs, links) -> CaseInputs:
