@@ -321,11 +321,17 @@ def _advance(b: Body, carry: Carry, dt):
     q = jnp.stack([vx, vy, r])
     m = jnp.stack([b.mass, b.mass, b.izz])
     dq = checkpoint_name(dt * jnp.stack([c * fu - s * fv, s * fu + c * fv, mz]) / m, "motion.dq")
-    # never more kinetic energy: scale the change back to the least energy along it where it overshoots
-    raw = checkpoint_name(la.safe_div(-jnp.sum(q * m * dq), jnp.sum(dq * m * dq), 1.0), "motion.raw")
+    energy2, reach = checkpoint_name((jnp.sum(m * q * q), power * dt), "motion.energy")
+    # never more kinetic energy: scale the change back to the least energy along it where it overshoots. The whole
+    # change where it cannot overshoot (the quotient is 1 or more), and where it is below rounding next to the
+    # velocities (|dq| < eps |q| in the mass metric): there the quotient's derivative, as 1 / (dq m dq)^2, overflows
+    # (a car rolling straight on without rolling resistance, the tyres damping its yaw rate geometrically toward 0),
+    # while any scale gives the same new velocities to rounding
+    num, den = -jnp.sum(q * m * dq), jnp.sum(dq * m * dq)
+    full = (num >= den) | (den <= jnp.finfo(den.dtype).eps ** 2 * energy2)
+    raw = checkpoint_name(jnp.where(full, 1.0, num / jnp.where(full, 1.0, den)), "motion.raw")
     scale = jnp.clip(raw, 0.0, 1.0)
     # the fraction of the step during which the vehicle moves: 2 E / (P dt), at most 1
-    energy2, reach = checkpoint_name((jnp.sum(m * q * q), power * dt), "motion.energy")
     phi = jnp.where(energy2 >= reach, jnp.where(energy2 > 0, 1.0, 0.0), la.safe_div(energy2, reach, 0.0))
     phi = checkpoint_name(phi, "motion.phi")
     h = phi * dt

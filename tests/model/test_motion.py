@@ -249,6 +249,30 @@ def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
         assert not np.any(bad), (jax.tree_util.keystr(path), got[bad], want[bad])
 
 
+def test_a_change_below_rounding_next_to_the_velocities_has_finite_forward_derivatives():
+    """A car rolling straight on at 0.5 m/s, free wheels without rolling resistance, with a lateral velocity of
+    1e-100 m/s or a yaw rate of 1e-60 rad/s (the tyres damp a yaw rate geometrically toward 0): its step's whole
+    change is far below rounding next to its velocity, and the energy rule's quotient, whose derivative goes as
+    1 / (dq m dq)^2, must not be taken there. The step's forward-mode Jacobian in the velocities is finite and
+    equals the one at a lateral velocity and yaw rate of exactly 0, their limit."""
+    b = M.body(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(FREE, f=0.0), 0.8, M.TIME_STEP)
+
+    def jacobian(vy, r):
+        zero = 0.0 * vy
+
+        def new(q):
+            carry = M.Carry(M.Planar(jnp.zeros(2), zero, q[:2], q[2]), jnp.zeros(2), zero, zero, 1.0 + zero)
+            state = M._step(b, carry, M.TIME_STEP).state
+            return jnp.concatenate([state.velocity, state.yaw_rate[None]])
+        return jax.jacfwd(new)(jnp.stack([0.5 + zero, vy, r]))
+
+    *tiny, zero = np.asarray(reference_jit(jax.vmap(jacobian))(jnp.asarray([1e-100, 0.0, 0.0]),
+                                                                jnp.asarray([0.0, 1e-60, 0.0])))
+    for jac in tiny:
+        assert np.all(np.isfinite(jac)), jac
+        np.testing.assert_allclose(jac, zero, rtol=1e-12, atol=1e-15)
+
+
 @pytest.mark.slow
 def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
     """A batch (vmap, in one program) gives each row what the row gives alone, unbatched; a vehicle at rest from
