@@ -180,6 +180,7 @@ def _vehicle_rows(sol):
     lines = []
     case = sol.case
     n = case.vehicle_count
+    crush = sol.crush()
     for k, (name, v) in enumerate(zip(case.vehicle_names, sol.result.vehicles)):
         if k >= n:  # a fixed object has no per-vehicle results
             struck = k in case.between
@@ -189,7 +190,7 @@ def _vehicle_rows(sol):
             continue
         if k not in case.between:
             lines += ["", f"  vehicles[{k}]: {visible(name)} (not in the first exchange)", *_hitch_rows(sol, k),
-                      *_approach_rows(sol, k)]
+                      *_approach_rows(sol, k), *_crush_rows(crush[k])]
             if sol.result.rest is not None and sol.result.rest[k] is not None:
                 lines += _rest_rows(sol.result.rest[k], case.motion)
             lines += _articulation_rows(sol, k)
@@ -206,8 +207,9 @@ def _vehicle_rows(sol):
             _row("PDOF", "undefined (no impulse)" if _no_impulse(sol) else "undefined" if not np.isfinite(v.pdof)
                  else f"{angle_text(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
             *_joint_delta_v_rows(sol, k),
-            _row("crush (deformation)", f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
+            _row(OVERLAP_LABEL, f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
             _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
+            *_crush_rows(crush[k]),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
             _row("course after",
@@ -221,6 +223,26 @@ def _vehicle_rows(sol):
             lines += _rest_rows(sol.result.rest[k], sol.case.motion)
         lines += _articulation_rows(sol, k)
     return lines
+
+
+# the exchange's crush: the depth of the centroid inside the vehicle's box, a model quantity (docs/model.md,
+# "Crush energy"), not a measured crush
+OVERLAP_LABEL = "crush, box overlap (model)"
+
+
+def _crush_rows(crush: dict):
+    """A vehicle's crush energy from its measured profile (``Solution.crush``), where it has one: the energy with its
+    one-sigma uncertainty (where the case gives one), its EES and, for the first exchange's vehicles, the CRASH3
+    delta-V."""
+    energy, sigma = crush["crush_energy"], crush["crush_energy_sigma"]
+    if energy is None:
+        return []
+    si, us = (f" +- {_fmt(sigma, 0)} J", f" +- {_fmt(sigma / U.FT_LBF, 0)} ft lbf") if sigma > 0 else (" J", " ft lbf")
+    rows = [_row("crush energy (measured profile)", f"{_fmt(energy, 0)}{si}", f"{_fmt(energy / U.FT_LBF, 0)}{us}"),
+            _quantity("  its EES", crush["crush_ees"], "m/s", U.MPH, "mph")]
+    if crush["crush_delta_v"] is not None:
+        rows.append(_quantity("  delta-V from crush (CRASH3)", crush["crush_delta_v"], "m/s", U.MPH, "mph"))
+    return rows
 
 
 HITCH_KINDS = {"drawbar": "drawbar", "fifth_wheel": "fifth wheel"}  # a hitch's kind as the panel words it

@@ -45,6 +45,8 @@ DIMENSIONS = {
     "dimensionless": "",
     "impulse": "[length] * [mass] / [time]",
     "energy": "[length] ** 2 * [mass] / [time] ** 2",
+    "force_per_length": "[mass] / [time] ** 2",  # a crush stiffness A (force per unit of damage width)
+    "force_per_area": "[mass] / [length] / [time] ** 2",  # a crush stiffness B (per unit of width and of crush)
 }
 
 # SI unit each kind is converted to; angles go to radians, angular velocity to rad/s.
@@ -60,6 +62,8 @@ SI_UNITS = {
     "dimensionless": "",
     "impulse": "N*s",
     "energy": "J",
+    "force_per_length": "N/m",
+    "force_per_area": "N/m^2",
 }
 
 # What a bare number means, per kind: SI, except angles (degrees) and angular velocities (deg/s).
@@ -80,6 +84,8 @@ US_DISPLAY = {
     "dimensionless": (1.0, ""),
     "impulse": (LBF_S, "lbf s"),
     "energy": (FT_LBF, "ft lbf"),
+    "force_per_length": (LBF / INCH, "lbf/in"),
+    "force_per_area": (LBF / INCH**2, "lbf/in^2"),
     "degrees": (1.0, "deg"),
 }
 
@@ -98,6 +104,8 @@ SI_DISPLAY = {
     "dimensionless": (1.0, ""),
     "impulse": (1.0, "N s"),
     "energy": (1.0, "J"),
+    "force_per_length": (1.0, "N/m"),
+    "force_per_area": (1.0, "N/m^2"),
     "degrees": (1.0, "deg"),
 }
 DISPLAY = {"si": SI_DISPLAY, "us": US_DISPLAY}
@@ -263,6 +271,8 @@ COMMON_UNITS = {
     "energy": ("J", "kJ", "ft*lbf"),
     "impulse": ("N*s", "lbf*s"),
     "time": ("s", "ms"),
+    "force_per_length": ("N/m", "kN/m", "lbf/in"),
+    "force_per_area": ("N/m^2", "kN/m^2", "lbf/in^2"),
 }
 MAX_TURNS = 1e6  # an orientation given in radians or turns beyond this many turns is refused
 

@@ -162,7 +162,8 @@ class Case:
     ``inputs.vehicles``, boxes at rest of infinite mass. ``vehicle_names``: every body's name, the vehicles' and then
     the fixed objects'. ``between``: the bodies of the first exchange (indices into ``inputs.vehicles``: its vehicle
     1 and vehicle 2). ``motion``: the integration's settings where the case has a ``road`` (its vehicles move on to
-    rest), else None."""
+    rest), else None. ``crush``: each vehicle's measured crush and stiffness (a ``case.crush.CrushProfile``, or None
+    for a vehicle without), () where no vehicle has one."""
 
     name: str
     inputs: CaseInputs | None
@@ -175,6 +176,7 @@ class Case:
     fixed: tuple = ()
     motion: Motion | None = None
     between: tuple = (0, 1)
+    crush: tuple = ()
 
     @property
     def valid(self) -> bool:

@@ -27,6 +27,23 @@ VEHICLE_FIELDS = {  # key -> (kind, shape); shape None = scalar
     "after": ("table", None),
     "hitch": ("table", None),
     "approach": ("list", None),
+    "stiffness": ("table", None),
+    "crush_profile": ("table", None),
+}
+
+STIFFNESS_FIELDS = {  # a vehicle's "stiffness": its damaged side's (docs/model.md, "Crush energy")
+    "A": ("force_per_length", None),
+    "B": ("force_per_area", None),
+    "A_sigma": ("force_per_length", None),
+    "B_sigma": ("force_per_area", None),
+}
+
+CRUSH_PROFILE_FIELDS = {  # a vehicle's "crush_profile": the measured crush across the damage
+    "width": ("length", None),
+    "depths": ("length", "list"),
+    "pdof": ("angle", None),
+    "width_sigma": ("length", None),
+    "depth_sigma": ("length", None),
 }
 
 HITCH_FIELDS = {  # a towed vehicle's "hitch" (docs/model.md, "Articulated vehicles: the case file")

@@ -12,6 +12,7 @@ import numpy as np
 from ..case import CUMULATIVE_OUTPUTS, Case, defined_output, undefined_kind
 from ..model.interaction import pairs_of
 from ..model.types import ContactResult, ExchangeResult, VehicleResult, status_text
+from .crush import crush_results
 
 
 @dataclass
@@ -74,6 +75,11 @@ class Solution:
                              "m (their undeformed outlines intersect): as much as they are crushed where they rest in "
                              "contact; more means one passed into the other")
         return notes
+
+    def crush(self) -> list:
+        """Each vehicle's crush-energy results from its measured crush profile (``crush.crush_results``): a dict per
+        vehicle, its values None where it has no profile."""
+        return crush_results(self.case)
 
     def body_names(self) -> list:
         """Each body as results name it: (path, name): "vehicles[i]" for a vehicle, "fixed[k]" for a fixed object."""
@@ -208,7 +214,8 @@ class Solution:
 
     def to_dict(self) -> dict:
         """{"name", "contact": {...}, "vehicles": [{...}, {...}]}: SI, the result names of docs/model.md,
-        (a vehicle's per case vehicle, in order, with its "approach" where it has one; with fixed objects,
+        (a vehicle's per case vehicle, in order, with its crush-energy results (``crush``: None where
+        it has no crush profile) and its "approach" where it has one; with fixed objects,
         "fixed": each as the file gives it, SI, angles in rad, one object or a list as in the file; "between": the
         first exchange's bodies;
         where ``notes`` has something to say, "notes": its list of sentences),
@@ -228,6 +235,7 @@ class Solution:
         vehicles = []
         fixed = self.case.fixed
         exchanges = self.exchange_list()
+        crush = self.crush()
         for i, (name, v) in enumerate(zip(self.case.vehicle_names[:self.case.vehicle_count], r.vehicles)):
             d = {"name": name}
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}") if undefined_kind(f"vehicles[{i}].{k}")
@@ -236,6 +244,7 @@ class Solution:
             if r.rest is not None:
                 d.update({k: _plain(x) for k, x in r.rest[i]._asdict().items() if k != "path"})
             d.update({k: _plain(defined_output(r, f"vehicles[{i}].{k}")) for k in CUMULATIVE_OUTPUTS})
+            d.update(crush[i])
             d["interactions"] = self.interactions_of(i, exchanges)
             d.update(self._hitch(i))
             d.update(self._approach(i))
