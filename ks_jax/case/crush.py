@@ -17,6 +17,7 @@ from .errors import CaseError
 from .fields import check_keys, given, number, shown, where
 from .schema import CRUSH_PROFILE_FIELDS, STIFFNESS_FIELDS, TEXT_FIELDS
 
+SIDES = ("front", "rear", "left", "right")  # the damaged side a profile may name (else the top view finds it)
 POINTS = (2, 4, 6)  # how many depths a profile may have: CRASH3's protocols
 MAX_ALPHA = 45.0  # deg: the principal force's angle off the damaged surface's normal at most (a factor of 2)
 EXAMPLE = ('"stiffness": {"A": "300 lbf/in", "B": "90 lbf/in^2"}, "crush_profile": {"width": "62 in", '
@@ -27,7 +28,8 @@ class CrushProfile(NamedTuple):
     """One vehicle's measured crush and its damaged side's stiffness, SI: ``width`` (m), ``depths`` (n,) m across
     it, ``a`` (N/m), ``b`` (N/m^2), ``alpha`` (rad, the principal force off the surface's normal) and the
     uncertainties (one sigma each, 0 where not given): ``width_sigma``, ``depth_sigma`` (of each depth, taken as
-    independent), ``a_sigma``, ``b_sigma`` (taken as independent)."""
+    independent), ``a_sigma``, ``b_sigma`` (taken as independent); ``side``: the damaged side (``SIDES``), or None
+    where the file does not say (the top view takes the side nearest the exchange's centroid)."""
 
     width: float
     depths: tuple
@@ -38,6 +40,7 @@ class CrushProfile(NamedTuple):
     depth_sigma: float = 0.0
     a_sigma: float = 0.0
     b_sigma: float = 0.0
+    side: str | None = None
 
 
 def read_crush(vehicles: list, sizes, case_name) -> tuple:
@@ -99,6 +102,11 @@ def _vehicle(d, i, size, case_name):
                             f"+-{MAX_ALPHA:g} deg (the principal force's angle off the damaged "
                             "surface's normal; its correction 1 + tan^2 doubles the energy at 45 deg and grows "
                             "without bound toward 90)")
+    side = profile.get("side")
+    if side is not None and side not in SIDES:
+        raise CaseError(f"{where(case_name, f'{path}.crush_profile.side')} = {shown(side)}: must be one of "
+                        f"{', '.join(SIDES)} (the damaged side; C1 is at the left end of the front or rear, at the "
+                        "front end of a side)")
     raw = profile.get("depths")
     if raw is None:
         raise CaseError(f"{where(case_name, f'{path}.crush_profile.depths')}: missing field, e.g. {EXAMPLE}")
@@ -114,4 +122,4 @@ def _vehicle(d, i, size, case_name):
             raise CaseError(f"{where(case_name, at)} = {given(c, x, 'length')}: must be >= 0 and at most the "
                             f"vehicle's length ({longest:.4g} m)")
         depths.append(x)
-    return CrushProfile(width, tuple(depths), a, b, alpha, width_sigma, depth_sigma, a_sigma, b_sigma)
+    return CrushProfile(width, tuple(depths), a, b, alpha, width_sigma, depth_sigma, a_sigma, b_sigma, side)

@@ -42,6 +42,7 @@ CRUSH_PROFILE_FIELDS = {  # a vehicle's "crush_profile": the measured crush acro
     "width": ("length", None),
     "depths": ("length", "list"),
     "pdof": ("angle", None),
+    "side": ("text", None),
     "width_sigma": ("length", None),
     "depth_sigma": ("length", None),
 }

@@ -40,6 +40,8 @@ What the top view draws (global frame, metres; a second axis in feet):
 - where a vehicle is towed (docs/model.md, "Articulated vehicles"), each hitch at the first exchange and, for a
   case with a road, at rest: a diamond at the tow's hitch point (its CG plus ``point_on_tow`` turned by its yaw)
   and a thin line from the tow's CG to it and on to the towed vehicle's CG, whose bend is the articulation;
+- where a vehicle has a measured crush profile (docs/model.md, "Crush energy"; ``case.crush``), that profile to
+  scale on its damaged side at the first exchange (``crush_profile.draw_profiles``);
 - given ``evidence`` (result path -> measured value, SI), each vehicle's measured rest position where both
   of its coordinates are given (rest_position[0] and [1]): an x, "measured rest" in the legend, and with
   ``sigma`` (path -> SI) an ellipse of semi-axes sigma_x, sigma_y about it (a circle for equal sigmas).
@@ -58,7 +60,7 @@ impulse arrow on vehicle i), "rest-path-i" (the CG path of vehicle i), "path-out
 phase's start time, the text beside it) and "approach-outline-i" (its closed outline at the approach's start); and,
 for a case with more than one exchange, "exchange-k" (the marker at the centroid of exchange k >= 1),
 "exchange-number-k" (the text "#k", k = 0 included), "exchange-normal-k" and "exchange-impulse-k-i" (the impulse arrow
-of exchange k on vehicle i).
+of exchange k on vehicle i); "crush-profile-i" (vehicle i's crushed outline).
 """
 
 from __future__ import annotations
@@ -73,6 +75,7 @@ from ..case import CaseInputs, impulse_exchanged, visible, visible_lines
 from ..case.paths import canonical_path
 from ..model.types import ExchangeResult
 from ..solve.cases import trajectories
+from .crush_profile import draw_profiles
 from .text import wrap_to_width
 
 # one colour per vehicle, by its index (a case has at most 8): tab10 without the red, cyan and grey that draw the
@@ -521,6 +524,7 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     if solution.result.approach is not None and paths is not None and paths.approach is not None:
         _draw_approaches(ax, solution, scene, paths.approach)
     _draw_hitches(ax, solution, scene)
+    draw_profiles(ax, case, exchanges, scene.cgs, scene.yaws, [vehicle_color(i) for i in range(scene.count)], names)
     _draw_measured_rest(ax, names, evidence, sigma)
     _finish_axes(ax)
     return ax

@@ -13,10 +13,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import ks_jax
 from ks_jax import units as U
 from ks_jax.case import CaseError, case_from_dict
 from ks_jax.case.crush import CrushProfile
 from ks_jax.model import crush as C
+from ks_jax.plot import top_view
 from ks_jax.solve.crush import energy_and_sigma
 from samples import run_cli
 
@@ -210,3 +212,20 @@ def test_a_bad_crush_entry_loses_only_its_case(tmp_path, capsys):
     code, (first, second), err = solve_json(tmp_path, capsys, bad, head_on())
     assert first["contact"]["status"].startswith("invalid") and "crush_profile.depths" in first["contact"]["status"]
     assert second["contact"]["status"] == "ok" and second["vehicles"][0]["crush_energy"] > 0
+
+
+def test_the_top_view_draws_each_profile_to_scale_on_its_damaged_side():
+    """The head-on's profiles drawn where the vehicles are: the car (yaw 180 deg, CG at x = 2.1 m, 1.9 m to its
+    front) has its front face at x = 0.2 m and its uniform 10 in of crush at x = 0.2 + 0.254 m, over the profile's
+    60 in centred on the centroid's foot (y = 0), C1 at its left end (at -y, the car facing -x); the pickup (yaw 0,
+    CG at x = -2.3 m, 2.6 m to its front) its 6, 8, 8, 5 in set back from x = 0.3 m over 70 in, C1 at +y."""
+    plt = pytest.importorskip("matplotlib.pyplot")
+    ax = top_view(ks_jax.solve(case_from_dict(head_on())))
+    drawn = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+    car, pickup = (np.column_stack(drawn[f"crush-profile-{i}"].get_data()) for i in (0, 1))
+    np.testing.assert_allclose(car[:, 0], 0.2 + 10 * U.INCH, atol=1e-9)
+    np.testing.assert_allclose(car[:, 1], np.linspace(-30, 30, 6) * U.INCH, atol=1e-9)
+    np.testing.assert_allclose(pickup[:, 0], 0.3 - np.array([6, 8, 8, 5]) * U.INCH, atol=1e-9)
+    np.testing.assert_allclose(pickup[:, 1], np.linspace(35, -35, 4) * U.INCH, atol=1e-9)
+    assert drawn["crush-profile-0"].get_label() == "car: measured crush profile (front, to scale)"
+    plt.close(ax.figure)
