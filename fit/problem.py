@@ -57,6 +57,7 @@ from ks_jax.case import (
 )
 from ks_jax.solve import solve_inputs
 
+from .crush import as_ees, is_crush_energy
 from .report import fmt
 
 # outputs that are piecewise constant (no gradient): they cannot be evidence for a fit
@@ -406,6 +407,8 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
     out = []
     for k, e in enumerate(spec):
         if isinstance(e, Evidence):
+            if is_crush_energy(e.path):
+                e = Evidence(*as_ees(case, e.path, e.value, e.sigma, f"case '{case.name}': evidence[{k}] ({e.path})"))
             out.append(check_evidence(case, e, checks))
             continue
         if not isinstance(e, dict):
@@ -416,6 +419,9 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
             raise CaseError(f"case '{case.name}': evidence[{k}].{sorted(extra)[0]}: unknown field "
                             "(known: quantity, value, sigma, time, note, source)")
         path = e.get("quantity", e.get("path"))
+        if is_crush_energy(path):
+            out.append(check_evidence(case, _crush_evidence(case, k, path, e), checks))
+            continue
         if path is None or "value" not in e or "sigma" not in e:
             raise CaseError(f"case '{case.name}': evidence[{k}]: needs quantity, value and sigma")
         for path, value, sigma in _at_times(case, k, path, e):
@@ -424,6 +430,23 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
             sigma = _evidence_value(case, path, sigma, f"evidence: {path}.sigma")
             out.append(check_evidence(case, Evidence(path, value, sigma), checks))
     return out
+
+
+def _crush_evidence(case: Case, k: int, path: str, e: dict) -> Evidence:
+    """A crush-energy evidence entry (``crush.as_ees``): its value and sigma as energies, or neither (from the
+    vehicle's crush profile)."""
+    where = f"case '{case.name}': evidence[{k}] ({path})"
+    if "time" in e:
+        raise CaseError(f"{where}: a crush energy has no time (it is the crash's whole crush)")
+    given = [key for key in ("value", "sigma") if key in e]
+    if len(given) == 1:
+        raise CaseError(f"{where}: give both value and sigma (energies), or neither (from the vehicle's crush "
+                        "profile and stiffness)")
+    energy = sigma = None
+    if given:
+        energy = _num(e["value"], "energy", f"evidence[{k}].value", case.name)
+        sigma = _num(e["sigma"], "energy", f"evidence[{k}].sigma", case.name)
+    return Evidence(*as_ees(case, path, energy, sigma, where))
 
 
 MAX_TABLE = 200  # rows of one evidence table at most (an event data recorder's pre-crash table has 5 to 50)

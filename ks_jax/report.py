@@ -208,7 +208,7 @@ def _vehicle_rows(sol):
                  else f"{angle_text(v.pdof)} deg ({int(v.pdof_clock)} o'clock)"),
             *_joint_delta_v_rows(sol, k),
             _row(OVERLAP_LABEL, f"{_fmt(v.crush)} m", f"{_fmt(v.crush / U.FT)} ft"),
-            _quantity("EES", defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
+            _quantity(_ees_label(sol), defined_output(sol.result, f"vehicles[{k}].ees"), "m/s", U.MPH, "mph"),
             *_crush_rows(crush[k]),
             _row("speed after", f"{_fmt(v.speed_after)} m/s", f"{_fmt(v.speed_after / U.MPH, 2)} mph "
                  f"({_fmt(v.speed_after / U.FT, 2)} ft/s)"),
@@ -228,6 +228,14 @@ def _vehicle_rows(sol):
 # the exchange's crush: the depth of the centroid inside the vehicle's box, a model quantity (docs/model.md,
 # "Crush energy"), not a measured crush
 OVERLAP_LABEL = "crush, box overlap (model)"
+
+
+def _ees_label(sol):
+    """The EES row's label: how the energy loss was shared, where the case has crush profiles (by the vehicles'
+    crush energies where both have one, else by the box overlap's crushes); "EES" alone where none has one."""
+    if not sol.case.crush:
+        return "EES"
+    return "EES (by crush energy)" if sol.split_by_crush_energy() else "EES (by box overlap)"
 
 
 def _crush_rows(crush: dict):

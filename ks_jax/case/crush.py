@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from ..model.crush import crush_energy
 from .errors import CaseError
 from .fields import check_keys, given, number, shown, where
 from .schema import CRUSH_PROFILE_FIELDS, STIFFNESS_FIELDS, TEXT_FIELDS
@@ -41,6 +42,15 @@ class CrushProfile(NamedTuple):
     a_sigma: float = 0.0
     b_sigma: float = 0.0
     side: str | None = None
+
+
+def crush_energies(crush: tuple, objects: tuple) -> tuple:
+    """``CaseInputs.crush_energy`` of a case's ``crush`` (``read_crush``) and fixed ``objects``: () for a case without
+    crush profiles, else per body its crush energy (J, ``model.crush.crush_energy``) or None."""
+    if not crush:
+        return ()
+    return tuple(None if p is None else float(crush_energy(p.width, p.depths, p.a, p.b, p.alpha)) for p in crush) + (
+        (None,) * len(objects))
 
 
 def read_crush(vehicles: list, sizes, case_name) -> tuple:

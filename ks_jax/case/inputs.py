@@ -116,7 +116,10 @@ class CaseInputs(NamedTuple):
     sets the later exchanges' own values, None where they are the first contact's; ``pairs``: a ``PairInputs`` for
     each pair of ``Motion.pairs``, whose own values take the place of the case's; ``hitches``: a ``HitchInputs`` for
     each link of ``Motion.links``; ``approach``: () for a case without one, else one entry per vehicle, an
-    ``ApproachInputs`` or None for a vehicle without."""
+    ``ApproachInputs`` or None for a vehicle without; ``crush_energy``: () for a case without crush profiles, else per
+    body the energy (J) its measured crush absorbed (docs/model.md, "Crush energy"), or None for a body without one:
+    where both bodies of the first exchange have one, its energy loss is shared between them in proportion to
+    these rather than to the box overlap's crushes."""
 
     vehicles: tuple
     contact: ContactInputs
@@ -125,6 +128,7 @@ class CaseInputs(NamedTuple):
     pairs: tuple = ()
     hitches: tuple = ()
     approach: tuple = ()
+    crush_energy: tuple = ()
 
 @dataclass(frozen=True)
 class Motion:

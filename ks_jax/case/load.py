@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import units as U
 from .approach import read_approach
-from .crush import read_crush
+from .crush import crush_energies, read_crush
 from .errors import CaseError, CaseWarning
 from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
@@ -227,11 +227,11 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
         motion = dataclasses.replace(motion, links=links)
     approach, kinds = read_approach(vehicles, road, links, name)
     motion = dataclasses.replace(motion, approach=kinds) if kinds else motion
-    inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches, approach)
+    crush = read_crush(vehicles, [(float(v.length), float(v.width)) for v in veh], name)
+    inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches, approach, crush_energies(crush, objects))
     names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
                   for i, v in enumerate(vehicles))
     names += tuple(str(o.get("name", o["kind"])) for o in objects_raw)
-    crush = read_crush(vehicles, [(float(v.length), float(v.width)) for v in veh], name)
     return Case(name, inputs, auto_point, auto_normal, names, None, d, source, objects, motion, between, crush)
 
 

@@ -13,7 +13,7 @@ from ..model import collision
 from ..model import linalg as la
 from ..model.contact import advance, automatic_stage, exchange_at_contact
 from ..model.checks import input_status
-from ..model.results import mask_invalid
+from ..model.results import ROUNDING, ees_pair, mask_invalid
 from ..model.types import INVALID_NONFINITE, OK, ExchangeResult, VehicleResult
 from .rest import approaches, states_at, to_rest
 from .rules import speed_status, with_speed_status
@@ -53,7 +53,7 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
     auto = auto_point or auto_normal
 
     def exchange_and_rest(inputs, *earlier):
-        result = last(inputs, *earlier)
+        result = split_by_crush(last(inputs, *earlier), inputs, between)
         if motion is None and between == tuple(range(len(inputs.vehicles))):
             return result  # the case's two bodies, in order: its exchange's results as they are
         states = body_states(inputs)
@@ -88,6 +88,23 @@ def _following(stage, links):
         return stage(follow_tows(inputs, links), *earlier)
 
     return run
+
+
+def split_by_crush(result: ExchangeResult, inputs: CaseInputs, between) -> ExchangeResult:
+    """``result`` (the first exchange's, its ``vehicles`` its pair) with the EES of its two vehicles shared in
+    proportion to their crush energies (``CaseInputs.crush_energy``, docs/model.md "Crush energy") where both have
+    one; as it is otherwise (in proportion to the box overlap's crushes, all of it to a vehicle against a fixed
+    object). The energy loss's rounding is the exchange's own (``model.results.derive``)."""
+    weights = inputs.crush_energy
+    i, j = between
+    if not weights or weights[i] is None or weights[j] is None:
+        return result
+    c = result.contact
+    rounding = ROUNDING * jnp.finfo(c.energy_loss.dtype).eps * 0.5 * c.impulse_magnitude * (
+        la.safe_norm(c.closing_velocity) + la.safe_norm(c.separation_velocity))
+    ees = ees_pair(c.energy_loss, weights[i], weights[j], inputs.vehicles[i].mass, inputs.vehicles[j].mass, 0.0,
+                   jax.lax.stop_gradient(rounding))
+    return result._replace(vehicles=tuple(v._replace(ees=e) for v, e in zip(result.vehicles, ees)))
 
 
 def in_body_order(result: ExchangeResult, between, states) -> ExchangeResult:

@@ -108,7 +108,7 @@ class Solution:
                                  else getattr(ex.contact, f)) for f in ContactResult._fields if f != "status"}
             contact["time"] = 0.0 if inter is None else _plain(inter.time[k])
             contact["status"] = status_text(ex.contact.status) if k else self.status
-            crush = [float(v.crush) for v in ex.vehicles]
+            crush = self._share_weights(k, pair, [float(v.crush) for v in ex.vehicles])
             energy = float(ex.contact.energy_loss)
             vehicles = []
             for side, b in enumerate(pair):
@@ -126,6 +126,19 @@ class Solution:
                         "interaction": 0 if inter is None else int(inter.interaction[k]), **contact,
                         "vehicles": vehicles})
         return out
+
+    def split_by_crush_energy(self) -> bool:
+        """Whether the first exchange's energy loss is shared by crush energy (both its bodies have a crush profile:
+        ``pipeline.split_by_crush``), not by the box overlap's crushes."""
+        weights = self.case.inputs.crush_energy if self.case.inputs is not None else ()
+        return bool(weights) and all(weights[b] is not None for b in self.case.between)
+
+    def _share_weights(self, k, pair, crush):
+        """What exchange ``k`` of the bodies ``pair`` shares its energy loss by: their crush energies for the first
+        exchange where ``split_by_crush_energy``, else the box overlap's ``crush``."""
+        if k == 0 and self.split_by_crush_energy():
+            return [float(self.case.inputs.crush_energy[b]) for b in pair]
+        return crush
 
     def interactions_of(self, vehicle: int, exchanges: list) -> list:
         """The contact interactions ``vehicle`` took part in (from ``exchange_list``): each with its exchanges'

@@ -20,6 +20,7 @@ from ks_jax.case.crush import CrushProfile
 from ks_jax.model import crush as C
 from ks_jax.plot import top_view
 from ks_jax.solve.crush import energy_and_sigma
+from fit import Evidence, parse_evidence
 from samples import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -160,6 +161,11 @@ def test_crush_results_through_solve_json_and_the_central_cross_check(tmp_path, 
         assert v["crush_ees"] == pytest.approx(math.sqrt(2 * e / m), rel=1e-12)
         assert v["crush_delta_v"] == pytest.approx(math.sqrt(2 * (e1 + e2) * other / (m * (m1 + m2))), rel=1e-12)
     loss = out["contact"]["energy_loss"]
+    # both have profiles: the energy loss is shared by crush energy, in the EES and the exchange's energy shares
+    shares = {v["vehicle"]: v["energy_share"] for v in out["exchanges"][0]["vehicles"]}
+    for k, (v, e, m) in enumerate(((sedan, e1, m1), (pickup, e2, m2))):
+        assert 0.5 * m * v["ees"] ** 2 == pytest.approx(loss * e / (e1 + e2), rel=1e-12)
+        assert shares[k] == pytest.approx(loss * e / (e1 + e2), rel=1e-12)
     for share in (0.3, 0.5, 0.8):
         dv = C.crush_delta_v(jnp.asarray(share * loss), jnp.asarray((1 - share) * loss), m1, m2)
         assert float(dv[0]) == pytest.approx(sedan["delta_v_magnitude"], rel=1e-9)
@@ -168,13 +174,15 @@ def test_crush_results_through_solve_json_and_the_central_cross_check(tmp_path, 
 
 def test_one_profile_a_fixed_object_and_the_panel(tmp_path, capsys):
     """A profile on one vehicle only: its energy and EES, no CRASH3 delta-V (the other's energy is unknown), and
-    nulls for the other. Into a wall (docs/validation/wall.json's W1), which takes no energy: the CRASH3 delta-V is
-    the EES. The panel shows the box overlap as a model quantity and the measured profile's rows."""
+    nulls for the other; the exchange's EES is shared by the box overlap's crushes as without any profile. Into a
+    wall (docs/validation/wall.json's W1), which takes no energy: the CRASH3 delta-V is the EES. The panel shows the
+    box overlap as a model quantity, which split the EES used, and the measured profile's rows."""
     wall = json.loads((ROOT / "docs/validation/wall.json").read_text())["cases"][0]
     wall["vehicles"][0].update(copy.deepcopy(SEDAN))
-    code, (one, into_wall), err = solve_json(tmp_path, capsys, head_on(second={}), wall)
+    code, (one, into_wall, plain), err = solve_json(tmp_path, capsys, head_on(second={}), wall, head_on({}, {}))
     assert code == 0, err
     sedan, pickup = one["vehicles"]
+    assert [v["ees"] for v in one["vehicles"]] == [v["ees"] for v in plain["vehicles"]]
     assert sedan["crush_energy"] == pytest.approx(40000 * U.FT_LBF, rel=1e-12) and sedan["crush_delta_v"] is None
     assert all(pickup[k] is None for k in ("crush_energy", "crush_energy_sigma", "crush_ees", "crush_delta_v"))
     car = into_wall["vehicles"][0]
@@ -183,6 +191,7 @@ def test_one_profile_a_fixed_object_and_the_panel(tmp_path, capsys):
     code, text, err = run_cli(capsys, "solve", str(path))
     assert code == 0, err
     assert "crush, box overlap (model)" in text and "crush energy (measured profile)" in text
+    assert "EES (by box overlap)" in text
     assert "40,000 ft lbf" in text and "delta-V from crush (CRASH3)" in text
 
 
@@ -229,3 +238,87 @@ def test_the_top_view_draws_each_profile_to_scale_on_its_damaged_side():
     np.testing.assert_allclose(pickup[:, 1], np.linspace(35, -35, 4) * U.INCH, atol=1e-9)
     assert drawn["crush-profile-0"].get_label() == "car: measured crush profile (front, to scale)"
     plt.close(ax.figure)
+
+
+def fit_json(tmp_path, capsys, raw):
+    path = tmp_path / "crush_fit.json"
+    path.write_text(json.dumps(raw))
+    code, text, err = run_cli(capsys, "fit", str(path), "--json")
+    assert code == 0, err
+    (out,) = json.loads(text)["cases"]
+    return out
+
+
+def test_a_fit_from_crush_energy_alone_is_the_closed_form(tmp_path, capsys):
+    """The head-on (central, inline, restitution 0) with the pickup's speed unknown and both crush energies as the
+    only evidence (the sedan's as a value and sigma, the pickup's from its profile and A_sigma): both vehicles have
+    profiles, so the exchange shares its energy loss E = mu u^2 / 2 (mu = m1 m2 / (m1 + m2), u = 15 m/s + v) in
+    proportion to them, and both residuals vanish where E is their sum: v = sqrt(2 (E1 + E2) / mu) - 15 m/s."""
+    raw = head_on()
+    raw["unknowns"] = {"vehicles[1].speed": {"bounds": ["0 mph", "80 mph"]}}
+    raw["evidence"] = [{"quantity": "vehicles[0].crush_energy", "value": "40000 ft*lbf", "sigma": "4000 ft*lbf"},
+                       {"quantity": "vehicles[1].crush_energy"}]
+    out = fit_json(tmp_path, capsys, raw)
+    e2, _ = energy_and_sigma(case_from_dict(head_on()).crush[1])
+    mu = 1300.0 * 2100.0 / 3400.0
+    want = math.sqrt(2 * (40000 * U.FT_LBF + e2) / mu) - 15.0
+    assert out["estimate"]["vehicles[1].speed"] == pytest.approx(want, rel=1e-6)
+    assert out["chi2"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_crush_energy_beside_delta_v_says_how_far_they_agree(tmp_path, capsys):
+    """The same head-on, the pickup's speed unknown (12 m/s in truth), the car's delta-V measured at the truth's
+    (m2 / (m1 + m2) 27 m/s, sigma 0.05 m/s) and both crush energies 10 % above the truth's shares of its energy loss
+    mu u^2 / 2 (shared by the profiles' crush energies, sigma 5 %): the fit follows the tight delta-V, and its
+    evidence table sets the crush's EES (sqrt(2 E / m)) beside the exchange's, sqrt(1.1) = 1.049 times it, its
+    residual (fitted - measured) / sigma about -1.8."""
+    raw = head_on()
+    raw["unknowns"] = {"vehicles[1].speed": {"bounds": ["0 mph", "80 mph"]}}
+    m1, m2, mu = 1300.0, 2100.0, 1300.0 * 2100.0 / 3400.0
+    weights = [energy_and_sigma(p)[0] for p in case_from_dict(head_on()).crush]
+    loss = 0.5 * mu * 27.0**2
+    raw["evidence"] = [{"quantity": "vehicles[0].delta_v_magnitude", "value": f"{m2 / (m1 + m2) * 27.0!r} m/s",
+                        "sigma": "0.05 m/s"}]
+    for i, w in enumerate(weights):
+        e = 1.1 * loss * w / sum(weights)
+        raw["evidence"].append({"quantity": f"vehicles[{i}].crush_energy", "value": f"{e!r} J",
+                                "sigma": f"{0.05 * e!r} J"})
+    out = fit_json(tmp_path, capsys, raw)
+    assert out["estimate"]["vehicles[1].speed"] == pytest.approx(12.0, abs=0.1)
+    for i, m in enumerate((m1, m2)):
+        path = f"vehicles[{i}].ees"
+        assert out["measured"][path] == pytest.approx(math.sqrt(2 * 1.1 * loss * weights[i] / sum(weights) / m),
+                                                      rel=1e-12)
+        assert out["measured"][path] / out["fitted"][path] == pytest.approx(math.sqrt(1.1), rel=0.01)
+        assert out["residuals"][path] == pytest.approx((out["fitted"][path] - out["measured"][path])
+                                                       / out["sigma"][path], rel=1e-9)
+
+
+@pytest.mark.parametrize("second, entry, words", [
+    ({}, {"quantity": "vehicles[1].crush_energy"}, "vehicles[1] has no crush profile"),
+    (PICKUP, {"quantity": "vehicles[0].crush_energy"}, "gives no uncertainty"),
+    (PICKUP, {"quantity": "vehicles[1].crush_energy", "value": "40000 ft*lbf"}, "give both value and sigma"),
+    (PICKUP, {"quantity": "vehicles[2].crush_energy", "value": "1 J", "sigma": "1 J"}, "not a vehicle of the first"),
+    (PICKUP, {"quantity": "vehicles[1].crush_energy", "value": "-5 J", "sigma": "1 J"}, "must be positive"),
+    (PICKUP, {"quantity": "vehicles[1].crush_energy", "time": "1 s"}, "has no time"),
+])
+def test_bad_crush_energy_evidence_is_refused_naming_the_entry(second, entry, words):
+    """Crush-energy evidence the fit cannot use: a vehicle without a profile and no value, a profile without any
+    sigma, a value without a sigma, a vehicle outside the first exchange, a negative energy, a time."""
+    case = case_from_dict(head_on(second=second))
+    with pytest.raises(CaseError) as err:
+        parse_evidence(case, [entry])
+    assert words in str(err.value) and "I2 head-on" in str(err.value) and "evidence[0]" in str(err.value)
+
+
+def test_crush_energy_evidence_is_the_ees_it_gives():
+    """In Python and in a file alike: E and sigma_E become EES = sqrt(2 E / m) and sigma_E / sqrt(2 m E)."""
+    case = case_from_dict(head_on())
+    e, s = 60000.0, 3000.0
+    entry = {"quantity": "vehicles[1].crush_energy", "value": f"{e} J", "sigma": f"{s} J"}
+    (from_file,) = parse_evidence(case, [entry])
+    (from_python,) = parse_evidence(case, [Evidence("vehicles[1].crush_energy", e, s)])
+    assert from_file == from_python
+    assert from_file.path == "vehicles[1].ees"
+    assert from_file.value == pytest.approx(math.sqrt(2 * e / 2100.0), rel=1e-15)
+    assert from_file.sigma == pytest.approx(s / math.sqrt(2 * 2100.0 * e), rel=1e-15)
