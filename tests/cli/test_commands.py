@@ -12,6 +12,7 @@ import ks_jax
 from ks_jax import units as U
 from ks_jax.case import load_case
 from ks_jax.cli import main
+from ks_jax.solve.crush import FIELDS as CRUSH_FIELDS
 from samples import US_CASE, run_cli
 
 
@@ -48,7 +49,9 @@ def test_json_keys_are_model_section_4(tmp_path, capsys):
     assert set(res) == {"name", "between", "contact", "vehicles", "exchanges", "energy_loss_total"}
     assert set(res["contact"]) == set(ks_jax.ContactResult._fields)
     assert set(res["vehicles"][0]) == set(ks_jax.VehicleResult._fields) | {"name", "interactions"} | set(
-        ks_jax.case.CUMULATIVE_OUTPUTS)
+        ks_jax.case.CUMULATIVE_OUTPUTS) | set(CRUSH_FIELDS)
+    # the crush-energy results (docs/model.md, "Crush energy") are there, null, for a vehicle without a crush profile
+    assert all(res["vehicles"][0][k] is None for k in CRUSH_FIELDS)
     assert res["contact"]["status"] == "ok"
     # the JSON's impulse is what the Python API gives
     direct = ks_jax.solve(load_case(path))
