@@ -73,6 +73,14 @@ def ees_pair(energy_loss, crush1, crush2, mass1, mass2, length_sum=1.0, energy_r
     return one(crush1, mass1), one(crush2, mass2)
 
 
+def energy_loss_rounding(energy, j_mag, u, u_after):
+    """The rounding of an exchange's energy loss E = -J.(u + u')/2 (``ees_pair``'s ``energy_rounding``), from |J| and
+    the relative velocities at the centroid before and after (3,): the dot product's terms are at most
+    |J| (|u| + |u'|) / 2. A tolerance, so without a derivative."""
+    bound = 0.5 * j_mag * (la.safe_norm(u) + la.safe_norm(u_after))
+    return jax.lax.stop_gradient(ROUNDING * jnp.finfo(energy.dtype).eps * bound)
+
+
 def _vehicle(force, body, point, normal_into, j_mag):
     vehicle, state, rot, inv_inertia, r = body
     dv = force / vehicle.mass
@@ -116,15 +124,14 @@ def derive(j, factors, n, p, u, sliding, status, body1, body2) -> ExchangeResult
         v2.velocity_after + la.cross(v2.angular_velocity_after, r2)
     )
     energy = la.plain_zero(-0.5 * la.dot(j, u + u_after))  # J = 0 (separating): 0, not -0
-    # the rounding of E: the dot product's terms are at most |J| (|u| + |u'|) / 2
-    rounding = ROUNDING * jnp.finfo(energy.dtype).eps * 0.5 * j_mag * (la.safe_norm(u) + la.safe_norm(u_after))
+    rounding = energy_loss_rounding(energy, j_mag, u, u_after)
     # against a fixed object vehicle 1 takes all of the energy (docs/model.md, "Fixed objects"): its crush
     # share is 1 and the object's 0, whatever the object's box holds
     fixed = body2[0].mass == jnp.inf
     crush1 = jnp.where(fixed, jnp.ones_like(v1.crush), v1.crush)
     crush2 = jnp.where(fixed, jnp.zeros_like(v2.crush), v2.crush)
     ees1, ees2 = ees_pair(energy, crush1, crush2, body1[0].mass, jnp.where(fixed, 1.0, body2[0].mass),
-                          body1[0].length + body2[0].length, jax.lax.stop_gradient(rounding))
+                          body1[0].length + body2[0].length, rounding)
     v1 = v1._replace(pdof_clock=clock(v1.pdof), ees=ees1)
     v2 = v2._replace(pdof_clock=clock(v2.pdof), ees=ees2)
     jn = la.dot(n, j)

@@ -13,7 +13,7 @@ from ..model import collision
 from ..model import linalg as la
 from ..model.contact import advance, automatic_stage, exchange_at_contact
 from ..model.checks import input_status
-from ..model.results import ROUNDING, ees_pair, mask_invalid
+from ..model.results import ees_pair, energy_loss_rounding, mask_invalid
 from ..model.types import INVALID_NONFINITE, OK, ExchangeResult, VehicleResult
 from .rest import approaches, states_at, to_rest
 from .rules import speed_status, with_speed_status
@@ -94,16 +94,15 @@ def split_by_crush(result: ExchangeResult, inputs: CaseInputs, between) -> Excha
     """``result`` (the first exchange's, its ``vehicles`` its pair) with the EES of its two vehicles shared in
     proportion to their crush energies (``CaseInputs.crush_energy``, docs/model.md "Crush energy") where both have
     one; as it is otherwise (in proportion to the box overlap's crushes, all of it to a vehicle against a fixed
-    object). The energy loss's rounding is the exchange's own (``model.results.derive``)."""
+    object). The energy loss's rounding is the exchange's own (``model.results.energy_loss_rounding``)."""
     weights = inputs.crush_energy
     i, j = between
     if not weights or weights[i] is None or weights[j] is None:
         return result
     c = result.contact
-    rounding = ROUNDING * jnp.finfo(c.energy_loss.dtype).eps * 0.5 * c.impulse_magnitude * (
-        la.safe_norm(c.closing_velocity) + la.safe_norm(c.separation_velocity))
+    rounding = energy_loss_rounding(c.energy_loss, c.impulse_magnitude, c.closing_velocity, c.separation_velocity)
     ees = ees_pair(c.energy_loss, weights[i], weights[j], inputs.vehicles[i].mass, inputs.vehicles[j].mass, 0.0,
-                   jax.lax.stop_gradient(rounding))
+                   rounding)
     return result._replace(vehicles=tuple(v._replace(ees=e) for v, e in zip(result.vehicles, ees)))
 
 
