@@ -27,7 +27,6 @@ import jax
 import numpy as np
 
 import ks_jax
-from ks_jax.case import defined_output, parse_output_value
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the measured tests' tables live beside this script
@@ -239,10 +238,7 @@ def _manual_rows(file, sol):
         field = path.split(".")[-1]
         result = labels.get(path) or {"delta_v_magnitude": "delta-V", "ees": "EES",
                                       "speed_after": "speed after"}[field] + f", {names[i]}"
-        number, unit = value.split(None, 1)
-        want_si = parse_output_value(value, path, sol.case.name)
-        scale = want_si / float(number)
-        got = float(np.asarray(defined_output(sol.result, path))) / scale
+        number, unit, got, _ = measured.in_reference_unit(sol, path, value)
         want = float(number)
         decimals = len(number.split(".")[1]) if "." in number else 0
         d = (got - want) / want

@@ -30,6 +30,7 @@ import fit
 import ks_jax
 from ks_jax.case import defined_output, parse_output_value
 from ks_jax.measured import barrier_rebound, measured_delta_v, read_test
+from ks_jax.units import FT
 
 HERE = Path(__file__).resolve().parent
 MEASURED = HERE / "validation" / "measured"
@@ -93,6 +94,15 @@ def _check_rule(cases, file):
                              f"forward cases hold the rule's {RULE_RESTITUTION}, {RULE_FRICTION}")
 
 
+def in_reference_unit(sol, path, text):
+    """A reference value as a case file writes it ("39.5 mph") beside ks-jax's result for ``path``: (the number as
+    written, its unit, ks-jax's value in that unit, ks-jax's value in SI)."""
+    number, unit = text.split(None, 1)
+    scale = parse_output_value(text, path, sol.case.name) / float(number)
+    got = float(np.asarray(defined_output(sol.result, path)))
+    return number, unit, got / scale, got
+
+
 def _label(path, names):
     i = int(path[9])
     field = path.split(".", 1)[1]
@@ -109,10 +119,8 @@ def forward_rows(group, cases=None):
             raise RuntimeError(f"{FILES[group]}: {sol.case.name}: status {sol.status}")
         names = [n.split(" ", 1)[1] if n[:4].isdigit() else n for n in sol.case.vehicle_names]
         for path, text in sol.case.raw["reference"].items():
-            number, unit = text.split(None, 1)
-            scale = parse_output_value(text, path, sol.case.name) / float(number)
-            got = float(np.asarray(defined_output(sol.result, path)))
-            rows.append(Compared(sol.case.name, path, _label(path, names), unit, number, got / scale, got))
+            number, unit, value, got = in_reference_unit(sol, path, text)
+            rows.append(Compared(sol.case.name, path, _label(path, names), unit, number, value, got))
     return rows
 
 
@@ -121,8 +129,7 @@ def _shown(path, value, std, statements):
     own. The value the solver stopped at along such a direction is arbitrary (it moves with the starts and the
     rounding of the machine), so it is not shown; a friction that the evidence bounds only from below says whether
     the contact sticks."""
-    ft = 0.3048
-    scale, unit = (ft, " ft") if path.startswith("contact.point") else (1.0, "")
+    scale, unit = (FT, " ft") if path.startswith("contact.point") else (1.0, "")
     if math.isfinite(std):
         return f"{value / scale:.3f} +- {std / scale:.3f}{unit}"
     for s in statements:

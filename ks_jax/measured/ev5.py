@@ -35,13 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ks_jax.units import DEG, G0, KPH
+from ks_jax.units import DEG, DEG_S, G0, KPH
 
 MM = 1e-3  # m
 US = 1e-6  # s
 
 # A channel's YUNITS -> the SI value of one unit (values are multiplied by it)
-UNITS = {"G'S": G0, "NWT": 1.0, "NWM": 1.0, "MM": MM, "DEG": DEG, "DPS": DEG, "SEC": 1.0}
+UNITS = {"G'S": G0, "NWT": 1.0, "NWM": 1.0, "MM": MM, "DEG": DEG, "DPS": DEG_S, "SEC": 1.0}
 
 SECTION = re.compile(r"^-{3,}\s*([A-Z0-9]+)\s*-{3,}$")
 REQUIRED = ("TEST", "VEHICLE", "INSTRUMENTATION", "END")
