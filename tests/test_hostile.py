@@ -174,6 +174,7 @@ def _terminal_safe(text):
     return all(c.isprintable() or c == "\n" for c in text)
 
 
+@pytest.mark.slow
 def test_names_are_kept_exactly_and_shown_escaped(tmp_path, capsys):
     """A name with a bidirectional override, terminal escapes, a line break, NUL or a lone surrogate: the case
     keeps it exactly, ``solve --json`` carries it exactly (case and vehicle names, and a bad case's), and the
@@ -281,6 +282,7 @@ def test_a_denormal_moment_of_inertia_is_refused_where_the_file_is_read():
         case_from_dict(d)
 
 
+@pytest.mark.slow
 def test_a_fit_whose_bounds_never_give_a_collision_exits_1(tmp_path, capsys):
     d = json.loads(FIT_CASE.read_text())
     d["unknowns"]["vehicles[1].speed"]["bounds"] = ["0 mph", "0.001 mph"]  # the Kia never reaches the Lucid

@@ -270,6 +270,7 @@ def violations(planted=None):
     ("from .. import sweeps\n", "cycle"),
     ("from .engine import sweep\n", None),  # a public name, of a module that does not import this one
 ])
+@pytest.mark.slow
 def test_the_checks_see_a_planted_violation(planted, broken):
     """Each check finds a violation planted in a module of the library, and only that: a function or a method
     of ``LONGEST`` + 2 lines, a private name taken from another module by ``from ... import`` (at the top or

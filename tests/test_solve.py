@@ -89,6 +89,7 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
     ("seed_001_lucid_kia.toml", (90, 0), 1.0, 1.0, None),
     ("seed_000_saturn_pontiac.json", (180, 180), 1.0, 1.0, 180),
 ])
+@pytest.mark.slow
 def test_flags_and_ees_of_a_quantity_zero_to_rounding_are_the_same_alone_batched_and_swept(
         name, yaws, friction, restitution, normal):
     """Seed crashes changed so that a result hangs on a quantity that is 0 up to rounding, solved alone, in
@@ -151,6 +152,7 @@ def test_no_impulse_has_no_pdof(tmp_path, capsys):
     assert "undefined (no impulse)" in out.split("azimuth / elevation")[1][:40]
 
 
+@pytest.mark.slow
 def test_overflowing_case_is_reported_not_drawn_with_nan(tmp_path, capsys):
     d = copy.deepcopy(US_CASE)
     d["vehicles"][1]["speed"] = 1e300  # m/s: finite, but its energy is not

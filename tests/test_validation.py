@@ -53,6 +53,7 @@ def test_every_difference_is_within_its_tolerance(validation, groups):
     assert {g: len(r) for g, r in groups.items() if g != "wall"} == {"manual": 12, "inline": 12, "brach": 28}
 
 
+@pytest.mark.slow
 def test_every_group_has_its_cases(groups):
     starts = {g: sum(1 for r in rows if r.case) for g, rows in groups.items()}
     assert starts == {"manual": 2, "inline": 3, "brach": 4, "wall": 3}

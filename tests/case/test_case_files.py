@@ -16,6 +16,7 @@ from ks_jax.case import CaseError, CaseWarning, at_rest_after, case_from_dict, d
 from samples import US_CASE, run_cli, si_twin
 
 
+@pytest.mark.slow
 def test_unit_strings_equal_si_numbers():
     a = ks_jax.solve(case_from_dict(US_CASE)).to_dict()
     b = ks_jax.solve(case_from_dict(si_twin())).to_dict()
@@ -118,6 +119,7 @@ def test_toml_case_and_unreadable_file(tmp_path, capsys):
     assert code == 2 and "no such file" in err
 
 
+@pytest.mark.slow
 def test_paths_refuse_unknown_names():
     case = case_from_dict(US_CASE)
     with pytest.raises(CaseError, match="not a vehicle input"):

@@ -242,6 +242,7 @@ def _followed(case, x):
     return jnp.stack([v.position[0], v.position[1], v.speed, v.course])
 
 
+@pytest.mark.slow
 def test_follow_tows_in_jit_and_vmap_and_its_derivatives_match_finite_differences():
     """Compiled and mapped over rows: the hand calculation's row, and a row at rest; jacfwd of the trailer's
     followed position, speed and course by the tractor's speed, course, yaw, yaw rate and x, and the trailer's yaw

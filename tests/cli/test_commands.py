@@ -134,6 +134,7 @@ def test_ees_note_names_zero_crushes_when_they_are_rounding(tmp_path, capsys):
     assert "both crushes are 0" in out and "negative" not in out
 
 
+@pytest.mark.slow
 def test_every_command_writes_json_as_cases(tmp_path, capsys):
     """``solve --json`` and ``fit --json`` write one shape, ``{"cases": [...]}``, for a file of one case as
     for a file of several; each fit entry is its ``FitResult.to_dict``, a case that was not fitted

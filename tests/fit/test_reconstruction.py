@@ -117,6 +117,7 @@ def test_a_fit_that_sticks_is_tried_from_the_slide_side_of_its_edge():
     np.testing.assert_allclose([r.estimate[p] for p in UNKNOWNS], truth, rtol=RECOVER, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_fit_pinned_at_a_bound_is_tried_from_inside_the_bounds(monkeypatch):
     """A sliding oblique case with noise-free evidence (friction 0.24). Starts with the friction on its upper bound
     of 1, where the contact sticks and the friction moves no evidence, stay there: one round of 8 such starts ends
@@ -177,6 +178,7 @@ def test_the_starts_from_a_fit_pinned_at_a_bound_move_each_pinned_unknown_inside
         np.testing.assert_array_equal(start, expected)
 
 
+@pytest.mark.slow
 def test_recovers_six_unknowns_of_sliding_oblique_cases(oblique):
     cases, truths, unknowns, evidence, results = oblique
     for truth, r in zip(truths, results):
@@ -241,6 +243,7 @@ def test_standard_errors_match_finite_difference_laplace(oblique):
     np.testing.assert_allclose(std, np.sqrt(np.diag(np.linalg.inv(H))), rtol=LAPLACE_FD_HESSIAN)
 
 
+@pytest.mark.slow
 def test_bounds_are_respected(oblique):
     cases, truths, unknowns, evidence, results = oblique
     for us, r in zip(unknowns, results):
@@ -328,6 +331,7 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     assert blocks[0].estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
 
 
+@pytest.mark.slow
 def test_monte_carlo_cut_off_by_a_bound_is_noted(blocks_of_8):
     """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
@@ -343,6 +347,7 @@ def test_monte_carlo_cut_off_by_a_bound_is_noted(blocks_of_8):
     assert note.startswith("vehicles[1].speed:") and "20.02 mph" in note and "read the Monte Carlo percentiles" in note
 
 
+@pytest.mark.slow
 def test_monte_carlo_refits_draw_the_priors_means_again_as_they_draw_the_evidence():
     """One unknown, the Kia's speed, measured by an EDR (9.0 +/- 0.4 m/s) with a prior 9.6 +/- 0.1 m/s that
     dominates it: the fit is linear, its estimate the precision-weighted mean and its posterior std
@@ -455,6 +460,7 @@ def test_transforms_and_angle_wrap():
     assert float(wrapped[1]) == pytest.approx(2.0)
 
 
+@pytest.mark.slow
 def test_cli_fit_json_and_text(capsys, tmp_path):
     from ks_jax.cli import main
 
@@ -644,6 +650,7 @@ def test_a_fit_that_never_reaches_a_collision_says_so():
     assert r.converged and r.status == "ok" and r.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.1)
 
 
+@pytest.mark.slow
 def test_chi2_beyond_its_99th_percentile_is_a_note():
     """The seed's delta-Vs moved apart by 2.5 sigma each: no speed explains both (one unknown, two
     evidence: 1 degree of freedom). chi^2 is then about 12 > 6.63, the exact 99% quantile of chi^2 with
@@ -660,6 +667,7 @@ def test_chi2_beyond_its_99th_percentile_is_a_note():
     assert fit.reconstruction.chi2_quantile(10, 2.326) == pytest.approx(23.209, rel=0.01)
 
 
+@pytest.mark.slow
 def test_a_prior_on_the_friction_of_a_sticking_contact_fixes_it():
     """The sticking T-bone of the test above with a prior of 0.5 +/- 0.1 on friction: the evidence still
     bounds it below only, and the prior alone fixes it: its standard error is the prior's 0.1."""

@@ -48,6 +48,7 @@ def run(kinds, rows, path=False):
     return jax.tree_util.tree_map(np.asarray, out)
 
 
+@pytest.mark.slow
 def test_a_locked_straight_skid_by_its_distance_is_the_closed_form():
     """Every wheel locked over a skid of d before an impact at v, straight: v_start = sqrt(v^2 + 2 mu g d), the skid's
     time (v_start - v) / (mu g), its start d behind the impact along the heading (heading 30 deg, at (4, -2) m); a
@@ -157,6 +158,7 @@ def test_derivatives_of_the_approach_match_central_differences(mode):
     np.testing.assert_allclose(derivative, central, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_the_state_at_given_times_is_the_closed_form_and_reaches_back_beyond_the_first_phase():
     """Free rolling for 2 s, then a locked skid of 20 m to the impact at 12 m/s: the speed at the impact, within the
     skid (v + mu g t back from it), at the skid's start, and within and beyond the free phase (the free phase run

@@ -210,6 +210,7 @@ def test_aligned_rear_impact(res):
     assert_same_exchange(r, second_formulation(CASES["rear"], 0.52, [10.25, 0.0, 0.7], [1.0, 0.0, 0.0]))
 
 
+@pytest.mark.slow
 def test_penetration_deeper_than_the_overlap_is_wide(res):
     """The rear impact above with 0.3 s of penetration: 3 m deep, 1.8 m wide, so the axis of least
     penetration is lateral; the normal must still point from vehicle 2 into vehicle 1 (+x)."""
@@ -223,12 +224,14 @@ def test_penetration_deeper_than_the_overlap_is_wide(res):
     assert_same_exchange(r, second_formulation(CASES["deep_rear"], 0.79, [12.95, 0.0, 0.7], [1.0, 0.0, 0.0]))
 
 
+@pytest.mark.slow
 def test_normal_pitch_tilts_the_automatic_normal(res):
     r, p = res["pitched"], math.radians(10.0)
     np.testing.assert_allclose(r.contact.normal, [math.cos(p), 0.0, math.sin(p)], atol=1e-12)
     np.testing.assert_allclose(r.contact.point, res["rear"].contact.point, atol=LEN_TOL)
 
 
+@pytest.mark.slow
 def test_tbone_into_the_right_side(res):
     r = res["tbone"]
     # front of 2 at -6 + 2.4 = -3.6, right side of 1 at -0.9, closing 10 m/s
@@ -242,6 +245,7 @@ def test_tbone_into_the_right_side(res):
     assert_same_exchange(r, second_formulation(CASES["tbone"], 0.29, [0.5, -0.8, 0.7], [0.0, 1.0, 0.0]))
 
 
+@pytest.mark.slow
 def test_oblique_corner_impact(res):
     r = res["oblique"]
     assert abs(r.contact.time - 0.3) < TIME_TOL
@@ -462,6 +466,7 @@ def test_shipped_automatic_cases_through_the_cli(tmp_path):
     assert d["vehicles"][0]["pdof"] < 90  # from the right front quarter: the sedan drives into the force
 
 
+@pytest.mark.slow
 def test_never_touching_case_reads_as_such(tmp_path):
     """Through the command line: no first-contact time, PDOF, centroid, normal, relative velocities or EES
     where nothing was exchanged (the exchange's are stand-ins), in the panel and in the JSON (null), and the
@@ -688,6 +693,7 @@ def test_refine_ends_on_the_touching_side_within_its_tolerance():
         assert float(search._refine(f, lo, hi, f(lo), f(hi), tol, False)) == 0.6
 
 
+@pytest.mark.slow
 def test_a_scene_far_from_the_origin_gives_the_same_contact():
     """docs/model.md, "The impulse exchange": translating the scene translates the results. Survey coordinates (3e5 m)
     round at ~6e-11 m, above the geometry's ~1e-12 m tolerances: a corner meeting a turned side at the instant of
@@ -779,6 +785,7 @@ def test_centroid_derivative_in_penetration_time_at_the_touch_is_the_growing_tri
 
 
 @pytest.mark.parametrize("name, h", [("oblique", 1e-6), ("tbone", 1e-6), ("spin", 1e-4)])
+@pytest.mark.slow
 def test_result_derivatives_in_penetration_time_at_the_touch(name, h):
     """Impulse, delta-V, crush, energy, yaw rate after: d/d(penetration_time) at 0 against second-order
     one-sided differences (penetration_time >= 0). oblique: a corner into a side at 30 deg; tbone: at

@@ -40,6 +40,7 @@ def test_random_cases_match_reference(random_results, kind):
     kit.assert_matches(eng, refb, RTOL_REFERENCE, cases)
 
 
+@pytest.mark.slow
 def test_random_sample_covers_sticking_and_sliding(random_results):
     branches = {"stick": 0, "slide": 0, "pull": 0, "separating": 0}
     crush_zero = 0
@@ -96,6 +97,7 @@ def _world_inertia(case, i):
     return ref.world_inertia(case["vehicles"][i])
 
 
+@pytest.mark.slow
 def test_momentum_conservation(random_results):
     rng = np.random.default_rng(3)
     for cases, eng, _ in random_results.values():
@@ -262,6 +264,7 @@ def test_seed_000_saturn_pontiac():
     np.testing.assert_allclose(np.asarray(a.delta_v_body), np.asarray(a.delta_v), atol=1e-12)  # yaw 0
 
 
+@pytest.mark.slow
 def test_seed_001_lucid_kia():
     m1 = 155.75 * U.SLUG
     m2 = 100.38 * U.SLUG

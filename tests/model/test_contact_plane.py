@@ -147,6 +147,7 @@ def test_offset_frontals_take_the_longitudinal_normal():
                                    atol=1e-8, err_msg=where)
 
 
+@pytest.mark.slow
 def test_a_small_overlap_pushed_deeper_than_it_is_wide_keeps_the_axis_it_touched_along():
     """20% and 40% offset frontals pushed 0.9 m in, deeper than their overlaps are wide (0.36 m and 0.72 m):
     the axis of least penetration there is lateral, but the fronts first touched along the vehicles' axis,
@@ -162,6 +163,7 @@ def test_a_small_overlap_pushed_deeper_than_it_is_wide_keeps_the_axis_it_touched
         np.testing.assert_allclose(r.contact.normal, [-math.cos(a), -math.sin(a), 0.0], atol=NORMAL_TOL, err_msg=where)
 
 
+@pytest.mark.slow
 def test_rear_ends_with_partial_overlap_take_the_longitudinal_normal():
     """30%, 50% and 80% overlap, vehicle 2 to either side, turned scenes and swapped numbers: n along the
     vehicles' axis from vehicle 2 (behind) into vehicle 1 (ahead), the point the overlap's centroid."""
@@ -231,6 +233,7 @@ def corner_into_side_of_2(yaw2_deg=110.0, depth_x=0.3, speed=10.0, t_i=0.1):
     return row, t_i, outward
 
 
+@pytest.mark.slow
 def test_tbones_and_corners_take_the_struck_side():
     """T-bones at 60, 90 and 120 deg into the right side and at -90 and -120 deg into the left, corners
     entering the right side at 30, 45 and 135 deg, and vehicle 1's corner entering vehicle 2's turned left
@@ -277,6 +280,7 @@ def _advanced(state, t):
     return state._replace(position=state.position + state.velocity * t)
 
 
+@pytest.mark.slow
 def test_forty_percent_offset_frontal_sticks_at_the_longitudinal_normal():
     """The 40% offset frontal, 0.6 m deep: the automatic exchange is ``ks_jax.exchange`` with both vehicles
     moved by hand to the exchange and the contact drawn by hand (the overlap's centroid, n = -x) to 1e-9,
@@ -323,6 +327,7 @@ def _normal_of(theta, row):
 NORMAL_JAC = quick_jit(jax.vmap(jax.jacfwd(_normal_of), in_axes=(None, 0)))
 
 
+@pytest.mark.slow
 def test_the_planes_derivatives():
     """d n / d (yaw 1, yaw 2, x 2, y 2) where the vehicles stand at the exchange. The T-bone's n is vehicle
     1's right-side normal (-sin yaw1, cos yaw1): (-1, 0) per radian of yaw 1, nothing else. The offset

@@ -138,6 +138,7 @@ def solve_json(tmp_path, capsys, *cases):
     return code, json.loads(text)["cases"], err
 
 
+@pytest.mark.slow
 def test_crush_results_through_solve_json_and_the_central_cross_check(tmp_path, capsys):
     """``ks-jax solve --json`` of a head-on with both profiles: the sedan's uniform 10 in over 60 in against
     A = 300 lbf/in, B = 90 lbf/in^2 is L (A C + B C^2 / 2 + G) = 60 (3000 + 4500 + 500) in lbf = 40,000 ft lbf
@@ -172,6 +173,7 @@ def test_crush_results_through_solve_json_and_the_central_cross_check(tmp_path, 
         assert float(dv[1]) == pytest.approx(pickup["delta_v_magnitude"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_one_profile_a_fixed_object_and_the_panel(tmp_path, capsys):
     """A profile on one vehicle only: its energy and EES, no CRASH3 delta-V (the other's energy is unknown), and
     nulls for the other; the exchange's EES is shared by the box overlap's crushes as without any profile. Into a
@@ -213,6 +215,7 @@ def test_a_bad_crush_entry_is_refused_naming_its_field_and_rule(change, field, r
     assert field in str(err.value) and rule in str(err.value) and "I2 head-on" in str(err.value)
 
 
+@pytest.mark.slow
 def test_a_bad_crush_entry_loses_only_its_case(tmp_path, capsys):
     """In a file of two cases, the one with a bad profile is reported with its field; the other is solved."""
     bad = head_on()
@@ -249,6 +252,7 @@ def fit_json(tmp_path, capsys, raw):
     return out
 
 
+@pytest.mark.slow
 def test_a_fit_from_crush_energy_alone_is_the_closed_form(tmp_path, capsys):
     """The head-on (central, inline, restitution 0) with the pickup's speed unknown and both crush energies as the
     only evidence (the sedan's as a value and sigma, the pickup's from its profile and A_sigma): both vehicles have
@@ -266,6 +270,7 @@ def test_a_fit_from_crush_energy_alone_is_the_closed_form(tmp_path, capsys):
     assert out["chi2"] == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_crush_energy_beside_delta_v_says_how_far_they_agree(tmp_path, capsys):
     """The same head-on, the pickup's speed unknown (12 m/s in truth), the car's delta-V measured at the truth's
     (m2 / (m1 + m2) 27 m/s, sigma 0.05 m/s) and both crush energies 10 % above the truth's shares of its energy loss

@@ -233,6 +233,7 @@ def _pole(centre, diameter=0.3, dt=0.0, speed=V):
             "contact": {"restitution": 0.1, "friction": 0.6, "penetration_time": dt}}
 
 
+@pytest.mark.slow
 def test_a_pole_is_met_as_a_circle():
     """Automatic contact with a pole of radius 0.15 m, by hand. A corner: the pole's centre 0.1 m outside the
     sedan's left side (y = 0.9 m) is first touched by the front-left corner, where the corner's line y = 0.9
@@ -283,6 +284,7 @@ def test_a_fit_recovers_the_speed_into_a_pole_from_its_delta_v():
     assert result.estimate["vehicles[0].speed"] == pytest.approx(14.0, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_the_example_file_of_fixed_objects_solves():
     """docs/examples/fixed_objects.json (named in the README): a wall at 160 deg, a pole and a barrier, each
     solved with automatic contact; the wall's normal is its own, and each EES takes all of the energy."""

@@ -182,6 +182,7 @@ def generic_cases(random_cases):
 
 @pytest.mark.parametrize("smoothing", MODES)
 @pytest.mark.parametrize("branch", ["stick", "slide", "pull"])
+@pytest.mark.slow
 def test_gradients_match_finite_differences(generic_cases, branch, smoothing):
     rng = np.random.default_rng({"stick": 1, "slide": 2, "pull": 3}[branch])
     fd_check(generic_cases[branch], smoothing, rng)
@@ -196,11 +197,13 @@ def test_gradients_match_finite_differences_inertia_tensor(random_cases, smoothi
 
 
 @pytest.mark.parametrize("smoothing", MODES)
+@pytest.mark.slow
 def test_gradients_at_head_on(smoothing):
     fd_check(head_on(), smoothing, np.random.default_rng(4))
 
 
 @pytest.mark.parametrize("smoothing", MODES)
+@pytest.mark.slow
 def test_gradients_at_separating_contact(random_cases, smoothing):
     case = copy.deepcopy(random_cases["principal"][3])
     s = ref.stick_split(case)
@@ -225,6 +228,7 @@ def test_gradients_on_the_cone_boundary_smooth_mode():
 
 
 @pytest.mark.parametrize("kind", ["principal", "full"])
+@pytest.mark.slow
 def test_gradients_where_the_smooth_minimum_blends(random_cases, kind):
     """mu 2 % above the cone boundary: with p = 1/tau = 20 the smooth minimum differs from the
     hard one by a factor (1 + 0.98^20)^(1/20), so both of its arguments carry gradient."""
@@ -349,6 +353,7 @@ def smoothing_ratios(random_cases):
 
 
 @pytest.mark.parametrize("kind", ["principal", "full", "principal-cone", "full-cone"])
+@pytest.mark.slow
 def test_smooth_converges_to_exact_at_rate_tau(smoothing_ratios, kind):
     ratios, _ = smoothing_ratios[kind]
     assert np.all(ratios <= SMOOTHING_RATE_C), ratios.max()

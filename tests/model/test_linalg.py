@@ -101,6 +101,7 @@ def test_degrees_and_clock():
     assert math.isclose(float(la.degrees_0_360(la.safe_atan2(-1.0, 0.0))), 270.0)
 
 
+@pytest.mark.slow
 def test_corrected_zeros_keep_their_derivative():
     """-0.0 is written 0.0 (and an angle that rounds to 360 deg is 0), but the derivative stays that of
     the uncorrected value (d/dx of degrees(x) is 180/pi, d/dx of -x*x/2 + 3x is 3 at 0): a plain

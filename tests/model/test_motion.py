@@ -249,6 +249,7 @@ def test_reverse_scans_step_adjoint_matches_jaxs_own_vjp_on_every_branch():
         assert not np.any(bad), (jax.tree_util.keystr(path), got[bad], want[bad])
 
 
+@pytest.mark.slow
 def test_a_change_below_rounding_next_to_the_velocities_has_finite_forward_derivatives():
     """A car rolling straight on at 0.5 m/s, free wheels without rolling resistance, with a lateral velocity of
     1e-100 m/s or a yaw rate of 1e-60 rad/s (the tyres damp a yaw rate geometrically toward 0): its step's whole

@@ -68,6 +68,7 @@ def test_jit_equals_eager(few_cases):
         assert_trees_close(jitted, eager, RTOL_JIT, "jit vs eager: ")
 
 
+@pytest.mark.slow
 def test_eager_smooth_equals_jit_vmap_row(random_cases):
     """The static Python-float smoothing (eager) equals the traced one (jitted batch)."""
     c = random_cases["principal"][7]
@@ -89,6 +90,7 @@ def test_vmap_equals_stacked_single_calls(random_cases):
     assert_trees_close(plain, jax.tree_util.tree_map(lambda x: x[:5], stacked), RTOL_JIT, "jax.vmap: ")
 
 
+@pytest.mark.slow
 def test_no_recompilation_for_new_values(few_cases):
     kit.exchange(*kit.inputs(few_cases[0]))  # compiled (at most once) here or earlier
     kit.batch_exchange(kit.inputs(few_cases[:2]), 0.0)

@@ -32,6 +32,10 @@ MEASURED = {"vehicles[0].rest_position[0]": 19.5 * U.FT, "vehicles[0].rest_posit
 SIGMA = {"vehicles[0].rest_position[0]": 1.0 * U.FT, "vehicles[0].rest_position[1]": 2.0 * U.FT}
 
 
+# every test here draws the paths of a solved motion to rest (the module's fixture): compiling it is slow
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def drawn():
     """The T-bone spin-out (explicit contact; both vehicles slide and turn to rest) solved once, its paths
@@ -59,7 +63,6 @@ def hand_box(v, xy, yaw_deg):
                      xy + front * f + half * left, xy + rear * f + half * left])
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("i", [0, 1])
 def test_cg_path_runs_from_the_exchange_to_the_rest_position(drawn, i):
     sol, paths, ax = drawn

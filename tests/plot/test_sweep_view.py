@@ -345,6 +345,7 @@ def test_typed_units_are_read_from_the_values_given():
         "vehicles[1].speed": "km/h", "vehicles[0].yaw": "rad", "vehicles[0].speed": "mph"}
 
 
+@pytest.mark.slow
 def test_a_sweeps_rate_counts_solving_and_its_compile_is_said_apart(case, monkeypatch):
     """Compiling is timed apart from solving: with the compile made 0.4 s slower, the sweep's seconds (and so
     its rate) do not change, its compile_seconds do, and the summary says both."""
@@ -373,6 +374,7 @@ def panels(fig):
     ("us", None, {"velocity": "mph", "impulse": "lbf s", "energy": "ft lbf", "speed": "mph"}),
     ("us", {"vehicles[1].speed": "km/h"}, {"velocity": "mph", "impulse": "lbf s", "energy": "ft lbf", "speed": "km/h"}),
 ])
+@pytest.mark.slow
 def test_a_figure_leaves_out_what_is_constant_and_keeps_one_unit_system(case, units, typed, unit):
     """``ks-jax sweep --plot`` of the rear impact over the Kia's speed and the restitution: the Lucid is struck
     from behind (PDOF 180 deg) and the Kia from the front (0 deg) at every point, and an inline contact sticks

@@ -60,6 +60,7 @@ def test_cli_writes_the_picture(tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
 
 
+@pytest.mark.slow
 def test_automatic_tbone_drawing():
     with resources.as_file(case_path("auto_tbone.json")) as path:
         sol = ks_jax.solve(ks_jax.load_case(path))
@@ -90,6 +91,7 @@ def test_automatic_tbone_drawing():
 
 
 @pytest.mark.parametrize("name", ["auto_tbone.json", "seed_001_lucid_kia.toml", "auto_seed_000.json"])
+@pytest.mark.slow
 def test_every_arrow_is_inside_the_axes(name):
     """Each arrow (the normal, the impulses, the velocities) ends inside the drawn limits: matplotlib
     does not draw an annotation whose tip is outside them (the normal of the T-bone was missing)."""
@@ -105,6 +107,7 @@ def test_every_arrow_is_inside_the_axes(name):
             assert x0 <= x <= x1 and y0 <= y <= y1, (a.arrow_patch.get_edgecolor(), (x, y), (x0, x1), (y0, y1))
 
 
+@pytest.mark.slow
 def test_explicit_contact_drawing_and_two_panels(tmp_path):
     with resources.as_file(case_path("seed_001_lucid_kia.toml")) as path:
         sol = ks_jax.solve(ks_jax.load_case(path))
@@ -120,6 +123,7 @@ def test_explicit_contact_drawing_and_two_panels(tmp_path):
     assert out.read_bytes()[:4] == b"\x89PNG"
 
 
+@pytest.mark.slow
 def test_clip_polygon_against_the_engine():
     """plot's NumPy clipping and the engine's fixed-size clipping give the same overlap."""
     from ks_jax.model.contact import overlap_polygon, polygon_area_centroid
@@ -337,6 +341,7 @@ def test_later_exchanges_are_drawn_where_they_happened(wall_slap):
     assert any(s.startswith(f"smaller later exchange ({len(small)}, impulse under 5%") for s in labels)
 
 
+@pytest.mark.slow
 def test_later_exchanges_normal_and_impulse_on_the_first_exchanges_scale(wall_slap):
     """A large later exchange's normal (a short red arrow from its centroid) and its impulse on the vehicle (its
     horizontal part over the legend's impulse scale: the scale of the first exchange's arrow, so that their sizes
@@ -372,6 +377,7 @@ def test_later_exchanges_normal_and_impulse_on_the_first_exchanges_scale(wall_sl
             assert x0 <= x <= x1 and y0 <= y <= y1
 
 
+@pytest.mark.slow
 def test_the_wall_face_takes_in_every_exchange_with_it(wall_slap):
     """The wall's face is drawn 1.2 vehicle lengths beyond the first centroid's foot and beyond each later one's
     (the rear's slap lies further along the wall than the first exchange's face would reach)."""
@@ -397,6 +403,7 @@ class Pushed(Solution):
         return Solution.exchange_list(self)[:1] + self.later
 
 
+@pytest.mark.slow
 def test_a_push_of_many_small_exchanges_is_drawn_as_dots(wall_slap):
     """20 exchanges of 50 N s after the first (a sustained push): a dot at each centroid, no number, no arrow; the
     legend says how many exchanges there were."""
