@@ -25,15 +25,13 @@ from ks_jax.cli.fit import case_at_estimate
 from ks_jax.plot.top_view import _draw_measured_rest
 from ks_jax.solve import motion_paths
 
+pytestmark = pytest.mark.slow  # every test draws the module fixture's solved motion to rest: compiling it is slow
+
 # measured rest positions (the reconstruction case's evidence, fit_rest_positions.json), away from the solved
 # ones so that a mark drawn at the solved rest position instead would fail
 MEASURED = {"vehicles[0].rest_position[0]": 19.5 * U.FT, "vehicles[0].rest_position[1]": 50.6 * U.FT,
             "vehicles[1].rest_position[0]": 8.1 * U.FT, "vehicles[1].rest_position[1]": 14.3 * U.FT}
 SIGMA = {"vehicles[0].rest_position[0]": 1.0 * U.FT, "vehicles[0].rest_position[1]": 2.0 * U.FT}
-
-
-# every test here draws the paths of a solved motion to rest (the module's fixture): compiling it is slow
-pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
