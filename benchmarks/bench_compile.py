@@ -51,7 +51,7 @@ def captured_calls():
     solve_module._solve = original
 
     pick = fit.rows.solver_for
-    fit.rows.solver_for = lambda block: recording("fit", fit.rows.fit_rows)
+    fit.rows.solver_for = lambda block, devices: recording("fit", fit.rows.fit_rows)
     fit.reconstruct(ks_jax.load_cases(CASES / "fit_seed_001.json")[0])
     fit.rows.solver_for = pick
     return calls

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ks_jax import units as U
+from ks_jax.backend import Plan
 from ks_jax.case import (
     CIRCULAR_OUTPUTS,
     Case,
@@ -108,7 +109,9 @@ class Problem:
 
     unknowns: input paths; ties: (unknown index, extra input path set to the same value)
     (a fitted yaw also moves the course when the case gives no course); evidence: tuples
-    (path, is_output, period) with period 360 (degrees), 2 pi (rad) or 0 (not an angle)."""
+    (path, is_output, period) with period 360 (degrees), 2 pi (rad) or 0 (not an angle). plan: how its rows are
+    computed (``ks_jax.backend.Plan``; set by ``reconstruct_batch`` from its devices; None: JAX's default devices'
+    path)."""
 
     unknowns: tuple
     ties: tuple
@@ -118,6 +121,7 @@ class Problem:
     pole: bool = False  # vehicle 2 is a pole (``Case.pole``)
     motion: Motion | None = None  # the vehicles move on to rest (``Case.motion``)
     between: tuple = (0, 1)  # the first exchange's bodies (``Case.between``)
+    plan: Plan | None = None
 
     @property
     def n(self) -> int:
@@ -610,7 +614,7 @@ def predict(problem: Problem, inputs, x, smoothing):
     result's units. |J_t| / J_n of a contact that sticks is the least friction that keeps it sticking."""
     inputs = apply_unknowns(problem, inputs, x)
     res = solve_inputs(inputs, problem.auto_point, problem.auto_normal, smoothing, problem.pole, problem.motion,
-                       problem.between)
+                       problem.between, problem.plan)
     preds = [get_output(res, p) if is_out else get_input(inputs, p) for p, is_out, _ in problem.evidence]
     dtype = jnp.result_type(x)
     c = res.contact

@@ -9,6 +9,7 @@ evidence the same way, through the same compiled program (``monte_carlo``).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import gc
 import math
@@ -18,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ks_jax.backend import plan_for
 from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
 from ks_jax.limits import check_memory
@@ -295,7 +297,7 @@ def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo):
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None, devices=None,
-                max_starts: int | None = None, posterior: int = 0, chains: int = 4) -> FitResult:
+                max_starts: int | None = None, posterior: int = 0, chains: int = 4, plan=None) -> FitResult:
     """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
@@ -316,20 +318,21 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
     ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved
     (default: this process's devices, ``jax.local_devices()``; over several, the rows are split among them:
-    docs/devices.md). Raises CaseError for a bad path, unit, bound or sigma.
+    docs/devices.md). plan: how the rows are computed, a ``ks_jax.backend.Plan`` or its path ("cpu",
+    "accelerator"); default, the path of ``devices``. Raises CaseError for a bad path, unit, bound or sigma.
     """
     return reconstruct_batch([case], None if unknowns is None else [unknowns],
                              None if evidence is None else [evidence], starts=starts, seed=seed,
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
                              rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices,
-                             max_starts=max_starts, posterior=posterior, chains=chains)[0]
+                             max_starts=max_starts, posterior=posterior, chains=chains, plan=plan)[0]
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
                       dtype=None, devices=None, max_starts: int | None = None, posterior: int = 0,
-                      chains: int = 4) -> list[FitResult]:
+                      chains: int = 4, plan=None) -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
@@ -355,6 +358,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     rtol = default_rtol(dtype) if rtol is None else rtol
     max_iter = max_iter or {"lm": 50, "lbfgs": 200, "adam": 2000}[solver]
     prepared, problem = _prepared_batch(cases, unknowns, evidence, starts, monte_carlo)
+    problem = dataclasses.replace(problem, plan=plan_for(plan, jax.local_devices() if devices is None else devices))
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
     x0 = first_starts(problem.unknowns, arrays, starts, rng)
@@ -364,7 +368,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
 
     # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
     # (``rows.refit_block``): one compiled program
-    block = refit_block(len(cases) * starts, int(monte_carlo)) if monte_carlo else None
+    block = refit_block(len(cases) * starts, int(monte_carlo), problem.plan) if monte_carlo else None
     first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
                      to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)
@@ -387,7 +391,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         z_more = to_z(x_more, arrays.lo[todo, None], arrays.hi[todo, None])
         some = arrays.take(todo)
         found.add(todo, run_rows(problem, solver, max_iter, some.inputs, *per_case(some), z_more, smoothing, dtype,
-                                 starts, block or more_block(len(cases), todo.size, starts), devices))
+                                 starts, block or more_block(len(cases), todo.size, starts, problem.plan), devices))
     everyone = np.arange(len(cases))
     rows = found.best(everyone)
     at_best = count_at_best(found.table.cost)

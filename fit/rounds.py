@@ -8,7 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ks_jax.backend import on_cpu
+from ks_jax.backend import Plan
 from ks_jax.model.types import OK
 
 from .rows import RowFits, best_start, count_at_best
@@ -76,16 +76,16 @@ MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts on a CPU: a
 MORE_BLOCKS_ELSEWHERE = tuple(8**k for k in range(1, 9))
 
 
-def more_block(cases: int, todo: int, starts: int) -> int:
+def more_block(cases: int, todo: int, starts: int, plan: Plan) -> int:
     """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
-    counts (``MORE_BLOCKS`` cases on the CPU's path, ``MORE_BLOCKS_ELSEWHERE`` on an accelerator's; at most
+    counts (``MORE_BLOCKS`` cases on the CPU's path of ``plan``, ``MORE_BLOCKS_ELSEWHERE`` on an accelerator's; at most
     ``cases``) that holds them all, else the largest. A call's vmapped solver runs every row until its slowest
     converges, so a round of a few cases of a large batch is not padded to hundreds of rows; fixed counts keep
     the compiled programs to a few, and a round of nearly all the cases runs in the program of the first round.
     On a CPU the rows of a call run one after another, so that calls of 64 cases cost what one call of them all
     does; an accelerator runs a call's rows side by side, and a round of thousands of cases in calls of 64 would
     wait on every call in turn."""
-    ladder = MORE_BLOCKS if on_cpu() else MORE_BLOCKS_ELSEWHERE
+    ladder = MORE_BLOCKS if plan.cpu else MORE_BLOCKS_ELSEWHERE
     sizes = sorted({min(c, cases) for c in ladder})
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.backend import on_cpu, row_placement
+from ks_jax.backend import Plan, row_placement
 from ks_jax.compilation import quick_jit
 from ks_jax.model.types import OK
 
@@ -196,25 +196,27 @@ ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 QUICK_ROWS = 500
 
 
-def solver_for(block: int):
-    """The compiled solver for calls of ``block`` rows: quick to compile up to ``QUICK_ROWS`` rows on a CPU."""
-    quick = jax.default_backend() == "cpu" and block <= QUICK_ROWS
+def solver_for(block: int, devices):
+    """The compiled solver for calls of ``block`` rows on ``devices``: quick to compile up to ``QUICK_ROWS`` rows
+    where they are CPUs. (That is the platform the program is compiled for, whose compile options these are;
+    the plan's path is an argument of the program.)"""
+    quick = all(d.platform == "cpu" for d in devices) and block <= QUICK_ROWS
     return fit_rows.quick if quick else fit_rows.plain
 
 
-def rows_per_call(rows: int) -> int:
+def rows_per_call(rows: int, plan: Plan) -> int:
     """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
-    ``ROWS_PER_CALL`` on the CPU's path, ``ROWS_PER_CALL_ELSEWHERE`` on an accelerator's (``backend.on_cpu``)."""
-    return min(rows, ROWS_PER_CALL if on_cpu() else ROWS_PER_CALL_ELSEWHERE)
+    ``ROWS_PER_CALL`` on the CPU's path (``plan``), ``ROWS_PER_CALL_ELSEWHERE`` on an accelerator's."""
+    return min(rows, ROWS_PER_CALL if plan.cpu else ROWS_PER_CALL_ELSEWHERE)
 
 
-def refit_block(fit_rows: int, refits: int) -> int:
+def refit_block(fit_rows: int, refits: int, plan: Plan) -> int:
     """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts) with ``refits`` Monte Carlo
     refits. On the CPU's path, the fit's own row count: a CPU runs a call's rows one after another, so that refits
     in calls of a few rows cost what one call of them all does, and the fit, the same fit with refits and its
     further rounds of starts then share the program that a fit without refits compiles. On an accelerator's, the
     larger of the two, as a call's rows run side by side there (``rows_per_call`` caps both)."""
-    return rows_per_call(fit_rows if on_cpu() else max(fit_rows, refits))
+    return rows_per_call(fit_rows if plan.cpu else max(fit_rows, refits), plan)
 
 
 def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts,
@@ -240,7 +242,7 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
     args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
     place = row_placement(devices)
     smoothing = jax.device_put(jnp.asarray(smoothing, dtype), place.replicated)
-    parts, fit_rows = [], solver_for(block)
+    parts, fit_rows = [], solver_for(block, devices)
     for start in range(0, total, block):
         part = jax.tree_util.tree_map(lambda a: jax.device_put(np.asarray(a[start:start + block], dtype), place.rows),
                                       args)

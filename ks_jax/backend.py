@@ -1,21 +1,25 @@
-"""Which kind of device the rows are computed on, and how many rows one call takes (docs/devices.md).
+"""How rows are computed on the devices at hand: the plan (docs/devices.md).
 
 A CPU and an accelerator (a GPU) want the same rows computed differently. A CPU runs a program's loops one
 after another over memory that is also the host's: it is fastest over chunks of rows that fit its cache,
 each stage of the exchange stored before the next reads it. An accelerator runs many rows at once from
 memory of its own: it is fastest over chunks as large as its free memory allows, with XLA free to fuse the
-stages, its results copied to the host while it computes the next chunk. Every batched path asks here
-which of the two it is on (``on_cpu``) and how many rows to take at once (``chunk_rows``).
+stages, its results copied to the host while it computes the next chunk.
 
-``path("accelerator")`` makes a CPU take the accelerator's path (and ``path("cpu")`` the reverse), so that
-the accelerator's logic is exercised and tested where no accelerator is: both paths compute the same values.
-The environment variable ``KS_JAX_PATH`` ("cpu" or "accelerator"), read at the first batch, sets the path for
-the whole process (``KS_JAX_PATH=accelerator`` runs the test suite's batches the accelerator's way on a CPU).
+That choice is data: a ``Plan`` (frozen, hashable), made once at an entry point (``exchange_batch``, ``sweep``,
+``solve``, ``fit.reconstruct*``, the command line) from the devices the rows go to, or given there, and passed
+down as a static argument, so that it is part of the key of every compiled and kept program: a program traced
+for one path is never run on the other. ``Plan("accelerator")`` on a CPU takes the accelerator's path there, so
+that its logic is exercised and tested where no accelerator is: both paths compute the same values. The
+physics (``ks_jax.model``) knows nothing of devices; its one CPU-only form, the stored sines and cosines of
+``model.linalg.materialize``, is chosen by the platform a program is compiled for (``jax.lax.platform_dependent``).
+The environment variable ``KS_JAX_PATH`` ("cpu" or "accelerator") is read by the command line alone
+(``path_from_environment``).
 """
 
 from __future__ import annotations
 
-import contextlib
+import dataclasses
 import os
 from typing import NamedTuple
 
@@ -35,49 +39,62 @@ FALLBACK_MEMORY = 8 << 30  # bytes assumed free on a device that reports no memo
 PATHS = ("cpu", "accelerator")
 
 
-def _path_from_environment() -> str | None:
-    """The path ``KS_JAX_PATH`` names, None where it is unset or empty; ValueError for any other value."""
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """How a batch's rows are computed. ``path``: "cpu" (the exchange's stages fenced apart, cache-sized
+    chunks, a motion's rows in blocks, calls of a few hundred fits) or "accelerator" (one program XLA fuses
+    freely, chunks from the device's free memory, results copied while the next chunk computes, calls of
+    thousands of fits). ``chunk_rows``: rows per chunk of a batch or sweep; None, the path's own (``rows``).
+    The dtype of the work is the inputs' (float64 where JAX's x64 is on): a plan does not change values.
+    Hashable and compared by value, so that it can be a static argument of ``jax.jit``."""
+
+    path: str = "cpu"
+    chunk_rows: int | None = None
+
+    def __post_init__(self):
+        if self.path not in PATHS:
+            raise ValueError(f"plan path = {self.path!r}: must be 'cpu' or 'accelerator'")
+        if self.chunk_rows is not None and (isinstance(self.chunk_rows, bool) or int(self.chunk_rows) != self.chunk_rows
+                                            or self.chunk_rows < 1):
+            raise ValueError(f"plan chunk_rows = {self.chunk_rows!r}: must be a positive whole number of rows")
+
+    @property
+    def cpu(self) -> bool:
+        """Whether this is the CPU's path."""
+        return self.path == "cpu"
+
+    def rows(self, bytes_per_row: int, device=None) -> int:
+        """Rows per chunk for rows of ``bytes_per_row`` input and result bytes: ``chunk_rows`` where given;
+        else ``CPU_CHUNK_ROWS`` on the CPU's path, and on an accelerator's the largest power of two whose
+        working set (``WORKING_SET`` times the rows' bytes) takes at most ``MEMORY_SHARE`` of ``device``'s free
+        memory, within [``MIN_ROWS``, ``MAX_ROWS``]."""
+        if self.chunk_rows is not None:
+            return int(self.chunk_rows)
+        if self.cpu:
+            return CPU_CHUNK_ROWS
+        fits = int(MEMORY_SHARE * free_bytes(device)) // max(int(bytes_per_row) * WORKING_SET, 1)
+        rows = 1 << max(fits, 1).bit_length() - 1
+        return min(max(rows, MIN_ROWS), MAX_ROWS)
+
+
+def plan_for(plan=None, devices=None) -> Plan:
+    """The plan of a call: ``plan`` as given (a ``Plan``, or "cpu" / "accelerator"), else the path of the
+    devices the rows go to (``devices``, default JAX's default devices): the CPU's where they are all CPUs."""
+    if isinstance(plan, Plan):
+        return plan
+    if plan is not None:
+        return Plan(plan)
+    devices = jax.devices() if devices is None else list(devices)
+    return Plan("cpu" if all(d.platform == "cpu" for d in devices) else "accelerator")
+
+
+def path_from_environment() -> Plan | None:
+    """The plan ``KS_JAX_PATH`` names (the command line's, read once there), None where it is unset or empty;
+    ValueError for any other value."""
     kind = os.environ.get("KS_JAX_PATH", "")
     if kind and kind not in PATHS:
-        raise ValueError(f"KS_JAX_PATH = {kind!r}: must be 'cpu' or 'accelerator' (or unset: the default device's)")
-    return kind or None
-
-
-_forced: str | None = None  # the path of the innermost ``path`` block
-_environment: list = []  # the path ``KS_JAX_PATH`` names, once read
-
-
-def on_cpu() -> bool:
-    """Whether the CPU's path applies: JAX's default backend is a CPU (unless ``path`` or ``KS_JAX_PATH`` says
-    otherwise; a ValueError names a ``KS_JAX_PATH`` that is neither path). Both paths compute the same values;
-    this only chooses how XLA is asked to compute them."""
-    if _forced is not None:
-        return _forced == "cpu"
-    if not _environment:
-        _environment.append(_path_from_environment())
-    if _environment[0] is not None:
-        return _environment[0] == "cpu"
-    return jax.default_backend() == "cpu"
-
-
-@contextlib.contextmanager
-def path(kind: str):
-    """Within the block, every batched path takes ``kind``'s way ("cpu" or "accelerator"), whatever the
-    device. Where that changes the path, JAX's caches of traced programs are cleared on entry and exit,
-    since a program traced for one path would otherwise be reused on the other."""
-    global _forced
-    if kind not in PATHS:
-        raise ValueError(f"path = {kind!r}: must be 'cpu' or 'accelerator'")
-    before, was_cpu = _forced, on_cpu()
-    _forced = kind
-    if on_cpu() != was_cpu:
-        jax.clear_caches()
-    try:
-        yield
-    finally:
-        _forced = before
-        if on_cpu() != was_cpu:
-            jax.clear_caches()
+        raise ValueError(f"KS_JAX_PATH = {kind!r}: must be 'cpu' or 'accelerator' (or unset: the devices')")
+    return Plan(kind) if kind else None
 
 
 def free_bytes(device=None) -> int:
@@ -92,17 +109,6 @@ def free_bytes(device=None) -> int:
     if not limit:
         return FALLBACK_MEMORY
     return max(int(limit) - int(stats.get("bytes_in_use", 0)), 0)
-
-
-def chunk_rows(bytes_per_row: int, device=None) -> int:
-    """Rows per chunk for rows of ``bytes_per_row`` input and result bytes: ``CPU_CHUNK_ROWS`` on the CPU's
-    path; on an accelerator's, the largest power of two whose working set (``WORKING_SET`` times the rows'
-    bytes) takes at most ``MEMORY_SHARE`` of the device's free memory, within [``MIN_ROWS``, ``MAX_ROWS``]."""
-    if on_cpu():
-        return CPU_CHUNK_ROWS
-    fits = int(MEMORY_SHARE * free_bytes(device)) // max(int(bytes_per_row) * WORKING_SET, 1)
-    rows = 1 << max(fits, 1).bit_length() - 1
-    return min(max(rows, MIN_ROWS), MAX_ROWS)
 
 
 class RowPlacement(NamedTuple):

@@ -114,7 +114,7 @@ def test_a_solve_read_back_gives_the_same_results(tmp_path, monkeypatch):
     assert len(written) == 1, written
     exports = []
     monkeypatch.setattr(compilation._Stored, "_export", lambda self, *a: exports.append(a) or None)
-    monkeypatch.setattr(sv, "_solve", compilation.quick_jit(sv._solve_rows, static_argnums=(1, 2, 3, 4, 5, 6)))
+    monkeypatch.setattr(sv, "_solve", compilation.quick_jit(sv._solve_rows, **sv._solve.quick.jit_kwargs))
     _leaves_equal(ks_jax.solve(case).result, want)
     assert exports == [] and _exports(tmp_path) == written
 
@@ -132,7 +132,7 @@ def test_keep_programs_in_python_keeps_them_in_its_folder(tmp_path, monkeypatch)
     monkeypatch.setattr(compilation.units, "REGISTRY_CACHE", None)
     monkeypatch.setattr(compilation, "_FOLDER", None)
     sv = importlib.import_module("ks_jax.solve.cases")  # a new function object: its program is traced and stored
-    monkeypatch.setattr(sv, "_solve", compilation.quick_jit(sv._solve_rows, static_argnums=(1, 2, 3, 4, 5, 6)))
+    monkeypatch.setattr(sv, "_solve", compilation.quick_jit(sv._solve_rows, **sv._solve.quick.jit_kwargs))
     cache_dir = jax.config.jax_compilation_cache_dir
     try:
         assert ks_jax.keep_programs(folder) == folder

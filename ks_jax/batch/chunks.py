@@ -14,7 +14,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..backend import CPU_CHUNK_ROWS, on_cpu
+from ..backend import CPU_CHUNK_ROWS, Plan
 from .stages import run, run_row
 
 CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
@@ -31,13 +31,14 @@ def cut(args, start, size, in_axes=0):
 
 def in_chunks(stages, n, args, in_axes, size=None):
     """The pipeline ``stages`` over the n rows of ``args`` in a loop over chunks of ``size`` rows, inside
-    one program. The last chunk ends at row n (it computes again some rows of the one before, which
-    get the same values), so that every chunk has the same shape. ``size``: default ``CHUNK_ROWS``."""
+    one program, the CPU's way (its stages fenced apart). The last chunk ends at row n (it computes again some
+    rows of the one before, which get the same values), so that every chunk has the same shape. ``size``:
+    default ``CHUNK_ROWS``."""
     size = CHUNK_ROWS if size is None else size
 
     def chunk(i, out):
         start = jnp.minimum(i * size, n - size)
-        result = run(stages, cut(args, start, size, in_axes), in_axes)
+        result = run(stages, cut(args, start, size, in_axes), in_axes, plan=Plan("cpu"))
         return jax.tree_util.tree_map(lambda o, x: jax.lax.dynamic_update_slice_in_dim(o, x, start, 0), out, result)
 
     shapes = _row_shapes(stages, _row_structs(args, in_axes))
@@ -57,10 +58,10 @@ def _row_shapes(stages, row):
     return jax.eval_shape(lambda *a: run_row(stages, a), *row)
 
 
-def batched_in_chunks(fn, stages):
+def batched_in_chunks(fn, stages, plan: Plan):
     """``fn`` (a function of arrays, equal to the pipeline ``stages``) with a vmap rule: over more than
-    ``CHUNK_ROWS`` rows, on one CPU device, the rows run in chunks through the stages fenced apart
-    (``in_chunks``); over one row, ``fn`` of that row unbatched (XLA compiles a batch of one row to a
+    ``CHUNK_ROWS`` rows, on the CPU's path (``plan``) and one device, the rows run in chunks through the stages
+    fenced apart (``in_chunks``); over one row, ``fn`` of that row unbatched (XLA compiles a batch of one row to a
     program many times the size of an unbatched row's); otherwise ``jax.vmap(fn)``. Every derivative is
     ``fn``'s, batched by ``jax.vmap`` (a custom vmap rule has no derivatives of its own): a loss that sums
     over many rows gets its gradient chunk by chunk from ``ks_jax.sum_over_rows``."""
@@ -72,7 +73,7 @@ def batched_in_chunks(fn, stages):
         if n == 1:
             row = fn(*jax.tree_util.tree_map(lambda x, a: x if a is None else x[0], args, in_axes))
             out = jax.tree_util.tree_map(lambda x: x[None], row)
-        elif n > CHUNK_ROWS and on_cpu() and jax.device_count() == 1:
+        elif n > CHUNK_ROWS and plan.cpu and jax.device_count() == 1:
             out = in_chunks(stages, n, args, in_axes)
         else:  # a short batch, or several devices (sharding is left to XLA)
             out = jax.vmap(fn, in_axes=in_axes)(*args)

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..backend import chunk_rows, on_cpu
+from ..backend import Plan, plan_for
 from ..compilation import compiler_options
 from ..model import collision
 from ..model.checks import check_smoothing
@@ -30,35 +30,43 @@ def exchange_stages(smoothing: float):
 
 
 @functools.lru_cache(maxsize=None)
-def _batched(smoothing: float):
+def _batched(smoothing: float, plan: Plan):
     plain = functools.partial(collision.exchange, smoothing=smoothing)
-    return batched_in_chunks(plain, exchange_stages(smoothing))
+    return batched_in_chunks(plain, exchange_stages(smoothing), plan)
 
 
 @functools.wraps(collision.exchange)
 def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
-             smoothing=0.0) -> ExchangeResult:
+             smoothing=0.0, plan: Plan | str | None = None) -> ExchangeResult:
     if isinstance(smoothing, (int, float)):
         check_smoothing(smoothing)
-        return _batched(float(smoothing))(vehicle1, state1, vehicle2, state2, contact)
+        return _batched(float(smoothing), plan_for(plan))(vehicle1, state1, vehicle2, state2, contact)
     return collision.exchange(vehicle1, state1, vehicle2, state2, contact, smoothing)  # a tau per row
 
 
+exchange.__doc__ = (collision.exchange.__doc__ or "") + """
+    plan: how ``jax.vmap(exchange)`` computes a large batch at a Python-number ``smoothing``: a ``backend.Plan``
+    or its path ("cpu": in cache-sized chunks, the stages fenced apart, on one device; "accelerator": the whole
+    batch in one program XLA fuses freely); default, the path of JAX's default devices. The values are the same.
+"""
+
+
 @functools.lru_cache(maxsize=32)
-def _chunk_program(size, smoothing, quick, cpu):
+def _chunk_program(size, smoothing, quick, plan: Plan):
     """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart on
-    the CPU's path (``cpu``, part of the key: a program traced for one path is not run on the other).
+    the CPU's path (``plan``, part of the key: a program traced for one path is not run on the other).
     ``quick``: compiled quickly (a batch of one chunk runs in milliseconds; compiling is most of its time)."""
     stages = exchange_stages(smoothing)
-    return jax.jit(lambda args, start: run(stages, cut(args, start, size)), compiler_options=compiler_options(quick))
+    return jax.jit(lambda args, start: run(stages, cut(args, start, size), plan=plan),
+                   compiler_options=compiler_options(quick))
 
 
 @functools.lru_cache(maxsize=32)
-def _rows_program(smoothing, quick, cpu):
-    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk); ``quick`` as
-    in ``_chunk_program``."""
+def _rows_program(smoothing, quick, plan: Plan):
+    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk); ``quick`` and
+    ``plan`` as in ``_chunk_program``."""
     stages = exchange_stages(smoothing)
-    return jax.jit(lambda args: run(stages, args), compiler_options=compiler_options(quick))
+    return jax.jit(lambda args: run(stages, args, plan=plan), compiler_options=compiler_options(quick))
 
 
 def row_bytes(tree) -> int:
@@ -69,13 +77,13 @@ def row_bytes(tree) -> int:
 
 def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
                    smoothing: float = 0.0, chunk: int | None = None, out: ExchangeResult | None = None,
-                   to_host: bool = True) -> ExchangeResult:
+                   to_host: bool = True, plan: Plan | str | None = None) -> ExchangeResult:
     """The values of ``jax.vmap(exchange)`` over a leading batch axis of every leaf, as NumPy arrays.
 
     Every leaf has the batch size N first (a (3,) input becomes (N, 3)). Returns the ExchangeResult with
     a leading axis N, as NumPy arrays; rows with invalid inputs get their status code and NaN, as in
     ``exchange``; a batch of no rows, results of no rows. The rows are computed in chunks of ``chunk``
-    rows (default ``backend.chunk_rows``: 16384 on a CPU, from the free memory on an accelerator; one
+    rows (default the plan's, ``backend.Plan.rows``: 16384 on a CPU, from the free memory on an accelerator; one
     program per chunk size, the last chunk aligned to the end of the batch), each chunk copied into the
     results while the next is computed, so that no batch-sized array of intermediate values is ever held
     by XLA. On an accelerator, rows given as NumPy arrays go to the device chunk by chunk, and each
@@ -86,7 +94,9 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     out: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an earlier
     result of a batch of the same size), written in place and returned: a loop over batches then touches
     no new memory. to_host: False, the results stay on the device, as JAX arrays (for work that goes on
-    there: a batch from device arrays then never crosses to the host).
+    there: a batch from device arrays then never crosses to the host). plan: a ``backend.Plan`` or its path
+    ("cpu", "accelerator"); default, the path of the devices that hold the rows given as JAX arrays, or of JAX's
+    default devices.
     """
     check_smoothing(float(smoothing))
     args, target = (vehicle1, state1, vehicle2, state2, contact), out
@@ -100,11 +110,13 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         raise ValueError("exchange_batch: every input needs the same leading batch axis; got sizes "
                          f"{sorted(map(str, sizes))}")
     n = sizes.pop()
-    chunk = chunk_rows(2 * row_bytes(args)) if chunk is None else chunk
+    on = {d for x in jax.tree_util.tree_leaves(args) if isinstance(x, jax.Array) for d in x.devices()}
+    plan = plan_for(plan, on or None)  # the path of the devices that hold the rows (or JAX's default devices)
+    chunk = plan.rows(2 * row_bytes(args)) if chunk is None else chunk
     if int(chunk) < 1:
         raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     given = [x for x in jax.tree_util.tree_leaves(args) if isinstance(x, np.ndarray)]
-    cpu = on_cpu()
+    cpu = plan.cpu
     on_host = not cpu and len(given) == len(jax.tree_util.tree_leaves(args))  # sent to the device by chunks
     args = args if on_host else jax.tree_util.tree_map(jnp.asarray, args)
     if n == 0:  # nothing to solve (a filtered batch may be empty): empty results, shaped and typed
@@ -120,10 +132,10 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         return target
     size = min(int(chunk), n)
     if on_host:
-        rows = _rows_program(float(smoothing), n <= CHUNK_ROWS, cpu)
+        rows = _rows_program(float(smoothing), n <= CHUNK_ROWS, plan)
         program = lambda a, start: rows(jax.tree_util.tree_map(lambda x: x[start:start + size], a))  # noqa: E731
     else:
-        program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, cpu)
+        program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, plan)
     leaves, treedef, pending, kept = None, None, None, []
 
     def store(lo, start, result):  # rows lo.. of the batch from a chunk that starts at ``start``

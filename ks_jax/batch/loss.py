@@ -8,13 +8,13 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
-from ..backend import on_cpu
+from ..backend import Plan, plan_for
 from .chunks import CHUNK_ROWS
 from .stages import as_chunks
 from .stages import fenced_by
 
 
-def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):
+def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS, plan: Plan | str | None = None):
     """``lambda *args: jnp.sum(jax.vmap(fn, in_axes)(*args))``, whose derivatives are computed chunk by chunk.
 
     The batched loss of a reconstruction or of a Monte Carlo study is a sum over rows of a row's loss
@@ -29,11 +29,13 @@ def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):
     argument, 0 or None (None: the same for every row, as an evidence target or a shared parameter
     is; its gradient sums the rows'). Derivatives of any order and mode (``jax.grad``, ``jax.jvp``,
     ``jax.hessian``); a forward-mode derivative computes the gradient and dots it with the tangent.
-    Only inputs that are differentiated get a gradient. On one CPU device over more than ``chunk`` rows,
-    the gradient runs in chunks, each fenced off from the others (``stages.fenced_by``, so that XLA
-    splits each chunk's loops over the cores); on a GPU, on several devices (sharded inputs) or over
-    ``chunk`` rows or fewer, it is ``jax.value_and_grad`` of the whole sum.
+    Only inputs that are differentiated get a gradient. On the CPU's path and one device over more than
+    ``chunk`` rows, the gradient runs in chunks, each fenced off from the others (``stages.fenced_by``, so
+    that XLA splits each chunk's loops over the cores); on an accelerator's path, on several devices (sharded
+    inputs) or over ``chunk`` rows or fewer, it is ``jax.value_and_grad`` of the whole sum. ``plan``: a
+    ``backend.Plan`` or its path ("cpu", "accelerator"); default, the path of JAX's default devices.
     """
+    plan = plan_for(plan)
     if int(chunk) < 1:
         raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     chunk = int(chunk)
@@ -68,7 +70,7 @@ def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS):
         t_leaves = jax.tree_util.tree_leaves(tangents, is_leaf=lambda t: isinstance(t, SymbolicZero))
         wrt = [not isinstance(t, SymbolicZero) and jnp.issubdtype(x.dtype, jnp.inexact)
                for x, t in zip(leaves, t_leaves)]
-        value, grads = _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk)
+        value, grads = _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk, plan)
         dot = jnp.zeros_like(value)
         for g, t in zip(grads, (t for t, w in zip(t_leaves, wrt) if w)):
             dot = dot + jnp.sum(g * t)
@@ -84,9 +86,9 @@ def _merge(flags, a, b):
     return [next(a) if f else next(b) for f in flags]
 
 
-def _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk):
+def _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk, plan):
     """The sum of ``row_values(args)`` over the rows and its gradient with respect to the leaves
-    marked ``wrt`` (a list, in their order): in chunks of ``chunk`` rows on one CPU device."""
+    marked ``wrt`` (a list, in their order): in chunks of ``chunk`` rows on the CPU's path and one device."""
     diff = [x for x, w in zip(leaves, wrt) if w]
     fixed = [x for x, w in zip(leaves, wrt) if not w]
 
@@ -125,4 +127,4 @@ def _value_and_grad(row_values, treedef, leaves, batched, wrt, chunk):
         g_shared = [jnp.sum(g, axis=0) for g in g_shared]
         return jnp.sum(values), _merge(d_batched, g_rows, g_shared)
 
-    return chunked(diff, fixed) if on_cpu() else whole(diff, fixed)
+    return chunked(diff, fixed) if plan.cpu else whole(diff, fixed)

@@ -1,5 +1,5 @@
-"""The one way a pipeline of stages runs over a batch of rows: each stage vmapped, and on a CPU
-fenced off from the next (docs/performance.md, "Stages").
+"""The one way a pipeline of stages runs over a batch of rows: each stage vmapped, and on the CPU's path
+(``backend.Plan``) fenced off from the next (docs/performance.md, "Stages").
 
 A pipeline is a tuple of functions of one row: stage k is called with the row's inputs and then the
 outputs of the stages before it, and the last stage's output is the result (``model.collision.stages``:
@@ -14,15 +14,15 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..backend import on_cpu
+from ..backend import Plan
 
 
-def run(stages, args, in_axes=0, fenced=True):
-    """The result of the pipeline ``stages`` over a batch of rows.
+def run(stages, args, in_axes=0, fenced=True, *, plan: Plan):
+    """The result of the pipeline ``stages`` over a batch of rows, computed as ``plan`` says.
 
     args: a tuple of pytrees; in_axes: 0 (every leaf has the rows first), or a tuple of the same
     structure as ``args`` holding 0 or None per leaf (None: the same for every row); one row, unbatched:
-    ``run_row``. fenced: True, each stage in a fence of its own on a CPU (``fence``); a number k, the first k
+    ``run_row``. fenced: True, each stage in a fence of its own on the CPU's path (``fence``); a number k, the first k
     stages only; False, none (one program that XLA may fuse freely, as it is everywhere but on a CPU). A fence costs
     tracing time under transformations (a fit's ``jax.jacfwd`` traces each conditional's branches again), so a caller
     that differentiates a few rows fences only what pays for itself."""
@@ -31,22 +31,23 @@ def run(stages, args, in_axes=0, fenced=True):
     for k, stage in enumerate(stages):
         axes = (in_axes,) * len(args) if in_axes == 0 else tuple(in_axes)
         fn = jax.vmap(stage, in_axes=axes + (0,) * len(outs))
-        if getattr(stage, "block_rows", 0) and on_cpu():
+        if getattr(stage, "block_rows", 0) and plan.cpu:
             fn = in_blocks(fn, stage.block_rows, axes + (0,) * len(outs))
-        outs += (fence(fn, *args, *outs) if k < count else fn(*args, *outs),)
+        outs += (fence(plan, fn, *args, *outs) if k < count else fn(*args, *outs),)
     return outs[-1]
 
 
-def run_row(stages, args, fenced=0):
+def run_row(stages, args, fenced=0, plan: Plan | None = None):
     """The result of the pipeline ``stages`` on one unbatched row (``args``: a tuple of pytrees), its first
-    ``fenced`` stages each fenced off from the later ones (``fence``): what ``run`` does for a batch."""
+    ``fenced`` stages each fenced off from the later ones on ``plan``'s path (``fence``; a plan is needed only
+    where ``fenced`` > 0): what ``run`` does for a batch."""
     outs = ()
     for k, stage in enumerate(stages):
-        outs += (fence(stage, *args, *outs) if k < fenced else stage(*args, *outs),)
+        outs += (fence(plan, stage, *args, *outs) if k < fenced else stage(*args, *outs),)
     return outs[-1]
 
 
-BLOCK_ROWS = 256  # rows per block of a ``blocked`` stage on a CPU
+BLOCK_ROWS = 256  # rows per block of a ``blocked`` stage on the CPU's path
 
 
 def blocked(stage, rows: int = BLOCK_ROWS):
@@ -100,12 +101,12 @@ def in_blocks(fn, rows, in_axes):
     return over_blocks
 
 
-def fence(fn, *operands):
-    """``fn(*operands)``; on a CPU as the taken branch of a conditional whose predicate XLA cannot see
-    through. XLA compiles a conditional's branches as computations of their own and fuses nothing
+def fence(plan: Plan, fn, *operands):
+    """``fn(*operands)``; on the CPU's path (``plan``) as the taken branch of a conditional whose predicate XLA
+    cannot see through. XLA compiles a conditional's branches as computations of their own and fuses nothing
     across their boundary, so ``fn``'s outputs are computed in loops of their own and stored. The other
-    branch returns zeros and never runs. Elsewhere (a GPU) ``fn(*operands)``."""
-    if not on_cpu():
+    branch returns zeros and never runs. On an accelerator's path ``fn(*operands)``."""
+    if not plan.cpu:
         return fn(*operands)
     return fenced_by(jax.lax.optimization_barrier(jnp.bool_(True)), fn, *operands)
 

@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     _compilation_cache()
     args = build_parser().parse_args(argv)
     try:
-        backend.on_cpu()  # a KS_JAX_PATH that names no path is refused before any work
+        args.plan = backend.path_from_environment()  # read here only; a value that names no path is refused
     except ValueError as err:
         print(f"ks-jax: error: {err}", file=sys.stderr)
         return 2

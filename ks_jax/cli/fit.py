@@ -91,7 +91,8 @@ def run(args) -> int:
             results.append(reconstruct(case, starts=args.starts, seed=args.seed, monte_carlo=args.monte_carlo,
                                        smoothing=args.smoothing, solver=args.solver,
                                        progress=args.monte_carlo > 0 or args.posterior > 0,
-                                       max_starts=args.max_starts, posterior=args.posterior, chains=args.chains))
+                                       max_starts=args.max_starts, posterior=args.posterior, chains=args.chains,
+                                       plan=args.plan))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
                 raise
@@ -119,7 +120,7 @@ def run(args) -> int:
     if args.plot:
         drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if r is not None and k not in failed]
         if drawn:
-            save_top_view(solve([case_at_estimate(c, r) for c, r in drawn]), args.plot,
+            save_top_view(solve([case_at_estimate(c, r) for c, r in drawn], plan=args.plan), args.plot,
                           evidence=[{e.path: e.value for e in r.evidence} for _, r in drawn],
                           sigma=[{e.path: e.sigma for e in r.evidence} for _, r in drawn])
             print(f"\ntop view at the estimate written to {args.plot}", file=sys.stderr if args.json else sys.stdout)

@@ -48,7 +48,7 @@ def run_solve(args) -> int:
     cases = load_cases(args.file)
     if len(cases) == 1 and not cases[0].valid:
         raise CaseError(cases[0].error)
-    solutions = solve(cases, smoothing=args.smoothing)
+    solutions = solve(cases, smoothing=args.smoothing, plan=args.plan)
     if args.json:
         print(json.dumps({"cases": [s.to_dict() for s in solutions]}, indent=1))
         for s in solutions:  # the panel prints them; beside JSON they are said on stderr too
@@ -72,7 +72,7 @@ def run_demo(args) -> int:
     for name in DEMO_CASES:
         with resources.as_file(resources.files("ks_jax.cases") / name) as path:
             case = load_case(path)
-        print(text_report(solve(case)))
+        print(text_report(solve(case, plan=args.plan)))
         note = "".join(f"\n  {line}" for line in DEMO_NOTES[name].splitlines())
         print(f"{note}\n\n  (case file: ks_jax/cases/{name})\n" + "-" * 100 + "\n")
     return 0

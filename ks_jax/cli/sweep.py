@@ -246,7 +246,8 @@ def run(args) -> int:
     try:
         result = sweep(case, over, outputs=args.output, mode=mode, chunk_size=args.chunk_size,
                        smoothing=args.smoothing, progress=False if args.no_progress else None,
-                       output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False)
+                       output_dtype=np.float32 if args.float32 else None, on_chunk=on_chunk, keep=False,
+                       plan=args.plan)
         raise_if_stopped()
         writer.close()
     except (KeyboardInterrupt, SystemExit):  # Ctrl-C or a kill: the finished points are kept, and said so

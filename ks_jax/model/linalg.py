@@ -31,8 +31,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ..backend import on_cpu
-
 
 if hasattr(lax, "unstack"):
     def _unstack(x):
@@ -130,7 +128,7 @@ def adjugate3(m):
 
 def materialize(*xs, everywhere=False):
     """``xs`` (arrays of one shape and float dtype) unchanged, computed in a loop of their own
-    and stored, batched under vmap on CPU.
+    and stored, batched under vmap, in a program compiled for a CPU.
 
     XLA's CPU fusion copies an elementwise producer into every loop that reads it: the six
     sines/cosines of a rotation (``sincos``, about 40 operations per angle) would be evaluated
@@ -139,13 +137,19 @@ def materialize(*xs, everywhere=False):
     max-reduce over copies is rewritten into an elementwise op; a bitwise-or reduction of the
     bits with zeros is kept as a reduction, which is not copied into elementwise consumers.
     The values are exact (NaN and signed zeros kept). Not differentiable: differentiate around it (``trig`` has its
-    own derivative). Off the CPU's path (``backend.on_cpu``) ``xs`` are returned as they are: a GPU's
-    fusions do not copy producers that way, and there the reduction was a kernel of its own that stored
-    and read back every value (over a third of the exchange's time). ``everywhere``: stored on every
-    device (a value that every later kernel reads, which a GPU's fusion would otherwise recompute in each)."""
-    xs = jnp.broadcast_arrays(*xs)
-    if not (everywhere or on_cpu()):
-        return tuple(xs)
+    own derivative). In a program compiled for another platform ``xs`` are returned as they are
+    (``lax.platform_dependent``, resolved when the program is lowered: the choice is the platform's, not the
+    caller's): a GPU's fusions do not copy producers that way, and there the reduction was a kernel of its own
+    that stored and read back every value (over a third of the exchange's time). ``everywhere``: stored on every
+    platform (a value that every later kernel reads, which a GPU's fusion would otherwise recompute in each)."""
+    xs = tuple(jnp.broadcast_arrays(*xs))
+    if everywhere:
+        return _stored(*xs)
+    return tuple(lax.platform_dependent(*xs, cpu=_stored, default=lambda *values: tuple(values)))
+
+
+def _stored(*xs):
+    """``xs`` through a bitwise-or reduction with zeros (``materialize``)."""
     dtype = xs[0].dtype
     int_type = {8: jnp.int64, 4: jnp.int32, 2: jnp.int16}[dtype.itemsize]
     bits = [lax.bitcast_convert_type(x, int_type) for x in xs]
@@ -221,13 +225,11 @@ def _sincos_values(x):
     return jnp.where(q >= 2, -sin, sin), jnp.where((q == 1) | (q == 2), -cos, cos)
 
 
-@functools.partial(jax.jit, static_argnums=1)
-def _sincos_stored(x, cpu: bool):
-    """``materialize(*_sincos_values(x))``, traced once per shape and path (``cpu``: ``on_cpu()`` where it is
-    called, which the trace reads, in the key of JAX's cache): within a traced program a call is one operation,
-    which XLA inlines. The dozens of angles of a program with a motion to rest would otherwise trace the
-    polynomials again each, a quarter of its operations."""
-    del cpu
+@jax.jit
+def _sincos_stored(x):
+    """``materialize(*_sincos_values(x))``, traced once per shape: within a traced program a call is one
+    operation, which XLA inlines. The dozens of angles of a program with a motion to rest would otherwise trace
+    the polynomials again each, a quarter of its operations."""
     return materialize(*_sincos_values(x))
 
 
@@ -236,7 +238,7 @@ def sincos(x):
     """(sin x, cos x) as vectorizable polynomials (see ``_sincos_values``), stored once
     (``materialize``: else XLA copies the polynomial into every loop that reads the values, and
     compiles each copy); derivative exact in terms of the values."""
-    return _sincos_stored(x, on_cpu())
+    return _sincos_stored(x)
 
 
 @sincos.defjvp
@@ -266,10 +268,9 @@ def _atan2_values(y, x):
     return jnp.where(jnp.signbit(y), -a, a)
 
 
-@functools.partial(jax.jit, static_argnums=2)
-def _atan2_stored(y, x, cpu: bool):
-    """``materialize(_atan2_values(y, x))[0]``, traced once per shape and path (as ``_sincos_stored``)."""
-    del cpu
+@jax.jit
+def _atan2_stored(y, x):
+    """``materialize(_atan2_values(y, x))[0]``, traced once per shape (as ``_sincos_stored``)."""
     return materialize(_atan2_values(y, x))[0]
 
 
@@ -278,7 +279,7 @@ def _atan2(y, x):
     """atan2 as a vectorizable polynomial (``_atan2_values``); derivative
     (x dy - y dx) / (x^2 + y^2), 0 at the origin."""
     y, x = jnp.broadcast_arrays(y, x)
-    return _atan2_stored(y, x, on_cpu())
+    return _atan2_stored(y, x)
 
 
 @_atan2.defjvp

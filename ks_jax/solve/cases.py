@@ -10,6 +10,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from ..backend import Plan, plan_for
 from ..batch.stages import run, run_row
 from ..case import Case, as_arrays
 from ..compilation import quick_jit
@@ -20,31 +21,35 @@ from .rules import status_words
 from .solution import Solution
 
 
-def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=None, between=(0, 1)):
-    """``solve_inputs`` of every row of ``inputs``. One row is solved unbatched: XLA compiles a batch of
-    one row to a program several times the size of one unbatched row's."""
+def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=None, between=(0, 1),
+                plan=Plan("cpu")):
+    """``solve_inputs`` of every row of ``inputs``, computed as ``plan`` says. One row is solved unbatched:
+    XLA compiles a batch of one row to a program several times the size of one unbatched row's."""
     pipeline = stages(auto_point, auto_normal, smoothing, pole, motion, between)
     if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
-        row = run_row(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), fenced=len(pipeline))
+        row = run_row(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), fenced=len(pipeline), plan=plan)
         return jax.tree_util.tree_map(lambda x: x[None], row)
-    return run(pipeline, (inputs,))
+    return run(pipeline, (inputs,), plan=plan)
 
 
-_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4, 5, 6))  # a file's few cases: compiling is most of the time
+# a file's few cases: compiling is most of the time
+_solve = quick_jit(_solve_rows, static_argnums=(1, 2, 3, 4, 5, 6, 7))
 
 
-def solve(cases, smoothing: float = 0.0):
+def solve(cases, smoothing: float = 0.0, plan: Plan | str | None = None):
     """Solve a Case (-> Solution) or a list of cases (-> list of Solution).
 
     Valid cases are solved together in one vmapped call per contact mode; an invalid case (bad input in
     a file of several cases) gets status "invalid: <reason>" and no numbers. In float32 (JAX's default) a
     case more than ``case.scale.FAR_IN_FLOAT32`` (1 km) from the origin is solved about its CGs' midpoint
-    (``case.scale.scene_origin``), and its ``contact.point`` is float64."""
+    (``case.scale.scene_origin``), and its ``contact.point`` is float64. ``plan``: how the rows are computed, a
+    ``backend.Plan`` or its path ("cpu", "accelerator"); default, the path of JAX's default devices."""
     single = isinstance(cases, Case)
     cases = [cases] if single else list(cases) if isinstance(cases, (list, tuple)) else None
     if cases is None or not all(isinstance(c, Case) for c in cases):
         raise TypeError("solve takes a Case or a list of them: ks_jax.load_case(path) reads a case file")
     check_smoothing(smoothing)
+    plan = plan_for(plan)
     out: list[Solution | None] = [None] * len(cases)
     groups: dict[tuple, list[int]] = {}
     for i, c in enumerate(cases):
@@ -58,7 +63,7 @@ def solve(cases, smoothing: float = 0.0):
     for (auto_point, auto_normal, pole, motion, between, _), idx in groups.items():
         stacked = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *[cases[i].inputs for i in idx])
         stacked, origin = about_midpoint(stacked, auto_point)  # float32 far from the origin: about the CGs' midpoint
-        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole, motion, between)
+        res = _solve(as_arrays(stacked), auto_point, auto_normal, float(smoothing), pole, motion, between, plan)
         res = moved_back(jax.tree_util.tree_map(np.asarray, res), origin)
         for k, i in enumerate(idx):
             row = jax.tree_util.tree_map(lambda x: x[k], res)

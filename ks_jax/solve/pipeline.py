@@ -7,6 +7,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ..backend import Plan, plan_for
 from ..batch.stages import blocked, run_row
 from ..case import CaseInputs, Motion, body_states, follow_tows, to_pytrees
 from ..model import collision
@@ -20,7 +21,8 @@ from .rules import speed_status, with_speed_status
 
 
 def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool = False,
-                 smoothing=0.0, pole: bool = False, motion: Motion | None = None, between=(0, 1)) -> ExchangeResult:
+                 smoothing=0.0, pole: bool = False, motion: Motion | None = None, between=(0, 1),
+                 plan: Plan | str | None = None) -> ExchangeResult:
     """One case's results from its inputs (pure, unbatched; jit, vmap and grad at the edge).
 
     ``auto_point``/``auto_normal`` (static) select automatic contact for the centroid and/or the normal;
@@ -35,9 +37,12 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     Of the pipeline's stages (``stages``) only automatic contact's first, the input rules, is fenced off
     (``batch.stages.run_row``): every later loop reads the rules, and XLA would derive them again inside each
     loop that reads a stand-in input, in a program over twice the size to compile. The others are fused
-    freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``."""
+    freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``. ``plan``
+    (static): a ``backend.Plan`` or its path ("cpu", "accelerator"), whose fence that is; default, the path of
+    JAX's default devices."""
+    auto = auto_point or auto_normal
     return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between), (inputs,),
-                   fenced=1 if auto_point or auto_normal else 0)
+                   fenced=1 if auto else 0, plan=plan_for(plan) if auto else None)
 
 
 def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False, motion: Motion | None = None,

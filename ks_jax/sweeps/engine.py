@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..backend import chunk_rows, on_cpu, row_placement
+from ..backend import Plan, plan_for, row_placement
 from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
@@ -49,7 +49,7 @@ def default_outputs(case) -> tuple:
     return outputs
 
 
-DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk on a CPU (elsewhere: ``backend.chunk_rows``)
+DEFAULT_CHUNK = CHUNK_ROWS  # rows per device and chunk on a CPU (elsewhere: ``backend.Plan.rows``)
 STATUS_CODES = tuple(sorted(STATUS_TEXT))  # the statuses counted on the device, in this order
 # a sweep of at most this many points compiles quickly (``compilation.quick_jit``): its one short chunk runs in
 # milliseconds, and compiling is most of its time; a larger one keeps XLA's defaults, where running counts
@@ -107,7 +107,7 @@ class ChunkProgram:
     one chunk: a sweep of another size in the same ``_bucket`` runs the same program); auto_point, auto_normal,
     pole, motion, between: the case's pipeline (``solve.stages``); smoothing: tau of the smooth cone; out_dtype: the
     kept results' float dtype; devices: the rows are sharded over them; quick: compiled quickly
-    (``QUICK_POINTS``); cpu: ``backend.on_cpu()`` (the stages are fenced on the CPU's path only)."""
+    (``QUICK_POINTS``); plan: the ``backend.Plan`` (the stages are fenced on the CPU's path only)."""
 
     paths: tuple
     ties: tuple
@@ -121,7 +121,7 @@ class ChunkProgram:
     out_dtype: np.dtype
     devices: tuple
     quick: bool = False
-    cpu: bool = True
+    plan: Plan = Plan("cpu")
     pole: object = False
     motion: object = None
     between: tuple = (0, 1)
@@ -154,7 +154,7 @@ def _program(key: ChunkProgram):
             one.block_rows = getattr(stage, "block_rows", 0)  # the motion to rest runs in blocks on a CPU
             return one
 
-        out = run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,))
+        out = run(tuple(on_values(f, k == len(pipeline) - 1) for k, f in enumerate(pipeline)), (vals,), plan=key.plan)
         counted = start + jnp.arange(key.n_rows, dtype=start.dtype) < stop
         status = out["status"].astype(jnp.int32)
         known = [jnp.sum(counted & (status == c), dtype=jnp.int32) for c in STATUS_CODES]
@@ -204,7 +204,7 @@ def _check_values(path, values):
 
 
 def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0, progress=None, devices=None,
-          output_dtype=None, on_chunk=None, keep=True, index_range=None) -> SweepResult:
+          output_dtype=None, on_chunk=None, keep=True, index_range=None, plan=None) -> SweepResult:
     """Solve ``case`` at every point of a grid or a list of samples of some of its inputs.
 
     case: a ``Case`` (``ks_jax.load_case``). over: {input path: values}, values SI (m, kg, s,
@@ -228,9 +228,11 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     only status counts are kept; use with ``on_chunk`` for reductions of any size).
     index_range: (lo, hi) solve only these flat indices (row-major over the grid), e.g. one
     process's share of a multi-host sweep; the result is then flat, shape (hi - lo,).
+    plan: how the rows are computed, a ``backend.Plan`` or its path ("cpu", "accelerator"); default, the path of
+    ``devices``.
     """
     request = check(case, over, outputs, mode, smoothing, index_range)
-    return run_plan(plan(request, chunk_size, devices, output_dtype), keep, on_chunk, progress)
+    return run_layout(layout(request, chunk_size, devices, output_dtype, plan), keep, on_chunk, progress)
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,7 +339,7 @@ def _checked_range(index_range, total):
 
 
 @dataclass(frozen=True, eq=False)
-class Plan:
+class Layout:
     """How a checked sweep (``request``) runs: its chunk's program (``program``, the key of ``_program``), the
     scene's inputs as arrays (``base``, moved about the CGs' midpoint in float32 far from the origin), the
     swept values as the program reads them (``axes``: padded to their ``_bucket`` in a sweep of one chunk) and
@@ -352,14 +354,16 @@ class Plan:
     index_dtype: object
 
 
-def plan(request: Request, chunk_size=None, devices=None, output_dtype=None) -> Plan:
-    """The ``Plan`` of ``request``: rows per chunk (``chunk_size`` per device, default ``backend.chunk_rows``; a
-    small sweep is one chunk rounded up to its ``_bucket``), where the scene is solved, and its program."""
+def layout(request: Request, chunk_size=None, devices=None, output_dtype=None, plan=None) -> Layout:
+    """The ``Layout`` of ``request``: rows per chunk (``chunk_size`` per device, default the plan's,
+    ``backend.Plan.rows``; a small sweep is one chunk rounded up to its ``_bucket``), where the scene is solved,
+    and its program. ``plan``: a ``backend.Plan`` or its path; default, the path of ``devices``."""
     case, n_points = request.case, request.hi - request.lo
     devices = tuple(jax.local_devices() if devices is None else devices)
-    if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.chunk_rows``)
+    plan = plan_for(plan, devices)
+    if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.Plan.rows``)
         one_row = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], as_arrays(case.inputs))
-        per_device = chunk_rows(2 * row_bytes(one_row), devices[0])
+        per_device = plan.rows(2 * row_bytes(one_row), devices[0])
     else:
         per_device = _whole_number(chunk_size, "chunk_size")
     if per_device <= 0:
@@ -388,37 +392,37 @@ def plan(request: Request, chunk_size=None, devices=None, output_dtype=None) -> 
     program = ChunkProgram(paths, input_ties(case, paths), request.outputs, request.mode, n_rows,
                            None if one_chunk else sizes, case.auto_point, case.auto_normal, request.smoothing,
                            np.dtype(output_dtype or dtype), devices,
-                           n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), on_cpu(),
+                           n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), plan,
                            case.pole, with_times(case.motion, request.outputs), case.between)
     axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
-    return Plan(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
+    return Layout(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
 
 
-def run_plan(plan: Plan, keep=True, on_chunk=None, progress=None) -> SweepResult:
-    """Solve ``plan``'s points chunk by chunk, each dispatched while the previous one's results are collected:
+def run_layout(layout: Layout, keep=True, on_chunk=None, progress=None) -> SweepResult:
+    """Solve ``layout``'s points chunk by chunk, each dispatched while the previous one's results are collected:
     kept (``keep``) and handed to ``on_chunk``, the statuses and undefined results counted."""
-    request, key = plan.request, plan.program
+    request, key = layout.request, layout.program
     lo, hi, n_points = request.lo, request.hi, request.hi - request.lo
-    store = _store(request, key.out_dtype, plan.moved) if keep else {}
+    store = _store(request, key.out_dtype, layout.moved) if keep else {}
     counts = np.zeros(len(STATUS_CODES) + 1, dtype=np.int64)
     undefined = {p: 0 for p in request.outputs if undefined_kind(p)}
     rows_wanted = keep or on_chunk is not None  # else only the counts leave the device
 
     def index(i):
-        return jnp.asarray(i, dtype=plan.index_dtype)
+        return jnp.asarray(i, dtype=layout.index_dtype)
 
     stop, total = index(hi), index(request.total)
     show = n_points > key.n_rows if progress is None else bool(progress)  # one chunk: one step, nothing to show
     bar = Progress(n_points, "ks-jax sweep", "pt", show, PROGRESS_DELAY if progress is None else 0.0)
     # compiled before the clock starts: a sweep's seconds and rate count solving, its compile is said apart
     t0 = time.perf_counter()
-    executable = compiled(_program(key), index(lo), stop, plan.axes, plan.sizes, total, plan.base)
+    executable = compiled(_program(key), index(lo), stop, layout.axes, layout.sizes, total, layout.base)
     compile_seconds = time.perf_counter() - t0
     t0 = time.perf_counter()
 
     def launch(start):
-        out, tally = executable(index(start), stop, plan.axes, plan.sizes, total, plan.base)
-        if rows_wanted and not on_cpu():  # start the copy to the host now: it runs while the next chunk computes
+        out, tally = executable(index(start), stop, layout.axes, layout.sizes, total, layout.base)
+        if rows_wanted and not key.plan.cpu:  # start the copy to the host now: it runs while the next chunk computes
             for x in out.values():
                 x.copy_to_host_async()
         return start, out, tally
@@ -432,8 +436,8 @@ def run_plan(plan: Plan, keep=True, on_chunk=None, progress=None) -> SweepResult
         if rows_wanted:
             chunk = {k: np.asarray(out[k])[:n] for k in (*request.outputs, "status")}  # in the order asked
             for p in request.outputs:
-                if p in plan.moved:
-                    chunk[p] = chunk[p].astype(np.float64) + plan.moved[p]
+                if p in layout.moved:
+                    chunk[p] = chunk[p].astype(np.float64) + layout.moved[p]
             for k, v in chunk.items() if keep else ():
                 store[k][start - lo:start - lo + n] = v
             if on_chunk is not None:

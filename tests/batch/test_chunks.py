@@ -1,10 +1,11 @@
-"""``jax.vmap(ks_jax.exchange)`` over more rows than a chunk runs in chunks on a CPU (``ks_jax.batch.chunks``):
+"""``jax.vmap(exchange)`` over more rows than a chunk runs in chunks on a CPU (``ks_jax.batch.chunks``):
 the values are the single solves' and the independent reference's, across chunk boundaries (a last chunk
 that overlaps the one before) and with bad rows; the derivatives are ``jax.vmap``'s, as through any batch."""
 
 from __future__ import annotations
 
 import copy
+import functools
 import importlib
 
 import jax
@@ -22,7 +23,9 @@ CHUNKS = importlib.import_module("ks_jax.batch.chunks")
 
 # ``jax.vmap(exchange)`` jitted once for the file (one compile per batch shape and dtype; the trace, and so
 # whether it runs in chunks, is the one made under the test's CHUNK_ROWS)
-BATCH = reference_jit(jax.vmap(ks_jax.exchange))
+# ``ks_jax.exchange`` on the CPU's path whatever the device: the chunked path is the CPU's
+exchange = functools.partial(ks_jax.exchange, plan=backend.Plan("cpu"))
+BATCH = reference_jit(jax.vmap(exchange))
 
 
 def _first(tree):
@@ -38,10 +41,9 @@ def _rows(tree, rows):
 @pytest.fixture
 def small_chunks(monkeypatch):
     """``jax.vmap(exchange)`` over more than CHUNK_ROWS rows runs in chunks on one CPU device;
-    64-row chunks exercise that path on small batches, taken on any device (``backend.path``)."""
+    64-row chunks exercise that path on small batches, taken on any device (``exchange``, below)."""
     monkeypatch.setattr(CHUNKS, "CHUNK_ROWS", 64)
-    with backend.path("cpu"):
-        yield 64
+    yield 64
 
 
 @pytest.mark.slow
@@ -49,7 +51,7 @@ def test_vmap_of_exchange_in_chunks_equals_single_solves(random_cases, small_chu
     cases = with_bad_rows(random_cases["full"][:150])  # chunks at 0, 64 and 86 (end-aligned)
     args = kit.inputs(cases)
     # the loop over chunks, not the whole-batch program
-    assert "scan" in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*args))
+    assert "scan" in str(jax.make_jaxpr(jax.vmap(exchange))(*args))
     batched = BATCH(*args)
     singles = [kit.exchange(*kit.inputs(c)) for c in cases]
     stacked = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *singles)
@@ -62,7 +64,7 @@ def test_vmap_of_exchange_in_chunks_equals_single_solves(random_cases, small_chu
                        kit.reference_batch([c for c, g in zip(cases, good) if g]), 1e-9,
                        [c for c, g in zip(cases, good) if g])
     # a batch of at most one chunk is one whole-batch program
-    assert "scan" not in str(jax.make_jaxpr(jax.vmap(ks_jax.exchange))(*kit.inputs(cases[:64])))
+    assert "scan" not in str(jax.make_jaxpr(jax.vmap(exchange))(*kit.inputs(cases[:64])))
 
 
 @pytest.mark.slow
@@ -71,7 +73,7 @@ def test_vmap_of_exchange_in_chunks_with_unbatched_inputs_and_smoothing(random_c
     at row 66 so as to end at row 130, equal the whole-batch program of those 64 rows."""
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:130])
     first = _rows((v1, v2), 0)
-    fn = reference_jit(jax.vmap(lambda s1, s2, c: ks_jax.exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
+    fn = reference_jit(jax.vmap(lambda s1, s2, c: exchange(first[0], s1, first[1], s2, c, smoothing=0.05)))
     batched = fn(s1, s2, c)
     for rows in (slice(0, 64), slice(66, 130)):  # one chunk: the whole-batch program
         assert_same_leaves(_rows(batched, rows), fn(*_rows((s1, s2, c), rows)))
@@ -88,7 +90,7 @@ def test_derivatives_through_a_chunked_batch(random_cases, small_chunks):
     shared = _rows(v2, 0)
 
     def row_loss(v2, v1, s1, s2, c):
-        r = ks_jax.exchange(v1, s1, v2, s2, c)
+        r = exchange(v1, s1, v2, s2, c)
         return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
                          + 1e-4 * r.contact.energy_loss, 0.0)
 
@@ -126,7 +128,7 @@ def test_a_batch_of_one_row_is_the_row(random_cases):
     bad["vehicles"][0]["mass"] = 0.0
 
     def row_loss(v2, s1, c, v1, s2):
-        r = ks_jax.exchange(v1, s1, v2, s2, c)
+        r = exchange(v1, s1, v2, s2, c)
         return jnp.where(r.contact.status == 0, r.vehicles[1].delta_v_magnitude + r.vehicles[0].speed_after ** 2
                          + 1e-4 * r.contact.energy_loss, 0.0)
 
@@ -136,7 +138,7 @@ def test_a_batch_of_one_row_is_the_row(random_cases):
     def checks(v1, s1, v2, s2, c):
         """One program (one compile): the batch's values, its gradient with vehicle 2 shared, and the row's."""
         shared, row = _first(v2), _first((v1, s1, v2, s2, c))
-        return (jax.vmap(ks_jax.exchange)(v1, s1, v2, s2, c), jax.grad(loss, argnums=(0, 1, 2))(shared, s1, c, v1, s2),
+        return (jax.vmap(exchange)(v1, s1, v2, s2, c), jax.grad(loss, argnums=(0, 1, 2))(shared, s1, c, v1, s2),
                 jax.grad(row_loss, argnums=(0, 1, 2))(shared, row[1], row[4], row[0], row[3]))
 
     program = reference_jit(checks)
@@ -164,7 +166,7 @@ def test_second_derivatives_through_a_chunked_batch(random_cases, small_chunks):
     v1, s1, v2, s2, c = kit.inputs(random_cases["principal"][:100])
 
     def loss(p):
-        r = jax.vmap(ks_jax.exchange)(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2,
+        r = jax.vmap(exchange)(v1, s1._replace(velocity=s1.velocity * p[0]), v2, s2,
                                        c._replace(friction=c.friction * p[1]))
         return jnp.sum(jnp.where(r.contact.status == 0, r.vehicles[0].delta_v_magnitude ** 2
                                  + r.vehicles[1].speed_after, 0.0))

@@ -112,7 +112,7 @@ def test_exchange_batch_of_no_rows(random_cases):
 
 @pytest.mark.slow
 def test_exchange_batch_on_the_accelerator_path(random_cases):
-    """The accelerator's path (``backend.path``, forced on whatever device runs the tests): rows given as
+    """The accelerator's path (``plan="accelerator"``, forced on whatever device runs the tests): rows given as
     NumPy arrays go to the device chunk by chunk (64, 64, then a last chunk aligned to the end), results are
     copied to the host while the next chunk runs, or stay on the device (``to_host=False``); device rows in
     the chunk of the policy. The values are ``jax.vmap(exchange)``'s, row for row, with bad rows among them;
@@ -121,19 +121,19 @@ def test_exchange_batch_on_the_accelerator_path(random_cases):
     args = kit.inputs(cases)
     reference = kit.batch_exchange(args)
     host = jax.tree_util.tree_map(np.array, args)
-    before = backend.on_cpu()
-    with backend.path("accelerator"):
-        assert not backend.on_cpu()
-        for rows, chunk in ((host, 64), (args, None)):
-            got = ks_jax.exchange_batch(*rows, chunk=chunk)
-            assert all(isinstance(x, np.ndarray) for x in jax.tree_util.tree_leaves(got))
-            assert_same_leaves(got, reference)
-            kept = ks_jax.exchange_batch(*rows, chunk=chunk, to_host=False)
-            assert all(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(kept))
-            assert_same_leaves(kept, reference)
-        with pytest.raises(ValueError, match="out= .* to_host=False"):
-            ks_jax.exchange_batch(*args, out=got, to_host=False)
-    assert backend.on_cpu() == before
+    plan = backend.Plan("accelerator")
+    for rows, chunk in ((host, 64), (args, None)):
+        got = ks_jax.exchange_batch(*rows, chunk=chunk, plan=plan)
+        assert all(isinstance(x, np.ndarray) for x in jax.tree_util.tree_leaves(got))
+        assert_same_leaves(got, reference)
+        kept = ks_jax.exchange_batch(*rows, chunk=chunk, to_host=False, plan="accelerator")
+        assert all(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(kept))
+        assert_same_leaves(kept, reference)
+    with pytest.raises(ValueError, match="out= .* to_host=False"):
+        ks_jax.exchange_batch(*args, out=got, to_host=False, plan=plan)
+    # the two paths' programs are kept apart: the same chunk's program, one per plan
+    assert ks_jax.batch.kernel._chunk_program(64, 0.0, True, plan) is not \
+        ks_jax.batch.kernel._chunk_program(64, 0.0, True, backend.Plan("cpu"))
 
 
 def test_chunk_rows_from_free_memory(monkeypatch):
@@ -141,31 +141,31 @@ def test_chunk_rows_from_free_memory(monkeypatch):
     bytes) is at most ``MEMORY_SHARE`` of the free memory, within [MIN_ROWS, MAX_ROWS]; the CPU's is fixed."""
     free = {"bytes": 80 << 30}
     monkeypatch.setattr(backend, "free_bytes", lambda device=None: free["bytes"])
-    with backend.path("cpu"):
-        assert backend.chunk_rows(1000) == backend.CPU_CHUNK_ROWS
-    with backend.path("accelerator"):
-        # 0.25 * 80 GiB / (4 * 1000 B) = 5.4e6 rows -> 2^22
-        assert backend.chunk_rows(1000) == 1 << 22
-        free["bytes"] = 1 << 30  # 0.25 GiB / 4 kB = 67108 -> 2^16
-        assert backend.chunk_rows(1000) == 1 << 16
-        free["bytes"] = 1 << 20  # far too little: the smallest chunk still
-        assert backend.chunk_rows(1000) == backend.MIN_ROWS
-        free["bytes"] = 1 << 50
-        assert backend.chunk_rows(8) == backend.MAX_ROWS
+    assert backend.Plan("cpu").rows(1000) == backend.CPU_CHUNK_ROWS
+    accelerator = backend.Plan("accelerator")
+    # 0.25 * 80 GiB / (4 * 1000 B) = 5.4e6 rows -> 2^22
+    assert accelerator.rows(1000) == 1 << 22
+    free["bytes"] = 1 << 30  # 0.25 GiB / 4 kB = 67108 -> 2^16
+    assert accelerator.rows(1000) == 1 << 16
+    free["bytes"] = 1 << 20  # far too little: the smallest chunk still
+    assert accelerator.rows(1000) == backend.MIN_ROWS
+    free["bytes"] = 1 << 50
+    assert accelerator.rows(8) == backend.MAX_ROWS
+    # a plan's own chunk is taken as given, on either path
+    assert backend.Plan("accelerator", 300).rows(1000) == backend.Plan("cpu", 300).rows(8) == 300
 
 
 def test_the_path_of_a_process_from_the_environment(monkeypatch, capsys):
     """``KS_JAX_PATH`` names the path a process takes ("cpu" or "accelerator"; unset or empty: the default
     device's); any other value is refused, naming the variable, the value and what it must be, by the command
     line before any work."""
-    for value, path in (("accelerator", "accelerator"), ("cpu", "cpu"), ("", None)):
+    for value, plan in (("accelerator", backend.Plan("accelerator")), ("cpu", backend.Plan("cpu")), ("", None)):
         monkeypatch.setenv("KS_JAX_PATH", value)
-        assert backend._path_from_environment() == path
+        assert backend.path_from_environment() == plan
     monkeypatch.delenv("KS_JAX_PATH")
-    assert backend._path_from_environment() is None
+    assert backend.path_from_environment() is None
     monkeypatch.setenv("KS_JAX_PATH", "gpu")
     with pytest.raises(ValueError, match="KS_JAX_PATH = 'gpu': must be 'cpu' or 'accelerator'"):
-        backend._path_from_environment()
-    monkeypatch.setattr(backend, "_environment", [])  # not yet read: the command line refuses it up front
-    assert main(["demo"]) == 2
+        backend.path_from_environment()
+    assert main(["demo"]) == 2  # the command line refuses it up front
     assert "ks-jax: error: KS_JAX_PATH = 'gpu'" in capsys.readouterr().err

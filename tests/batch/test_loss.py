@@ -32,7 +32,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(random_cases):
     v1, s1, v2, s2, c = kit.inputs(cases)
     shared = jax.tree_util.tree_map(lambda x: x[0], v2)
     axes = (0, 0, None, 0, 0, None)
-    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64)
+    loss = ks_jax.sum_over_rows(_evidence_row_loss, in_axes=axes, chunk=64, plan=backend.Plan("cpu"))  # fenced chunks
     target = jnp.asarray(4.0)
 
     def plain(*a):
@@ -44,8 +44,7 @@ def test_sum_over_rows_equals_the_sum_and_per_row_gradients(random_cases):
         return (jax.value_and_grad(loss, argnums=(1, 2, 4, 5))(*a), loss(*a), plain(*a),
                 jax.vmap(jax.grad(_evidence_row_loss, argnums=(1, 2, 4, 5)), in_axes=axes)(*a))
 
-    with backend.path("cpu"):  # the chunks fenced apart (on any device)
-        traced = reference_jit(checks).trace(v1, s1, shared, s2, c, target)
+    traced = reference_jit(checks).trace(v1, s1, shared, s2, c, target)
     assert "cond[" in str(traced.jaxpr)
     program = traced.lower().compile()
     (value, grads), jitted, plain_value, per_row = program(v1, s1, shared, s2, c, target)

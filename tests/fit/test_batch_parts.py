@@ -137,13 +137,12 @@ def test_a_further_round_is_one_call_on_an_accelerator_and_calls_of_64_cases_on_
     """A round of 228 of 1000 cases x 8 starts: on a CPU, calls of 64 cases (a call's rows run one after
     another there, and few row counts compile few programs); on an accelerator, one call of 512 cases (its
     rows run side by side), and a round of 600 one call of all 1000, the first round's program."""
-    with backend.path("cpu"):
-        assert more_block(1000, 228, 8) == MORE_BLOCKS[-1] * 8 == 64 * 8
-        assert more_block(1000, 5, 8) == 8 * 8 and more_block(4, 3, 8) == 4 * 8
-    with backend.path("accelerator"):
-        assert more_block(1000, 228, 8) == 512 * 8
-        assert more_block(1000, 600, 8) == 1000 * 8
-        assert more_block(10**6, 3 * 10**5, 8) == 10**6 * 8
+    cpu, accelerator = backend.Plan("cpu"), backend.Plan("accelerator")
+    assert more_block(1000, 228, 8, cpu) == MORE_BLOCKS[-1] * 8 == 64 * 8
+    assert more_block(1000, 5, 8, cpu) == 8 * 8 and more_block(4, 3, 8, cpu) == 4 * 8
+    assert more_block(1000, 228, 8, accelerator) == 512 * 8
+    assert more_block(1000, 600, 8, accelerator) == 1000 * 8
+    assert more_block(10**6, 3 * 10**5, 8, accelerator) == 10**6 * 8
 
 
 def test_a_batchs_checks_accept_and_refuse_each_case_as_its_own_checks_do():

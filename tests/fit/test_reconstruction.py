@@ -29,7 +29,7 @@ from fit.report import fmt
 from fit.rounds import OFF_BOUND, other_side
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case
 from ks_jax import units as U
-from ks_jax.backend import on_cpu
+from ks_jax.backend import Plan
 from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input
 from ks_jax.model.types import OK
 from ks_jax.solve import solve
@@ -313,17 +313,21 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
 
     case = load_case(FIT_SEED)
     kw = dict(starts=2, seed=3, monte_carlo=4)
-    # on a CPU the refits run in calls of the fit's own rows; on an accelerator in calls of as many as they are
-    assert rc.refit_block(3 * 2, 4) == 6 and rc.refit_block(2, 20) == (2 if on_cpu() else 20)
+    # on the CPU's path the refits run in calls of the fit's own rows; on an accelerator's in calls of as many as
+    # they are
+    cpu, accelerator = Plan("cpu"), Plan("accelerator")
+    assert rc.refit_block(3 * 2, 4, cpu) == 6 and rc.refit_block(2, 20, cpu) == 2
+    assert rc.refit_block(3 * 2, 4, accelerator) == 6 and rc.refit_block(2, 20, accelerator) == 20
+    devices = jax.local_devices()
     fit.reconstruct_batch([case] * 3, starts=2, seed=3)  # no refits: one call of its 6 rows
-    programs = rc.solver_for(6)._cache_size()
+    programs = rc.solver_for(6, devices)._cache_size()
     one_call = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc.solver_for(6)._cache_size() == programs  # the refits ran in the fit's program
+    assert rc.solver_for(6, devices)._cache_size() == programs  # the refits ran in the fit's program
     monkeypatch.setattr(rc, "ROWS_PER_CALL", 5)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 5)
-    programs = rc.solver_for(5)._cache_size()
+    programs = rc.solver_for(5, devices)._cache_size()
     blocks = fit.reconstruct_batch([case] * 3, **kw)
-    assert rc.solver_for(5)._cache_size() == programs + 1
+    assert rc.solver_for(5, devices)._cache_size() == programs + 1
     for a, b in zip(blocks, one_call):
         assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std
         np.testing.assert_array_equal(a.monte_carlo["x"], b.monte_carlo["x"])

@@ -579,12 +579,12 @@ def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
 
 @pytest.mark.slow
 def test_the_accelerator_path_counts_on_the_device(case):
-    """On the accelerator's path (``backend.path``, forced here), each chunk's statuses and undefined values
+    """On the accelerator's path (``plan="accelerator"``, forced here), each chunk's statuses and undefined values
     are counted on the device over the rows of the range alone; a sweep that keeps nothing copies no rows
     to the host. Values, statuses and counts are the CPU path's, in chunks that end inside the range."""
     over = {"vehicles[1].speed": np.linspace(0.0, 20.0, 9), "contact.restitution": np.linspace(0.0, 1.5, 7)}
     outputs = ["contact.impulse_magnitude", "vehicles[0].pdof", "vehicles[1].course_after"]
-    cpu = sweep(case, over, outputs=outputs, chunk_size=1000)
+    cpu = sweep(case, over, outputs=outputs, chunk_size=1000, plan="cpu")
     flat = {k: v.ravel() for k, v in cpu.items()}
 
     def counted(lo, hi):  # the counts a sweep of flat indices lo..hi should give, from the kept results
@@ -593,13 +593,12 @@ def test_the_accelerator_path_counts_on_the_device(case):
         return ({ks_jax.model.types.status_text(c): int(n) for c, n in zip(codes, k)},
                 {p: int(np.sum(np.isnan(flat[p][lo:hi]) & solved)) for p in outputs[1:]})
 
-    with ks_jax.backend.path("accelerator"):
-        r = sweep(case, over, outputs=outputs, chunk_size=5)  # the last chunk ends past the grid
-        for p in outputs + ["status"]:
-            np.testing.assert_allclose(r[p], cpu[p], rtol=1e-12, atol=1e-12, err_msg=p)
-        assert (r.status_counts, r.undefined) == counted(0, 63)
-        part = sweep(case, over, outputs=outputs, chunk_size=5, index_range=(10, 33), keep=False)
-        assert len(part) == 0 and (part.status_counts, part.undefined) == counted(10, 33)
+    r = sweep(case, over, outputs=outputs, chunk_size=5, plan="accelerator")  # the last chunk ends past the grid
+    for p in outputs + ["status"]:
+        np.testing.assert_allclose(r[p], cpu[p], rtol=1e-12, atol=1e-12, err_msg=p)
+    assert (r.status_counts, r.undefined) == counted(0, 63)
+    part = sweep(case, over, outputs=outputs, chunk_size=5, index_range=(10, 33), keep=False, plan="accelerator")
+    assert len(part) == 0 and (part.status_counts, part.undefined) == counted(10, 33)
     # the grid has each kind of row counted: solved, separating at speed 0 (its PDOF and course undefined), invalid
     assert set(cpu.status_counts) == {"ok", "separating", "invalid: contact.restitution must be in [-1, 1]"}
     assert cpu.undefined == {"vehicles[0].pdof": 5, "vehicles[1].course_after": 5}

@@ -1,0 +1,154 @@
+"""The plan (``ks_jax.backend.Plan``): how rows are computed is data, made at the entry points and passed down
+as a static argument, never state of the process (docs/devices.md). On a CPU the accelerator's plan is taken
+to exercise its logic, with the CPU's values; the physics' one CPU-only form is the platform's choice."""
+
+from __future__ import annotations
+
+import ast
+import json
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax import export
+
+import ks_jax
+from ks_jax.backend import Plan, plan_for
+from ks_jax.cli import main
+from ks_jax.model import linalg as la
+from ks_jax.solve import cases as solve_cases
+
+MODEL = Path(ks_jax.__file__).parent / "model"
+CASES = Path(ks_jax.__file__).parent / "cases"
+
+
+def test_a_plan_is_a_value_and_bad_plans_are_refused():
+    """Equal plans are one key (hashable, compared by value, a repr without an address: a kept program's key
+    holds it); a path other than the two, or a chunk that is not a positive whole number, is refused with the
+    value and the rule."""
+    assert Plan("cpu") == Plan() == plan_for("cpu") and hash(Plan("accelerator", 8)) == hash(Plan("accelerator", 8))
+    assert len({Plan("cpu"), Plan("accelerator"), Plan("cpu", 64)}) == 3
+    assert repr(Plan("accelerator")) == "Plan(path='accelerator', chunk_rows=None)"
+    assert plan_for(Plan("accelerator", 8)) == Plan("accelerator", 8)
+    with pytest.raises(ValueError, match="plan path = 'gpu': must be 'cpu' or 'accelerator'"):
+        Plan("gpu")
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match=f"plan chunk_rows = {bad!r}: must be a positive whole number"):
+            Plan("cpu", bad)
+
+
+def test_the_default_plan_is_the_devices_path():
+    """Without a plan, the devices the rows go to decide: the CPU's path where they are all CPUs."""
+    cpus = jax.devices("cpu")
+    assert plan_for(None, cpus) == Plan("cpu")
+    expected = "cpu" if all(d.platform == "cpu" for d in jax.devices()) else "accelerator"
+    assert plan_for() == Plan(expected)
+
+
+def _imported_modules(path: Path) -> set[str]:
+    """Every module a file imports, relative imports resolved against ``ks_jax.model``."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = "ks_jax.model" if node.level == 1 else "ks_jax" if node.level == 2 else ""
+            module = ".".join(p for p in (base, node.module or "") if p)
+            names.add(module)
+            names |= {f"{module}.{a.name}" for a in node.names}
+    return names
+
+
+def test_the_physics_knows_nothing_of_devices():
+    """No module of ``ks_jax.model`` imports ``ks_jax.backend`` or asks JAX which devices or backend there are."""
+    files = sorted(MODEL.glob("*.py"))
+    assert len(files) > 10
+    for path in files:
+        imported = _imported_modules(path)
+        assert not [m for m in imported if m.startswith("ks_jax.backend")], path.name
+        text = path.read_text()
+        for asked in ("default_backend", "jax.devices", "local_devices", "KS_JAX_PATH"):
+            assert asked not in text, (path.name, asked)
+
+
+def test_stored_sines_are_the_cpus_and_plain_elsewhere():
+    """``materialize`` (the sines and cosines stored once) is chosen by the platform a program is lowered for:
+    the same function lowered for a CPU holds the stored values' reduction, lowered for a GPU it does not; on
+    the CPU the values are unchanged."""
+    x = jax.ShapeDtypeStruct((16,), jnp.float64)
+    program = jax.jit(la.sincos)
+    cpu = export.export(program, platforms=["cpu"])(x).mlir_module()
+    gpu = export.export(program, platforms=["cuda"])(x).mlir_module()
+    assert "stablehlo.reduce" in cpu and "stablehlo.reduce" not in gpu
+    angles = np.linspace(-7.0, 7.0, 16)
+    stored = jax.jit(lambda a: la.materialize(a, 2 * a))(angles)
+    np.testing.assert_array_equal(stored[0], angles)
+    np.testing.assert_array_equal(stored[1], 2 * angles)
+    plain = jax.jit(lambda a: la.materialize(a, everywhere=True))(angles)[0]
+    np.testing.assert_array_equal(plain, angles)
+
+
+@pytest.mark.slow
+def test_a_solve_on_either_path_gives_the_same_numbers_from_programs_kept_apart():
+    """The seed chapter's automatic-contact case solved on the CPU's path and on the accelerator's (forced on
+    this device): the CPU's fences its first stage (a conditional), the accelerator's does not, and every
+    number is the same. The plan is a static argument of the compiled solve, so each path has its own program
+    and its own key among kept programs."""
+    case = ks_jax.load_case(CASES / "auto_seed_000.json")
+    on_cpu, on_accelerator = (ks_jax.solve(case, plan=p) for p in ("cpu", Plan("accelerator")))
+    for a, b in zip(jax.tree_util.tree_leaves(on_cpu.result), jax.tree_util.tree_leaves(on_accelerator.result)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-13)
+    assert on_cpu.status == on_accelerator.status
+
+    def jaxpr(plan):
+        solve = functools.partial(ks_jax.solve_inputs, auto_point=True, auto_normal=True, plan=plan)
+        return str(jax.make_jaxpr(solve)(case.inputs))
+
+    assert jaxpr("cpu").count("cond[") > jaxpr("accelerator").count("cond[")
+    stored = solve_cases._solve.quick
+    leaves, tree = jax.tree_util.tree_flatten(case.inputs)
+    keys = {stored._key({"plan": plan, "auto_point": True}, tree, leaves)
+            for plan in (Plan("cpu"), Plan("accelerator"))}
+    assert len(keys) == 2 and None not in keys
+
+
+@pytest.mark.slow
+def test_the_command_line_reads_the_path_once_and_passes_it_down(monkeypatch, capsys):
+    """``KS_JAX_PATH=accelerator`` is read by the command line and given to the library as a plan: the solve
+    runs on the accelerator's path (here, on a CPU) with the same results as without it (to rounding: XLA fuses
+    the accelerator's program differently)."""
+    seen = []
+    original = solve_cases.plan_for
+
+    def recording(plan=None, devices=None):
+        seen.append(plan)
+        return original(plan, devices)
+
+    monkeypatch.setattr(solve_cases, "plan_for", recording)
+    case = str(CASES / "auto_seed_000.json")
+    assert main(["solve", case, "--json"]) == 0
+    plain = capsys.readouterr().out
+    monkeypatch.setenv("KS_JAX_PATH", "accelerator")
+    assert main(["solve", case, "--json"]) == 0
+    _assert_close(json.loads(capsys.readouterr().out), json.loads(plain))
+    assert seen == [None, Plan("accelerator")]
+
+
+def _assert_close(a, b, where="json"):
+    """Two parsed JSON documents equal, their numbers to 1e-12 of themselves (1e-12 absolute near 0)."""
+    assert type(a) is type(b), where
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _assert_close(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), where
+        for k, (x, y) in enumerate(zip(a, b)):
+            _assert_close(x, y, f"{where}[{k}]")
+    elif isinstance(a, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-12), where
+    else:
+        assert a == b, where
