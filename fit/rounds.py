@@ -72,21 +72,20 @@ def other_side(best: RowFits, problem, lo, hi, pw, count: int):
 
 
 MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts on a CPU: a few row counts, a program each
-# elsewhere: powers of 8 up to any batch, so that a round of any size is one call
-MORE_BLOCKS_ELSEWHERE = tuple(8**k for k in range(1, 9))
 
 
 def more_block(cases: int, todo: int, starts: int, plan: Plan) -> int:
-    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases: the least of a few fixed
-    counts (``MORE_BLOCKS`` cases on the CPU's path of ``plan``, ``MORE_BLOCKS_ELSEWHERE`` on an accelerator's; at most
-    ``cases``) that holds them all, else the largest. A call's vmapped solver runs every row until its slowest
-    converges, so a round of a few cases of a large batch is not padded to hundreds of rows; fixed counts keep
-    the compiled programs to a few, and a round of nearly all the cases runs in the program of the first round.
-    On a CPU the rows of a call run one after another, so that calls of 64 cases cost what one call of them all
-    does; an accelerator runs a call's rows side by side, and a round of thousands of cases in calls of 64 would
-    wait on every call in turn."""
-    ladder = MORE_BLOCKS if plan.cpu else MORE_BLOCKS_ELSEWHERE
-    sizes = sorted({min(c, cases) for c in ladder})
+    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases. On the CPU's path of ``plan``:
+    the least of ``MORE_BLOCKS`` cases (at most ``cases``) that holds them all, else the largest. A CPU runs a
+    call's rows one after another and a vmapped solver runs every row until its slowest converges, so a round of
+    a few cases of a large batch is not padded to hundreds of rows, and calls of 64 cases cost what one call of
+    them all does; the fixed counts keep the compiled programs to a few. On an accelerator's: the first round's
+    rows (every case), its program: an accelerator runs a call's rows side by side, so a padded call costs about
+    what a call of the round's own rows would, and a fresh process compiles the solver once rather than once per
+    round of another size."""
+    if not plan.cpu:
+        return cases * starts
+    sizes = sorted({min(c, cases) for c in MORE_BLOCKS})
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 
 

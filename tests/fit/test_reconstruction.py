@@ -754,3 +754,25 @@ def test_float32_fit_far_from_the_origin_equals_the_fit_at_the_origin(oblique):
             assert mc_b - shift.get(p, 0.0) == pytest.approx(mc_a, abs=tol), (p, q)
     for k, v in a.fitted.items():
         assert b.fitted[k] - shift.get(k, 0.0) == pytest.approx(v, abs=1e-3 * dict((e.path, e.sigma) for e in ev)[k]), k
+
+
+@pytest.mark.slow
+def test_on_the_accelerators_path_every_round_of_starts_runs_in_the_first_rounds_program():
+    """Ten copies of the stick-or-slide fit with two starts each take further rounds of starts (4 to 16 starts
+    in all). On the CPU's path a round of a few cases runs in calls of 8 cases, a second program; on an
+    accelerator's (forced here) every round runs padded in the first round's program: one program, as a fresh
+    process on a GPU then compiles once. Each case's fit is the same on both paths."""
+    case = load_case(CASES / "fit_stick_or_slide.json")
+    devices = jax.local_devices()
+    solver = rc.solver_for(20, devices)
+    got = {}
+    for plan in ("cpu", "accelerator"):
+        before = solver._cache_size()
+        got[plan] = fit.reconstruct_batch([case] * 10, starts=2, seed=3, plan=plan)
+        got[plan + " programs"] = solver._cache_size() - before
+    assert (got["cpu programs"], got["accelerator programs"]) == (2, 1)
+    assert max(r.starts for r in got["cpu"]) > 2  # further rounds ran
+    for a, b in zip(got["cpu"], got["accelerator"]):
+        assert a.starts == b.starts and a.cost == pytest.approx(b.cost, rel=1e-12)
+        for path, value in a.estimate.items():
+            assert b.estimate[path] == pytest.approx(value, rel=1e-10, abs=1e-12), path
