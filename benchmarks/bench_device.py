@@ -19,10 +19,17 @@ Prints the device, the date and the command, then, each the median of --repeats 
   ``ks_jax.sum_over_rows``;
 - ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases), and the
   host's work of that call (its solver's calls replayed from a recording: ``bench_fit.host_seconds``); then a batch
-  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second.
+  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second;
+- motion to rest: --motions two-vehicle motions (``bench_motion.py``'s random pairs, 3 s of motion at the default
+  step, stopping once every vehicle rests) on the default device, the way its plan computes them (``backend.Plan``:
+  blocks of 256 vehicles on the CPU's path, all at once on an accelerator's), in motions per second, and
+  --cpu-motions of them on the host's CPU the CPU's way: the ratio of the two rates; then a case with later
+  exchanges (``tbone_spin_out.json``: the watched motion after the first exchange, docs/model.md "Contact
+  interactions") swept over --interaction points, on the default device and on the CPU: points per second.
 
-Defaults: 2^22 rows, 10^8 sweep points, 1000 fits and 10^5 in a batch on an accelerator; 2^16, 10^6, 100 and none
-on a CPU.
+Defaults: 2^22 rows, 10^8 sweep points, 1000 fits and 10^5 in a batch, 10^6 motions and 10^5 points of the
+interaction on an accelerator; 2^16, 10^6, 100, none, 10^4 and 10^3 on a CPU; 10^4 motions and 10^3 points on the
+CPU for the comparison.
 --profile DIR: also writes the compiled programs of the kernel (float32 and float64) and, for the kernel,
 ``exchange_batch`` and the fits, a table of the device's kernels by time (``jax.profiler``) to DIR.
 """
@@ -49,11 +56,15 @@ jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_fit
+import bench_motion
 from bench_kernel import delta_v, random_batch, streaming_references
 
 import fit
 import ks_jax
+from ks_jax.backend import plan_for
+from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.model import collision
+from ks_jax.model import motion as M
 
 CASE = Path(ks_jax.__file__).resolve().parent / "cases" / "seed_000_saturn_pontiac.json"
 
@@ -112,6 +123,64 @@ def as_dtype(tree, dtype):
     return jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x, tree)
 
 
+MOTION_SECONDS = 3.0
+
+
+def _motion_program(device):
+    """The jitted forward of two-vehicle motions to rest on ``device``, computed the way its plan says (blocks of
+    ``BLOCK_ROWS`` vehicles on the CPU's path, as a case's pipeline runs them; all rows at once elsewhere)."""
+    def one(mass, izz, h, chassis, wheels, mu, start):
+        return M.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=MOTION_SECONDS).rest_position
+
+    rows = jax.vmap(one)
+    if plan_for(None, [device]).cpu:
+        rows = in_blocks(rows, BLOCK_ROWS, (0,) * 7)
+    return jax.jit(rows)
+
+
+def _motion_rate(pairs, device, repeats):
+    """(motions per second, first call's seconds) of ``pairs`` two-vehicle motions on ``device``."""
+    data = jax.device_put(bench_motion.vehicles(2 * pairs), device)
+    program = _motion_program(device)
+    t = time.perf_counter()
+    jax.block_until_ready(program(*data))
+    first = time.perf_counter() - t
+    return pairs / median_time(blocking(program, *data), repeats), first
+
+
+def _interaction_rate(points, device, repeats):
+    """(points per second, first call's seconds) of a sweep of ``tbone_spin_out.json`` over the pickup's speed
+    (``points`` points, the watched motion after the first exchange in every one) on ``device``."""
+    case = ks_jax.load_case(CASE.parent / "tbone_spin_out.json")
+    over = {"vehicles[0].speed": np.linspace(10.0, 20.0, points)}
+
+    def call():
+        return ks_jax.sweep(case, over, outputs=["vehicles[0].rest_position[0]"], devices=[device], keep=False,
+                            progress=False)
+
+    t = time.perf_counter()
+    call()
+    first = time.perf_counter() - t
+    return points / median_time(call, repeats), first
+
+
+def motions_to_rest(args, row):
+    """The motion section: motions to rest and a case with later exchanges, on the default device and the CPU."""
+    dev, cpu = jax.devices()[0], jax.devices("cpu")[0]
+    repeats = max(1, min(args.repeats, 3))
+    here, first = _motion_rate(args.motions, dev, repeats)
+    there, _ = (here, first) if dev == cpu and args.cpu_motions == args.motions else \
+        _motion_rate(args.cpu_motions, cpu, repeats)
+    row(f"motions to rest, {args.motions} two-vehicle, {MOTION_SECONDS:g} s, float64", f"{here:.3g} /s",
+        f"first call {first:.1f} s; the CPU ({args.cpu_motions} motions): {there:.3g} /s, ratio {here / there:.2f}")
+    here, first = _interaction_rate(args.interaction, dev, repeats)
+    cpu_points = min(args.interaction, 10 ** 3)
+    there, _ = (here, first) if dev == cpu and cpu_points == args.interaction else \
+        _interaction_rate(cpu_points, cpu, repeats)
+    row(f"sweep of tbone_spin_out.json (later exchanges), {args.interaction} points", f"{here:.3g} /s",
+        f"first call {first:.1f} s; the CPU ({cpu_points} points): {there:.3g} /s, ratio {here / there:.2f}")
+
+
 def main(argv=None):
     accel = jax.default_backend() != "cpu"
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -122,7 +191,12 @@ def main(argv=None):
                     help="a batch of this many reconstructions, the --fits cases repeated (0: none)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--profile", metavar="DIR", help="write compiled programs and kernel tables to DIR")
-    ap.add_argument("--only", default="kernel,batch,sweep,grad,fit", help="sections to run, comma-separated")
+    ap.add_argument("--motions", type=int, default=10 ** 6 if accel else 10 ** 4,
+                    help="two-vehicle motions to rest on the default device")
+    ap.add_argument("--cpu-motions", type=int, default=10 ** 4, help="the same on the host's CPU, for the ratio")
+    ap.add_argument("--interaction", type=int, default=10 ** 5 if accel else 10 ** 3,
+                    help="sweep points of a case with later exchanges on the default device (10^3 on the CPU)")
+    ap.add_argument("--only", default="kernel,batch,sweep,grad,fit,motion", help="sections to run, comma-separated")
     args = ap.parse_args(argv)
     only = set(args.only.split(","))
     dev = jax.devices()[0]
@@ -257,6 +331,8 @@ def main(argv=None):
             host = bench_fit.host_seconds(calls, many_call, repeats=1)
             row(f"reconstruct_batch, {args.many} x 8 starts (the {args.fits} repeated)", f"{args.many / wall:.3g} /s",
                 f"{wall:.2f} s; host work {host:.2f} s ({1e3 * host / args.many:.3f} ms per fit)")
+    if "motion" in only:
+        motions_to_rest(args, row)
     print(f"\n{dev.device_kind}, {date}\n| what | figure | note |\n|---|---|---|")
     print("\n".join(table))
 
