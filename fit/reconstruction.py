@@ -33,11 +33,11 @@ from .posterior import sampler
 from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .problem import predict, to_z
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
-from .rows import count_at_best, refit_block, run_rows, several_minima, stick_thresholds
+from .rows import EDGE, Row, count_at_best, edge_jacobians, refit_block, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .report import improbable_note, misfit_note, not_fitted_status, stalled_statement, status_note, unmoved_note
-from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, friction_bounded_below
+from .uncertainty import CHI2_Z, analyse_batch, chi2_quantile, default_rtol, friction_bounded_below, on_the_edge
 
 
 @dataclass
@@ -407,6 +407,18 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     info = analyse_batch(problem.unknowns, rows.x[fitted] + kept.x_offset, rows.jacobian[fitted],
                          len(problem.evidence), kept.lower, kept.upper, kept.prior_sigma, kept.pw,
                          rtol)
+    if "contact.friction" in problem.unknowns:  # fits that stick, on the edge of sliding
+        j = problem.unknowns.index("contact.friction")
+        needed = np.abs(rows.stick_ratio[fitted].astype(np.float64))
+        with np.errstate(invalid="ignore"):
+            edge = np.flatnonzero((rows.status[fitted] == OK) & ~rows.sliding[fitted].astype(bool)
+                                  & (needed * (1.0 - EDGE) > kept.lower[:, j]))
+        if edge.size:
+            on, x = kept.take(edge), rows.x[fitted][edge]
+            sides = edge_jacobians(problem, Row(on.inputs, *per_case(on)), x, needed[edge], smoothing, dtype)
+            stick, slide = (analyse_batch(problem.unknowns, x + on.x_offset, J, len(problem.evidence), on.lower,
+                                          on.upper, on.prior_sigma, on.pw, rtol) for J in sides)
+            on_the_edge(info, edge, stick, slide, j, needed[edge])
 
     def arrays_of(i):
         return arrays.row(i, case_inputs[i])

@@ -81,6 +81,13 @@ def direction_statement(paths, d, involved, prior_paths) -> str:
     return text
 
 
+def edge_statement(direction, needed) -> str:
+    """A ``direction_statement`` of the slide side of a contact that sticks at the estimate
+    (``uncertainty.on_the_edge``; ``needed``: the friction it needs to stick)."""
+    return (f"{direction}, where the contact slides at a friction just below the {needed:.3g} it needs to stick, "
+            "which fits the evidence as well as the estimate")
+
+
 def at_bound_statement(path, side, bound) -> str:
     return (f"{path} is at its {side} bound {fmt(bound, input_kind(path))}: the bound, not the evidence, sets it "
             "(its standard error ignores the bound)")

@@ -38,7 +38,11 @@ def whitened(problem: Problem, z, d: Row, smoothing):
     """The whitened residuals (m + n,) at the unconstrained unknowns z (n,) of row ``d``: the evidence's deviations
     in sigmas (angles wrapped), then the priors' (0 where none); and (predicted evidence (m,), the exchange's
     flags)."""
-    x = to_x(z, d.lo, d.hi)
+    return whitened_at(problem, to_x(z, d.lo, d.hi), d, smoothing)
+
+
+def whitened_at(problem: Problem, x, d: Row, smoothing):
+    """``whitened`` at the physical unknowns x (n,)."""
     pred, flags = predict(problem, d.inputs, x, smoothing)
     dev = jnp.stack([wrap(pred[k] - d.values[k], period) for k, (_, _, period) in enumerate(problem.evidence)])
     return jnp.concatenate([dev / d.sigmas, (x - d.pm) * d.pw]), (pred, flags)
@@ -119,6 +123,36 @@ def stick_thresholds(problem: Problem, inputs, x, smoothing, dtype):
     out = _stick_thresholds(problem, rows, jnp.asarray(pad(np.asarray(x, np.float64)), dtype),
                             jnp.asarray(smoothing, dtype))
     return np.asarray(out)[:B]
+
+
+EDGE = 0.01  # the slide side of a contact that sticks: friction this fraction below the friction it needs
+
+
+@partial(quick_jit, static_argnames=("problem",))
+def _edge_jacobians(problem: Problem, data: Row, x, needed, smoothing):
+    """(2, R, m + n, n): d(whitened residuals)/dx of each row at ``x`` with the friction raised to
+    ``STICKING_FRICTION`` (the stick side, where friction moves nothing), then with it ``EDGE`` below ``needed``
+    (R,), the friction the row's contact needs to stick (the slide side, where the contact just slides). One
+    vmapped Jacobian over both sides' rows."""
+    j = problem.unknowns.index("contact.friction")
+    both = jnp.concatenate([x.at[:, j].set(STICKING_FRICTION), x.at[:, j].set(needed * (1.0 - EDGE))])
+    twice = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, a]), data)
+    jac = jax.vmap(jax.jacfwd(lambda xi, d: whitened_at(problem, xi, d, smoothing)[0]))(both, twice)
+    return jac.reshape((2, len(x)) + jac.shape[1:])
+
+
+def edge_jacobians(problem: Problem, data: Row, x, needed, smoothing, dtype):
+    """``_edge_jacobians`` of the rows of ``data`` (a ``Row`` of B stacked cases) at ``x`` (B, n) and ``needed``
+    (B,), in one call, B padded to a power of two (at least 8) as in ``stick_thresholds``. NumPy (stick side,
+    slide side), each (B, m + n, n)."""
+    B = len(x)
+    size = max(8, 1 << (B - 1).bit_length())
+    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], size - B, axis=0)])  # noqa: E731
+    rows = jax.tree_util.tree_map(lambda a: jnp.asarray(pad(np.asarray(a, np.float64)), dtype), data)
+    out = _edge_jacobians(problem, rows, jnp.asarray(pad(np.asarray(x, np.float64)), dtype),
+                          jnp.asarray(pad(np.asarray(needed, np.float64)), dtype), jnp.asarray(smoothing, dtype))
+    out = np.asarray(out, np.float64)[:, :B]
+    return out[0], out[1]
 
 
 def best_start(cost, converged):

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .report import FRICTION_STATEMENT, NO_DERIVATIVES, at_bound_statement, direction_statement, friction_statement
-from .report import poorly_statement
+from .report import FRICTION_STATEMENT, NO_DERIVATIVES, at_bound_statement, direction_statement, edge_statement
+from .report import friction_statement, poorly_statement
 
 INVOLVED = 0.01
 AT_BOUND = 1e-4
@@ -100,11 +100,12 @@ class Analysis:
     poorly: np.ndarray
     statements: list
     at_bound: list
+    directions: list
 
     def row(self, i: int) -> Analysis:
         """Fit ``i``'s analysis (arrays are views: editing them edits the batch's)."""
         return Analysis(self.cov[i], self.std[i], self.corr[i], self.singular[i], self.undetermined[i],
-                        self.poorly[i], self.statements[i], self.at_bound[i])
+                        self.poorly[i], self.statements[i], self.at_bound[i], self.directions[i])
 
 
 def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: float) -> Analysis:
@@ -153,14 +154,16 @@ def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: 
     with np.errstate(invalid="ignore"):
         poorly = ~undetermined & np.isfinite(lo) & np.isfinite(hi) & (std > (hi - lo) / math.sqrt(12.0))
 
-    statements, at_bound = [[] for _ in range(B)], [[] for _ in range(B)]
+    statements, at_bound, directions = [[] for _ in range(B)], [[] for _ in range(B)], [[] for _ in range(B)]
     for i in np.flatnonzero(null.any(axis=1) & ~bad):
         basis = _rref_basis(Vt[i].T[:, null[i]])
         for v in basis.T:
             involved = np.abs(v) >= INVOLVED * np.max(np.abs(v))
             fixed_by_prior = not any(undetermined[i][involved])
             priors = [paths[j] for j in np.flatnonzero(involved) if pw[i, j] > 0] if fixed_by_prior else []
-            statements[i].append(direction_statement(paths, v * s_j[i], np.flatnonzero(involved).tolist(), priors))
+            text = direction_statement(paths, v * s_j[i], np.flatnonzero(involved).tolist(), priors)
+            statements[i].append(text)
+            directions[i].append((text, tuple(np.flatnonzero(involved).tolist())))
     for i in np.flatnonzero((at_lo | at_hi | poorly).any(axis=1) & ~bad):
         for j, path in enumerate(paths):
             for side, b, at in (("lower", lo[i, j], at_lo[i, j]), ("upper", hi[i, j], at_hi[i, j])):
@@ -174,7 +177,40 @@ def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: 
         undetermined[bad], poorly[bad] = True, False
         for i in np.flatnonzero(bad):
             statements[i] = [NO_DERIVATIVES]
-    return Analysis(cov, std, corr, sv_full, undetermined, poorly, statements, at_bound)
+    return Analysis(cov, std, corr, sv_full, undetermined, poorly, statements, at_bound, directions)
+
+
+def on_the_edge(analysis: Analysis, rows, stick: Analysis, slide: Analysis, j: int, needed):
+    """The rule for fits whose contact sticks at the estimate while the friction (unknown ``j``) is an unknown
+    (``rows``: their indices in ``analysis``; ``stick``, ``slide``: their analyses with the Jacobian taken on
+    either side of the edge of sticking, ``rows.edge_jacobians``; ``needed`` (K,): the friction each needs).
+
+    A sticking contact gives one exchange for every friction above the one it needs, and so, at that friction,
+    the contact that just slides gives the same exchange: the fit is as good there. Where the sliding exchange
+    does not see a direction the sticking one sees (for the delta-Vs and yaw rates of two cars: the restitution
+    and a centroid moved along the impulse's line trade against each other once the friction fixes the
+    impulse's direction), the evidence fits as well along that direction, on the side where the contact keeps
+    sliding, and so does not determine it. So: the stick side's analysis (free of the smoothing band's last
+    bits, where the exchange at the estimate may half slide), and every unknown that the slide side leaves
+    undetermined, but the friction (the friction rule's), is undetermined too, with the slide side's words.
+    Edits ``analysis``."""
+    for s_k, k in enumerate(np.asarray(rows).tolist()):
+        a, st, sl = analysis.row(k), stick.row(s_k), slide.row(s_k)
+        for name in ("cov", "std", "corr", "singular", "undetermined", "poorly"):
+            getattr(a, name)[...] = getattr(st, name)
+        newly = sl.undetermined & ~st.undetermined
+        newly[j] = False
+        added = [(text, inv) for text, inv in sl.directions if newly[list(inv)].any()]
+        analysis.statements[k] = list(st.statements) + [edge_statement(text, float(needed[s_k])) for text, _ in added]
+        analysis.directions[k] = list(st.directions) + added
+        if newly.any():
+            a.undetermined[newly] = True
+            a.poorly[newly] = False
+            a.std[newly] = np.inf
+            a.cov[newly, :] = np.inf
+            a.cov[:, newly] = np.inf
+            a.corr[newly, :] = np.nan
+            a.corr[:, newly] = np.nan
 
 
 NEAR_STICK = 2.0  # a sliding estimate within this many standard errors of sticking is bounded below only
