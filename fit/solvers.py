@@ -24,6 +24,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
+HIGHEST = jax.lax.Precision.HIGHEST  # the products of J at their dtype's full precision (``model.linalg.mm``)
+
 
 class SolveState(NamedTuple):
     z: jax.Array  # (R, n) final unconstrained parameters
@@ -56,7 +58,7 @@ def _cost(r):
 
 def gradient_test(J, r, cost, gtol, ctol):
     """(R,) bool: max_i |J_i . r| <= gtol |J_i| |r| for every column i, or cost <= ctol."""
-    g = jnp.einsum("...mn,...m->...n", J, r)
+    g = jnp.einsum("...mn,...m->...n", J, r, precision=HIGHEST)
     col = jnp.sqrt(jnp.sum(J * J, -2))
     rn = jnp.sqrt(2.0 * jnp.where(jnp.isfinite(cost), cost, 0.0))[..., None]
     return (jnp.all(jnp.abs(g) <= gtol * col * rn + 1e-30, -1) | (cost <= ctol)) & jnp.isfinite(cost)
@@ -119,8 +121,8 @@ def levenberg_marquardt(fun, z0, data, max_iter: int = 100, z_min=None, z_max=No
         aux = jax.tree_util.tree_map(pick, aux_t, s["aux"])
         cost = jnp.where(accept, c_t, s["cost"])
         done = s["done"] | (live & (gradient_test(J, r, cost, gtol, ctol) | stalled | (first & ~ok)))
-        g = jnp.einsum("rmn,rm->rn", J, r)
-        H = jnp.einsum("rmi,rmj->rij", J, J)
+        g = jnp.einsum("rmn,rm->rn", J, r, precision=HIGHEST)
+        H = jnp.einsum("rmi,rmj->rij", J, J, precision=HIGHEST)
         d = jnp.diagonal(H, axis1=1, axis2=2)
         d = jnp.maximum(d, 1e-9 * jnp.max(d, 1, keepdims=True) + jnp.finfo(dtype).tiny)
         A = H + lam[:, None, None] * (d[:, :, None] * jnp.eye(n, dtype=dtype))
@@ -128,7 +130,7 @@ def levenberg_marquardt(fun, z0, data, max_iter: int = 100, z_min=None, z_max=No
         dz = jnp.where(jnp.all(jnp.isfinite(dz), 1, keepdims=True), dz, 0.0)
         trial = jnp.clip(z + dz, z_min, z_max)
         dz = trial - z
-        predicted = -(jnp.sum(g * dz, 1) + 0.5 * jnp.einsum("ri,rij,rj->r", dz, H, dz))
+        predicted = -(jnp.sum(g * dz, 1) + 0.5 * jnp.einsum("ri,rij,rj->r", dz, H, dz, precision=HIGHEST))
         return {"z": z, "J": J, "r": r, "aux": aux, "cost": cost, "trial": trial, "predicted": predicted,
                 "lam": lam, "nu": nu, "done": done, "iterations": s["iterations"] + live.astype(jnp.int32),
                 "it": s["it"] + 1}

@@ -152,3 +152,47 @@ def _assert_close(a, b, where="json"):
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12), where
     else:
         assert a == b, where
+
+
+def _products_without_precision(source, name):
+    """Where source text multiplies arrays by ``@`` or calls matmul, dot, einsum or tensordot without a
+    ``precision``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult):
+            found.append(f"{name}:{node.lineno}: @")
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                node.func.attr in ("matmul", "dot", "einsum", "tensordot") and \
+                isinstance(node.func.value, ast.Name) and node.func.value.id == "jnp" and \
+                "precision" not in {k.arg for k in node.keywords}:
+            found.append(f"{name}:{node.lineno}: jnp.{node.func.attr}")
+    return found
+
+
+def test_every_product_of_arrays_asks_for_its_dtypes_full_precision():
+    """An accelerator may compute a float32 matrix product in TF32 (a 10-bit mantissa) unless asked otherwise: the
+    physics and the fit's solver multiply arrays only through ``linalg.mm`` or with an explicit precision."""
+    files = sorted(MODEL.rglob("*.py")) + [Path(ks_jax.__file__).parents[1] / "fit" / "solvers.py"]
+    assert len(files) > 15
+    assert [f for path in files for f in _products_without_precision(path.read_text(), path.name)] == []
+    caught = _products_without_precision("a @ b\njnp.einsum('ij,j', a, b)\njnp.dot(a, b, precision=p)", "s")
+    assert caught == ["s:1: @", "s:2: jnp.einsum"]
+
+
+@pytest.mark.slow
+def test_a_solve_lowered_for_a_gpu_asks_every_product_for_full_precision():
+    """The solves of a case with automatic contact, a later exchange and motion to rest (tbone_spin_out.json) and
+    of an articulated one (docs/examples/semi_trailer_side_impact.json), lowered for a GPU from this machine:
+    every dot_general of their programs carries the highest precision."""
+    examples = Path(ks_jax.__file__).parents[1] / "docs" / "examples"
+    for path in (CASES / "tbone_spin_out.json", examples / "semi_trailer_side_impact.json"):
+        case = ks_jax.load_case(path)
+        case = case[0] if isinstance(case, list) else case
+        rows = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], case.inputs)
+        program = jax.jit(functools.partial(solve_cases._solve_rows, auto_point=case.auto_point,
+                                            auto_normal=case.auto_normal, smoothing=0.0, pole=case.pole,
+                                            motion=case.motion, between=case.between, plan=Plan("accelerator")))
+        text = export.export(program, platforms=["cuda"])(rows).mlir_module()
+        dots = [line for line in text.splitlines() if "stablehlo.dot_general" in line]
+        assert dots, path.name
+        assert all("precision = [HIGHEST, HIGHEST]" in line for line in dots), (path.name, dots[:3])

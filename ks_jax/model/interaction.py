@@ -216,7 +216,7 @@ def _material(point, s):
 
 def _closing(point, normal, s1, s2):
     """u_n: the relative velocity of body 1 over body 2 at ``point`` along ``normal``."""
-    return normal @ (_material(point, s1) - _material(point, s2))
+    return la.mm(normal, _material(point, s1) - _material(point, s2))
 
 
 def _by_kind(pairs, poles):
@@ -371,8 +371,8 @@ def _impulse(vehicle1, state1, vehicle2, state2, contact, smoothing):
     r1, r2 = la.array(found.r1), la.array(found.r2)
     v1 = state1.velocity + j / vehicle1.mass
     v2 = state2.velocity - j / vehicle2.mass  # 1 / inf = 0: a fixed object does not move
-    w1 = state1.angular_velocity + a1 @ la.cross(r1, j)
-    w2 = state2.angular_velocity - a2 @ la.cross(r2, j)
+    w1 = state1.angular_velocity + la.mm(a1, la.cross(r1, j))
+    w2 = state2.angular_velocity - la.mm(a2, la.cross(r2, j))
     ok = found.approaching & jnp.all(jnp.isfinite(j))
     return ok, jnp.stack([v1, v2]), jnp.stack([w1, w2])
 

@@ -93,12 +93,12 @@ def _solve(r_t, r_w, inv_t, inv_w, error, limited):
     """The generalized impulse (3,) that takes ``error`` (3,) (the hitch's relative velocity or gap, and the
     articulation's) to zero, with the third row only where ``limited``: K^-1 (-error), K of the module's docstring."""
     a_t, a_w = _rows(r_t), _rows(r_w)
-    k = a_t @ (inv_t[:, None] * a_t.T) + a_w @ (inv_w[:, None] * a_w.T)
+    k = la.mm(a_t, inv_t[:, None] * a_t.T) + la.mm(a_w, inv_w[:, None] * a_w.T)
     unit = jnp.eye(3, dtype=k.dtype)
     keep = jnp.stack([jnp.ones_like(limited), jnp.ones_like(limited), limited])
     k = jnp.where(keep[:, None] & keep[None, :], k, unit)
     rhs = jnp.where(keep, -error, 0.0)
-    return la.adjugate3(k) @ rhs / la.det3(k)
+    return la.mm(la.adjugate3(k), rhs) / la.det3(k)
 
 
 def _limit(state_t: Planar, state_w: Planar, hitch: Hitch):

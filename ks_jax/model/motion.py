@@ -396,8 +396,8 @@ def _integration_adjoint(b: Body, sv: _Saved, ct: Carry, dt):
     m = jnp.stack([b.mass, b.mass, b.izz])
     a_pos, a_yaw = ct.state.position, ct.state.yaw
     # the new time, distance, position and yaw: t + h, d + h |v_mean|, p + h v_mean, yaw + h (r + r') / 2
-    speed = sv.v_mean @ (sv.v_mean * sv.inv_v_mean)
-    a_h = ct.time + ct.distance * speed + a_pos @ sv.v_mean + a_yaw * 0.5 * (r + sv.new_yaw_rate)
+    speed = la.mm(sv.v_mean, sv.v_mean * sv.inv_v_mean)
+    a_h = ct.time + ct.distance * speed + la.mm(a_pos, sv.v_mean) + a_yaw * 0.5 * (r + sv.new_yaw_rate)
     a_vmean = h * a_pos + ct.distance * h * sv.v_mean * sv.inv_v_mean
     a_qnew = jnp.concatenate([ct.state.velocity + 0.5 * a_vmean, (ct.state.yaw_rate + 0.5 * h * a_yaw)[None]])
     a_velocity = 0.5 * a_vmean
@@ -405,9 +405,9 @@ def _integration_adjoint(b: Body, sv: _Saved, ct: Carry, dt):
     # the new acceleration scale (fu, fv) / m and the new velocities q + scale dq, where still moving
     a_acc = jnp.where(moving, ct.accel, 0.0)
     a_qnew = jnp.where(moving, a_qnew, 0.0)
-    a_scale = a_acc @ sv.force[:2] / b.mass + a_qnew @ sv.dq
+    a_scale = la.mm(a_acc, sv.force[:2]) / b.mass + la.mm(a_qnew, sv.dq)
     a_fu, a_fv = a_acc[0] * scale / b.mass, a_acc[1] * scale / b.mass
-    a_mass = -(a_acc @ sv.force[:2]) * scale / (b.mass * b.mass)
+    a_mass = -la.mm(a_acc, sv.force[:2]) * scale / (b.mass * b.mass)
     a_q = a_qnew
     a_dq = a_qnew * scale
     # phi: 1 or 0 where 2 E >= P dt, else 2 E / (P dt); h = phi dt

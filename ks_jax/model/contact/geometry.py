@@ -59,8 +59,8 @@ def edge_normals(yaw1, yaw2):
 def penetrations(corners1, corners2, axes):
     """(8,) overlap of the projections on each axis, for vehicle 1 on the + side of vehicle 2
     (first 4) and on the - side (last 4). All >= 0 iff the footprints touch."""
-    p1 = corners1 @ axes.T  # (4 corners, 4 axes)
-    p2 = corners2 @ axes.T
+    p1 = la.mm(corners1, axes.T)  # (4 corners, 4 axes)
+    p2 = la.mm(corners2, axes.T)
     plus = jnp.max(p2, 0) - jnp.min(p1, 0)
     minus = jnp.max(p1, 0) - jnp.min(p2, 0)
     return jnp.concatenate([plus, minus])
@@ -142,7 +142,7 @@ def clip(poly, count, a, b):
     keep = jnp.stack([valid & in0, crossing], 1).reshape(2 * size)
     pos = jnp.cumsum(keep) - 1
     onehot = ((pos[:, None] == jnp.arange(size)[None, :]) & keep[:, None]).astype(poly.dtype)
-    return onehot.T @ cand, jnp.minimum(jnp.sum(keep), size).astype(jnp.int32)
+    return la.mm(onehot.T, cand), jnp.minimum(jnp.sum(keep), size).astype(jnp.int32)
 
 
 def polygon_area_centroid(poly, count):

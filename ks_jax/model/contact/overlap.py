@@ -136,7 +136,7 @@ def outline_crossings(corners1, corners2, tol=0.0):
 def _first_two(points, mask):
     pos = jnp.cumsum(mask) - 1
     sel = ((pos[:, None] == jnp.arange(2)[None, :]) & mask[:, None]).astype(points.dtype)
-    return sel.T @ points
+    return la.mm(sel.T, points)
 
 
 # the axis (index into ``edge_normals``' rows) perpendicular to each edge of a footprint, edges as
@@ -170,8 +170,8 @@ def _manifold_point(corners1, corners2, n, tol):
     """Middle of the touching features along the axis ``n`` (from 2 into 1): vehicle 1's
     support toward -n, vehicle 2's toward +n, overlapped along the tangent."""
     t = jnp.stack([-n[1], n[0]])
-    p1n, p2n = corners1 @ n, corners2 @ n
-    p1t, p2t = corners1 @ t, corners2 @ t
+    p1n, p2n = la.mm(corners1, n), la.mm(corners2, n)
+    p1t, p2t = la.mm(corners1, t), la.mm(corners2, t)
     lo1, hi2 = jnp.min(p1n), jnp.max(p2n)
     s1 = p1n <= lo1 + tol
     s2 = p2n >= hi2 - tol
@@ -205,7 +205,7 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touche
     normals = edge_normals(state1.yaw, state2.yaw)
     axis, facing = _plane_axis(mask, normals, n_sat if touched is None else normals[touched])
     toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
-    side = jnp.where(axis @ toward1 != 0, axis @ toward1, axis @ n_sat)
+    side = jnp.where(la.mm(axis, toward1) != 0, la.mm(axis, toward1), la.mm(axis, n_sat))
     axis = jnp.where(side < 0, -axis, axis)
     n2 = jnp.where(crossing_ok, axis, n_sat)
 

@@ -48,7 +48,7 @@ def _translation_contact(vehicle1, state1, vehicle2, state2):
     c2 = footprint_at(vehicle2, state2, 0.0)
     axes = edge_normals(state1.yaw, state2.yaw)
     f = penetrations(c1, c2, axes)
-    rate = axes @ (state1.velocity[:2] - state2.velocity[:2])  # d/dt of vehicle 1's projections
+    rate = la.mm(axes, state1.velocity[:2] - state2.velocity[:2])  # d/dt of vehicle 1's projections
     g = jnp.concatenate([-rate, rate])
     root = la.safe_div(-f, g)
     big = jnp.asarray(1e30, f.dtype)
