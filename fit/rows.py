@@ -112,17 +112,25 @@ def _stick_thresholds(problem: Problem, inputs, x, smoothing):
     return jnp.where((status == OK) & ~sliding, ratio, jnp.nan)
 
 
+def _padded(trees, dtype):
+    """Every leaf of ``trees`` (each with a leading axis of B rows) as a ``dtype`` array whose rows are padded, by
+    repeating the last, to a power of two (at least 8): so that batches of other sizes run the program already
+    compiled."""
+    B = len(jax.tree_util.tree_leaves(trees)[0])
+    size = max(8, 1 << (B - 1).bit_length())
+
+    def pad(a):
+        a = np.asarray(a, np.float64)
+        return jnp.asarray(np.concatenate([a, np.repeat(a[-1:], size - B, axis=0)]), dtype)
+
+    return jax.tree_util.tree_map(pad, trees)
+
+
 def stick_thresholds(problem: Problem, inputs, x, smoothing, dtype):
     """``_stick_thresholds`` of the rows of ``inputs`` (stacked CaseInputs [B]) at ``x`` (B, n), in one call
-    (a call per case would wait on the device once per case): B padded to a power of two (at least 8), so
-    that batches of other sizes run the program already compiled. NumPy (B,)."""
-    B = len(x)
-    size = max(8, 1 << (B - 1).bit_length())
-    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], size - B, axis=0)])  # noqa: E731
-    rows = jax.tree_util.tree_map(lambda a: jnp.asarray(pad(np.asarray(a, np.float64)), dtype), inputs)
-    out = _stick_thresholds(problem, rows, jnp.asarray(pad(np.asarray(x, np.float64)), dtype),
-                            jnp.asarray(smoothing, dtype))
-    return np.asarray(out)[:B]
+    (a call per case would wait on the device once per case), padded (``_padded``). NumPy (B,)."""
+    rows, x_rows = _padded((inputs, x), dtype)
+    return np.asarray(_stick_thresholds(problem, rows, x_rows, jnp.asarray(smoothing, dtype)))[:len(x)]
 
 
 EDGE = 0.01  # the slide side of a contact that sticks: friction this fraction below the friction it needs
@@ -143,15 +151,9 @@ def _edge_jacobians(problem: Problem, data: Row, x, needed, smoothing):
 
 def edge_jacobians(problem: Problem, data: Row, x, needed, smoothing, dtype):
     """``_edge_jacobians`` of the rows of ``data`` (a ``Row`` of B stacked cases) at ``x`` (B, n) and ``needed``
-    (B,), in one call, B padded to a power of two (at least 8) as in ``stick_thresholds``. NumPy (stick side,
-    slide side), each (B, m + n, n)."""
-    B = len(x)
-    size = max(8, 1 << (B - 1).bit_length())
-    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], size - B, axis=0)])  # noqa: E731
-    rows = jax.tree_util.tree_map(lambda a: jnp.asarray(pad(np.asarray(a, np.float64)), dtype), data)
-    out = _edge_jacobians(problem, rows, jnp.asarray(pad(np.asarray(x, np.float64)), dtype),
-                          jnp.asarray(pad(np.asarray(needed, np.float64)), dtype), jnp.asarray(smoothing, dtype))
-    out = np.asarray(out, np.float64)[:, :B]
+    (B,), in one call, padded (``_padded``). NumPy (stick side, slide side), each (B, m + n, n)."""
+    out = _edge_jacobians(problem, *_padded((data, x, needed), dtype), jnp.asarray(smoothing, dtype))
+    out = np.asarray(out, np.float64)[:, :len(x)]
     return out[0], out[1]
 
 

@@ -205,7 +205,8 @@ def contact_geometry(vehicle1, state1, vehicle2, state2, coordinates=0.0, touche
     normals = edge_normals(state1.yaw, state2.yaw)
     axis, facing = _plane_axis(mask, normals, n_sat if touched is None else normals[touched])
     toward1 = jnp.mean(c1, 0) - jnp.mean(c2, 0)  # footprint 2's centre -> footprint 1's
-    side = jnp.where(la.mm(axis, toward1) != 0, la.mm(axis, toward1), la.mm(axis, n_sat))
+    along = la.mm(axis, toward1)
+    side = jnp.where(along != 0, along, la.mm(axis, n_sat))
     axis = jnp.where(side < 0, -axis, axis)
     n2 = jnp.where(crossing_ok, axis, n_sat)
 
