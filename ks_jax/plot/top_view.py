@@ -4,9 +4,9 @@ and, for a case with a road, each vehicle's motion from the exchange to rest.
 matplotlib is imported only inside the functions (it is the ``plot`` extra). The contact is drawn in NumPy
 from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprints move freely from the case
 state (docs/model.md, "Automatic contact", as ``ks_jax.model.contact`` moves them), so a case without a
-road needs no JAX call. The motion to rest is the one thing the results do not hold step by step: for a case
-with a road, ``ks_jax.solve.cases.trajectories`` solves the case once more, keeping every step of it (the paths to
-rest, and the approaches' paths before the impact).
+road needs no JAX call. The motion to rest and the approach are drawn step by step: ``solve`` keeps every step of
+a case with a road, and ``ks_jax.solve.cases.trajectories`` reads those paths (or, for a case solved without them,
+solves it once more keeping them).
 
 A case has 1 to 8 vehicles and 0 to 8 fixed objects (its bodies: ``case.inputs.vehicles``, the vehicles and then
 the objects); its first exchange is between two of them, ``case.between`` (its vehicle 1, and its vehicle 2, a
@@ -518,7 +518,7 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
         ax.text(0.02, 0.02, "no contact within the search horizon", transform=ax.transAxes, fontsize=8)
     paths = None
     if solution.result.rest is not None or solution.result.approach is not None:
-        paths = trajectories(solution)  # the case solved once more, every step kept: None without a road
+        paths = trajectories(solution)  # every step of the motions: None without a road
     if solution.result.rest is not None and paths is not None:
         _draw_motion_to_rest(ax, solution, scene.count, paths.rest)
     if solution.result.approach is not None and paths is not None and paths.approach is not None:
@@ -531,8 +531,8 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
 
 
 def _draw_motion_to_rest(ax, solution, count, paths):
-    """The path of each of the ``count`` vehicles from the exchange to rest (``paths``: ``Trajectories.rest``, the
-    case solved once more, every step kept): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly
+    """The path of each of the ``count`` vehicles from the exchange to rest (``paths``: ``Trajectories.rest``, every
+    step of the motion): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly
     spaced in time (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
     results (``rest_position``, ``rest_yaw``) where the path's last step is."""
     from matplotlib.patches import Polygon
@@ -567,7 +567,7 @@ def _draw_motion_to_rest(ax, solution, count, paths):
 
 def _draw_approaches(ax, solution, scene, paths):
     """Each vehicle's approach (``solution.result.approach``; ``paths``: ``Trajectories.approach``, its CG's path,
-    the case solved once more, every step kept), drawn as the start of its trajectory: the CG's path from the
+    every step), drawn as the start of its trajectory: the CG's path from the
     approach's start to the impact (dashed, as thin as its path to rest, which goes on from the exchange; with
     automatic contact the free motion from the case state to the CG at the first exchange, ``scene.cgs``, is added,
     so that the two join), a small open circle at the start of each phase (its position in the results) with the

@@ -23,6 +23,7 @@ from ks_jax import plot
 from ks_jax import units as U
 from ks_jax.cli.fit import case_at_estimate
 from ks_jax.plot.top_view import _draw_measured_rest
+from ks_jax.solve import cases as solve_cases
 from ks_jax.solve import motion_paths
 
 pytestmark = pytest.mark.slow  # every test draws the module fixture's solved motion to rest: compiling it is slow
@@ -176,6 +177,29 @@ def test_save_top_view_takes_one_evidence_per_panel(drawn, tmp_path):
     sol, _, _ = drawn
     with pytest.raises(ValueError, match="one mapping for all, or one per solution"):
         plot.save_top_view([sol, sol], tmp_path / "two.png", evidence=[MEASURED])
+
+
+def test_the_paths_drawn_are_the_ones_solve_kept_and_a_solve_without_them_gives_the_same(drawn, monkeypatch):
+    """``solve`` keeps a road case's paths, so its top view solves nothing more (and compiles no second program). A
+    group whose paths would take more than ``PATH_BYTES`` is solved without them: the same numbers, and its picture
+    solves it once more for the same paths, which end at the rest positions that the solve without them found."""
+    sol, paths, _ = drawn
+    assert all(r.path is not None for r in sol.result.rest)
+    calls = []
+    solve = solve_cases.solve
+    monkeypatch.setattr(solve_cases, "solve", lambda case: calls.append(case.motion) or solve(case))
+    for a, b in zip(motion_paths(sol), paths):
+        np.testing.assert_array_equal(a, b)
+    assert calls == []
+
+    monkeypatch.setattr(solve_cases, "PATH_BYTES", 0)
+    bare = solve(sol.case)
+    assert all(r.path is None for r in bare.result.rest) and bare.to_dict() == sol.to_dict()
+    again = motion_paths(bare)
+    assert [m.path for m in calls] == [True]
+    for a, b, rest in zip(again, paths, bare.result.rest):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a[-1, 1:3], np.asarray(rest.rest_position)[:2])
 
 
 def test_fit_plot_solves_the_case_at_the_estimate(drawn):
