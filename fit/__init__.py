@@ -19,7 +19,8 @@ the others a Latin hypercube within the bounds), vmapped in one compiled call, t
 two starts reach the best fit, or its chi^2 is improbable, more rounds of starts follow (``max_starts``).
 ``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
 
-The package: ``problem`` (unknowns, evidence, the residual vector), ``solvers`` (Levenberg-Marquardt, optax),
+The package: ``spec`` (unknowns and evidence, read and checked), ``problem`` (what a fit compiles: the
+residual vector), ``solvers`` (Levenberg-Marquardt, optax),
 ``rows`` (the compiled solver over cases x starts), ``starts``, ``rounds`` (more rounds of starts where a fit
 needs them), ``reconstruction`` (``reconstruct`` and what a fit says), ``uncertainty``, ``monte_carlo``, ``report``
 (the text report), ``synthetic`` (cases with known truth).
@@ -33,7 +34,8 @@ scaled Jacobian, in words, with std = inf (null in JSON) for those unknowns rath
 confident number; ``at_bound``: unknowns pinned at a bound.
 """
 
-from .problem import Evidence, Problem, Unknown, parse_evidence, parse_unknowns
+from .problem import Problem
+from .spec import Evidence, Unknown, parse_evidence, parse_unknowns
 from .reconstruction import FitResult, reconstruct, reconstruct_batch
 
 __all__ = ["Evidence", "FitResult", "Problem", "Unknown", "parse_evidence", "parse_unknowns", "reconstruct",

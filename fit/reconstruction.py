@@ -30,8 +30,8 @@ from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
 from .posterior import sampler
-from .problem import PathChecks, Problem, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
-from .problem import predict, to_z
+from .problem import Problem, predict, to_z
+from .spec import PathChecks, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
 from .rows import EDGE, Row, count_at_best, edge_jacobians, refit_block, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS

@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 
 import fit
-import fit.problem
+import fit.spec
 import ks_jax
 from fit.synthetic import oblique_case
 from ks_jax import units as U
@@ -359,8 +359,8 @@ def test_every_field_of_a_case_with_any_hostile_value_is_read_or_refused():
                 assert all(np.all(np.isfinite(x)) for x in leaves), (path, value)
                 if "unknowns" in d:
                     try:
-                        fit.problem.parse_unknowns(case, d["unknowns"])
-                        fit.problem.parse_evidence(case, d["evidence"])
+                        fit.spec.parse_unknowns(case, d["unknowns"])
+                        fit.spec.parse_evidence(case, d["evidence"])
                     except CaseError:
                         pass
 

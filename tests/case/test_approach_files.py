@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fit.problem import evidence_kind, unknown_path
+from fit.spec import evidence_kind, unknown_path
 from ks_jax import units as U
 from ks_jax.case import CaseError, CaseWarning, PathError, case_from_dict, cases_from_data, check_output_path
 from ks_jax.case import get_output, output_kind, parse_path, path_key, without_approach

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fit.problem import evidence_kind, unknown_path
+from fit.spec import evidence_kind, unknown_path
 from ks_jax import units as U
 from ks_jax.case import CaseError, CaseWarning, PathError, as_arrays, case_from_dict, cases_from_data, follow_tows
 from ks_jax.case import follows_tow, get_input, input_ties, load_cases, path_key, set_input

@@ -1,5 +1,5 @@
 """The host's part of a batch of fits, in NumPy over all the batch's fits at once: the checks of the unknowns and
-evidence (``fit.problem.check_batch``), the starts (``fit.starts``), the Laplace analysis
+evidence (``fit.spec.check_batch``), the starts (``fit.starts``), the Laplace analysis
 (``fit.uncertainty.analyse_batch``) and the size of a further round's calls. Each is checked against what it must
 be for every fit of the batch on its own: each case checked alone, the Latin hypercube's strata, the closed-form
 covariance (J^T J)^-1, and each fit analysed alone."""
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fit
-from fit.problem import PathChecks, check_batch, make_problem, parse_evidence, parse_unknowns
+from fit.spec import PathChecks, check_batch, make_problem, parse_evidence, parse_unknowns
 from fit.rounds import MORE_BLOCKS, more_block
 from fit.starts import START_SPREAD, starts
 from fit.uncertainty import analyse_batch
