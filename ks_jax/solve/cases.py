@@ -4,8 +4,8 @@ picture.
 
 A group of cases with a road is solved keeping every step of its motions (``case.Motion.path``) where those paths are
 small (``PATH_BYTES``): the top view draws them, so the numbers and the picture of a file come from one compiled
-program. Solving again for the picture compiled a second program as large as the first (a watched motion's program
-is most of a ``solve``'s time), and the kept steps add little to a run."""
+program: solving again for the picture would compile a second program as large as the first (a watched motion's
+program is most of a ``solve``'s time), while the kept steps add little to a run."""
 
 from __future__ import annotations
 
