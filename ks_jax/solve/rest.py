@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 
 from ..case import CaseInputs, Motion
-from ..model.interaction import Bodies, Watch, interact, pairs_of
+from ..model.interaction import Bodies, Watch, interact
+from ..model.pairs import pairs_of
 from ..model.joint import Hitch, carried
 from ..model.approach import Phases, approach, state_at
 from ..model.motion import MAX_FRICTION, Chassis, Planar, Wheels, body

@@ -10,7 +10,7 @@ import jax
 import numpy as np
 
 from ..case import CUMULATIVE_OUTPUTS, Case, defined_output, undefined_kind
-from ..model.interaction import pairs_of
+from ..model.pairs import pairs_of
 from ..model.types import ContactResult, ExchangeResult, VehicleResult, status_text
 from .crush import crush_results
 

@@ -23,7 +23,8 @@ import pytest
 
 from ks_jax.model import motion as M
 from ks_jax.model.contact import advance, automatic_exchange, disc_gap, first_contact, separation
-from ks_jax.model.interaction import APPROACH_TOLERANCE, Bodies, Interactions, Watch, interact, pairs_of
+from ks_jax.model.interaction import APPROACH_TOLERANCE, Bodies, Interactions, Watch, interact
+from ks_jax.model.pairs import pairs_of
 from ks_jax.model.types import Contact, State, Vehicle
 from samples import reference_jit
 
