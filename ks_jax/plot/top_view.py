@@ -6,11 +6,13 @@ from a ``ks_jax.solve.Solution`` (its case inputs and its results): the footprin
 state (docs/model.md, "Automatic contact", as ``ks_jax.model.contact`` moves them), so a case without a
 road needs no JAX call. The motion to rest and the approach are drawn step by step: ``solve`` keeps every step of
 a case with a road, and ``ks_jax.solve.cases.trajectories`` reads those paths (or, for a case solved without them,
-solves it once more keeping them).
+solves it once more keeping them). The contact and the exchanges are drawn here; each vehicle's way (its approach,
+path to rest, hitches and measured rest) by ``plot.trajectory``, every footprint by ``plot.outline``.
 
 A case has 1 to 8 vehicles and 0 to 8 fixed objects (its bodies: ``case.inputs.vehicles``, the vehicles and then
 the objects); its first exchange is between two of them, ``case.between`` (its vehicle 1, and its vehicle 2, a
-vehicle or a fixed object). Each vehicle has its own colour (``COLORS``, by its index) and its name in the legend.
+vehicle or a fixed object). Each vehicle has its own colour (``outline.COLORS``, by its index) and its name in the
+legend.
 What the top view draws (global frame, metres; a second axis in feet):
 - every vehicle's outline at first contact t_i (dashed; automatic contact only) and at the first exchange (solid),
   the front face thicker; every fixed object as what it is (a wall as its hatched face, a pole as its circle, a
@@ -23,8 +25,8 @@ What the top view draws (global frame, metres; a second axis in feet):
 - whether the contact slides (the impulse on the cone's edge, |T| = mu N: that edge drawn dashed
   beyond the wedge) or sticks (inside the cone), in the title and the legend;
 - where the case has a road (``solution.result.rest`` is not None), each vehicle's motion from the exchange to
-  rest: its CG's path (a thin line), its outline at ``PATH_OUTLINES`` instants evenly spaced in time along the
-  way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
+  rest: its CG's path (a thin line), its outline at ``trajectory.PATH_OUTLINES`` instants evenly spaced in time
+  along the way (thin, faded: they bunch up where it slows down), and its outline at rest (solid, lightly filled, with a
   dot at its CG; "at rest" in the legend, or "at the time limit" for one that had not stopped by then);
 - where a vehicle has an approach (docs/model.md, "The approach"; ``solution.result.approach``), its CG's path from
   the approach's start to the impact (dashed, thin: the same trajectory as its path to rest, before the impact; with
@@ -72,20 +74,19 @@ import numpy as np
 
 from .. import units as U
 from ..case import CaseInputs, impulse_exchanged, visible, visible_lines
-from ..case.paths import canonical_path
 from ..model.types import ExchangeResult
 from ..solve.cases import trajectories
 from .crush_profile import draw_profiles
+from .outline import clip_polygon, draw_footprint, footprint_box, vehicle_color
+from .trajectory import draw_approaches, draw_hitches, draw_measured_rest, draw_motion_to_rest
 from .text import wrap_to_width
 
 # one colour per vehicle, by its index (a case has at most 8): tab10 without the red, cyan and grey that draw the
 # contact (plane, normal, cone) and the fixed objects, and magenta for the eighth (not the navy of a sliding contact's
 # cone edge, nor the black of the centroids)
-COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "magenta")
 IMPULSE_LENGTH = 0.4  # the longest impulse arrow, in units of the larger vehicle's length or width
 VELOCITY_LENGTH = 0.5  # the longest velocity arrow, likewise
 ROUND_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # of a scale, times a power of ten
-PATH_OUTLINES = 8  # outlines drawn on the way from the exchange to rest, between the two drawn solid
 LEGEND_SIZE = 6.5  # points, the legend's font
 TITLE_SIZE = 9.0  # points, the title's font
 TWO_COLUMNS = 420.0  # points: an axes at least this wide has its legend in two columns
@@ -93,7 +94,6 @@ PANEL_WIDTH = 8.5  # inches, one panel of ``save_top_view``
 PLOT_HEIGHT = 7.2  # inches of a panel above its legend: the axes, its labels and a two-line title
 LATER_SHARE = 0.05  # a later exchange is numbered and drawn whole where its impulse is this share of the largest
 LATER_NORMAL = 0.25  # a later exchange's normal arrow, in units of the larger vehicle's length or width
-PHASE_LABEL = 7.0  # points from a phase's start marker to its time's text, across the vehicle's heading
 
 
 def round_scale(x):
@@ -127,39 +127,6 @@ def _legend(ax, offset):
                      bbox_transform=below, ncol=ncol, frameon=False)
 
 
-def _box(length, width, cg_to_front, xy, yaw):
-    a, b, h = cg_to_front - length, cg_to_front, 0.5 * width
-    body = np.array([[a, -h], [b, -h], [b, h], [a, h]])
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.asarray(xy)[:2] + body @ np.array([[c, s], [-s, c]])
-
-
-def clip_polygon(subject, clip):
-    """Sutherland-Hodgman in NumPy: convex ``subject`` (k, 2) clipped by the counter-clockwise
-    convex polygon ``clip`` (m, 2). Returns (j, 2) (j may be 0)."""
-    out = [np.asarray(p, float) for p in subject]
-    for i in range(len(clip)):
-        a, b = np.asarray(clip[i], float), np.asarray(clip[(i + 1) % len(clip)], float)
-        e = b - a
-        side = lambda p: e[0] * (p[1] - a[1]) - e[1] * (p[0] - a[0])  # noqa: E731
-        pts, out = out, []
-        for k, p in enumerate(pts):
-            q = pts[(k + 1) % len(pts)]
-            dp, dq = side(p), side(q)
-            if dp >= 0:
-                out.append(p)
-            if (dp >= 0) != (dq >= 0):
-                out.append(p + dp / (dp - dq) * (q - p))
-        if not out:
-            break
-    return np.array(out).reshape(-1, 2)
-
-
-def vehicle_color(i):
-    """Vehicle ``i``'s colour (``COLORS``; a case has at most as many vehicles as there are colours)."""
-    return COLORS[i % len(COLORS)]
-
-
 def _vehicle_boxes(inputs, t):
     """Footprint corners of every body after free motion for ``t`` s (a fixed object, at rest, stays where it is),
     their CGs (2,) and their yaws (rad)."""
@@ -168,17 +135,10 @@ def _vehicle_boxes(inputs, t):
         vel = float(v.speed) * np.array([math.cos(float(v.course)), math.sin(float(v.course))])
         xy = np.asarray(v.position, float)[:2] + vel * t
         yaw = float(v.yaw) + float(np.asarray(v.angular_velocity)[2]) * t
-        boxes.append(_box(float(v.length), float(v.width), float(v.cg_to_front), xy, yaw))
+        boxes.append(footprint_box(float(v.length), float(v.width), float(v.cg_to_front), xy, yaw))
         cgs.append(xy)
         yaws.append(yaw)
     return boxes, cgs, yaws
-
-
-def _draw_box(ax, corners, color, style, label=None, alpha=1.0, lw=1.4, gid=None):
-    """A footprint: its closed outline (``gid`` on it) and its front face (corners 1-2) drawn thicker."""
-    closed = np.vstack([corners, corners[:1]])
-    ax.plot(closed[:, 0], closed[:, 1], style, color=color, lw=lw, label=label, alpha=alpha, gid=gid)
-    ax.plot(corners[1:3, 0], corners[1:3, 1], style, color=color, lw=lw * 15 / 7, alpha=alpha)  # front face
 
 
 def _arrow(ax, tip, tail, props, **kw):
@@ -253,14 +213,14 @@ def _draw_outlines(ax, solution, names, exchanges):
     if auto and not no_contact:
         first, _, _ = _vehicle_boxes(inputs, t_i)
         for i in range(count):
-            _draw_box(ax, first[i], vehicle_color(i), "--", alpha=0.6, gid=f"first-contact-outline-{i}",
-                      label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
+            draw_footprint(ax, first[i], vehicle_color(i), "--", alpha=0.6, gid=f"first-contact-outline-{i}",
+                           label=f"{names[i]} at first contact, t_i = {t_i:.4f} s")
     boxes, cgs, yaws = _vehicle_boxes(inputs, t_x)
     exchange = "the first exchange" if many else "the exchange"
     when = ("at the case state (no contact)" if no_contact else f"at {exchange}, t = {t_x:.4f} s" if auto
             else "at the case state (explicit contact)")
     for i in range(count):
-        _draw_box(ax, boxes[i], vehicle_color(i), "-", label=f"{names[i]} {when}", gid=f"outline-{i}")
+        draw_footprint(ax, boxes[i], vehicle_color(i), "-", label=f"{names[i]} {when}", gid=f"outline-{i}")
     extent = max(max(float(v.length), float(v.width)) for v in inputs.vehicles[:count])
     for k, obj in enumerate(case.fixed):
         b = count + k
@@ -520,145 +480,14 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     if solution.result.rest is not None or solution.result.approach is not None:
         paths = trajectories(solution)  # every step of the motions: None without a road
     if solution.result.rest is not None and paths is not None:
-        _draw_motion_to_rest(ax, solution, scene.count, paths.rest)
+        draw_motion_to_rest(ax, solution, scene.count, paths.rest)
     if solution.result.approach is not None and paths is not None and paths.approach is not None:
-        _draw_approaches(ax, solution, scene, paths.approach)
-    _draw_hitches(ax, solution, scene)
+        draw_approaches(ax, solution, scene, paths.approach)
+    draw_hitches(ax, solution, scene)
     draw_profiles(ax, case, exchanges, scene.cgs, scene.yaws, [vehicle_color(i) for i in range(scene.count)], names)
-    _draw_measured_rest(ax, names, evidence, sigma)
+    draw_measured_rest(ax, names, evidence, sigma)
     _finish_axes(ax)
     return ax
-
-
-def _draw_motion_to_rest(ax, solution, count, paths):
-    """The path of each of the ``count`` vehicles from the exchange to rest (``paths``: ``Trajectories.rest``, every
-    step of the motion): the CG's path, ``PATH_OUTLINES`` faded outlines at instants evenly
-    spaced in time (each at the step nearest it, so that it sits on the path), and the outline at rest, placed by the
-    results (``rest_position``, ``rest_yaw``) where the path's last step is."""
-    from matplotlib.patches import Polygon
-
-    names, inputs = [visible(n) for n in solution.case.vehicle_names], solution.case.inputs
-    for i in range(count):
-        rest, path = solution.result.rest[i], paths[i]
-        if rest is None or path is None:
-            continue
-        v = inputs.vehicles[i]
-        size = (float(v.length), float(v.width), float(v.cg_to_front))
-        t, d = float(rest.time_to_rest), float(rest.distance_to_rest)
-        step = t / (PATH_OUTLINES + 1)
-        ax.plot(path[:, 1], path[:, 2], "-", color=vehicle_color(i), lw=0.9, gid=f"rest-path-{i}",
-                label=f"{names[i]}: CG path to rest, {d:.2f} m ({d / U.FT:.1f} ft) in {t:.2f} s; "
-                      f"outlines every {step:.2f} s")
-        if step > 0:
-            instants = step * np.arange(1, PATH_OUTLINES + 1)
-            for k in np.unique(np.clip(np.searchsorted(path[:, 0], instants), 1, len(path) - 1)):
-                _draw_box(ax, _box(*size, path[k, 1:3], path[k, 3]), vehicle_color(i), "-", alpha=0.3, lw=0.6,
-                          gid=f"path-outline-{i}")
-        xy = np.asarray(rest.rest_position, float)
-        yaw = float(rest.rest_yaw)
-        corners = _box(*size, xy, math.radians(yaw))
-        where = "at rest" if bool(rest.at_rest) else f"at the time limit, {t:.2f} s (not at rest)"
-        ax.add_patch(Polygon(corners, closed=True, facecolor=vehicle_color(i), edgecolor="none", alpha=0.15))
-        _draw_box(ax, corners, vehicle_color(i), "-", gid=f"rest-outline-{i}",
-                  label=f"{names[i]} {where}: CG ({xy[0]:.2f}, {xy[1]:.2f}) m, yaw {yaw:.1f} deg "
-                        f"(turned {float(rest.rotation_to_rest):+.1f} deg)")
-        ax.plot(*xy, "o", color=vehicle_color(i), ms=5, mec="black", mew=0.6, gid=f"rest-cg-{i}")
-
-
-def _draw_approaches(ax, solution, scene, paths):
-    """Each vehicle's approach (``solution.result.approach``; ``paths``: ``Trajectories.approach``, its CG's path,
-    every step), drawn as the start of its trajectory: the CG's path from the
-    approach's start to the impact (dashed, as thin as its path to rest, which goes on from the exchange; with
-    automatic contact the free motion from the case state to the CG at the first exchange, ``scene.cgs``, is added,
-    so that the two join), a small open circle at the start of each phase (its position in the results) with the
-    phase's start time beside it (across the heading, on alternate sides from one phase to the next, so that the
-    times of short phases do not print over each other), and the outline at the approach's start (thin, faded). One
-    legend entry for every approach."""
-    label = "approach (CG path before the impact; marks at each phase's start)"
-    text = dict(textcoords="offset points", fontsize=6, zorder=7,
-                bbox=dict(boxstyle="round,pad=0.1", facecolor="white", edgecolor="none", alpha=0.6))
-    for i in range(scene.count):
-        found, path = solution.result.approach[i], paths[i]
-        if found is None or path is None:
-            continue
-        xy = np.asarray(path, float)[:, 1:3]
-        starts = np.asarray(found.position, float).reshape(-1, 2)
-        if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(starts))):  # a phase that breaks a rule: NaN
-            continue
-        if np.linalg.norm(scene.cgs[i] - xy[-1]) > 0:  # automatic contact: moved freely on to the exchange
-            xy = np.vstack([xy, scene.cgs[i]])
-        color = vehicle_color(i)
-        ax.plot(xy[:, 0], xy[:, 1], "--", color=color, lw=0.9, gid=f"approach-path-{i}")
-        times, yaws = np.asarray(found.time, float).reshape(-1), np.asarray(found.yaw, float).reshape(-1)
-        for k, (point, t, yaw) in enumerate(zip(starts, times, yaws)):
-            ax.plot(*point, "o", ms=4, mfc="white", mec=color, mew=1.0, zorder=6, gid=f"approach-phase-{i}-{k}")
-            side = math.radians(yaw) + (0.5 * math.pi if k % 2 == 0 else -0.5 * math.pi)  # left, then right
-            off = np.array([math.cos(side), math.sin(side)])
-            ax.annotate(f"{t:.2f} s", point, xytext=tuple(PHASE_LABEL * off), color=color, gid=f"approach-time-{i}-{k}",
-                        ha="left" if off[0] > 0.3 else "right" if off[0] < -0.3 else "center",
-                        va="bottom" if off[1] > 0.3 else "top" if off[1] < -0.3 else "center", **text)
-        v = scene.inputs.vehicles[i]
-        _draw_box(ax, _box(float(v.length), float(v.width), float(v.cg_to_front), starts[0], math.radians(yaws[0])),
-                  color, "-", alpha=0.3, lw=0.7, gid=f"approach-outline-{i}")
-        if label is not None:  # one legend entry, in a neutral colour: every vehicle's approach is drawn alike
-            ax.plot([], [], "--", color="0.3", lw=0.9, marker="o", ms=4, mfc="white", mec="0.3", label=label)
-            label = None
-
-
-def hitch_point(position, yaw, point_on_tow):
-    """(2,) m: a tow's hitch point, its CG ``position`` (2,) plus ``point_on_tow`` (2,), its body frame point, turned
-    by its ``yaw`` (rad): where the joint holds the towed vehicle's hitch point."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    p = np.asarray(point_on_tow, float)
-    return np.asarray(position, float)[:2] + np.array([c * p[0] - s * p[1], s * p[0] + c * p[1]])
-
-
-def _draw_hitches(ax, solution, scene):
-    """Each hitch (``case.motion.links``, its points ``case.inputs.hitches``) at the first exchange (where the
-    outlines are, ``scene``) and at rest (the rest results, where the case has a road): a diamond at the tow's hitch
-    point (filled in the towed vehicle's colour) and a thin dark line from the tow's CG through it to the towed
-    vehicle's CG, so that the line's bend shows the articulation. One legend entry for all of them."""
-    case, rest = solution.case, solution.result.rest
-    if case.motion is None:  # a hitch needs a road: none without one
-        return
-    label = "hitch: the tow's hitch point (diamond), joined to the two CGs"
-    for (towed, tow, _), hitch in zip(case.motion.links, case.inputs.hitches):
-        poses = [("", scene.cgs[tow], scene.yaws[tow], scene.cgs[towed])]
-        if rest is not None and rest[tow] is not None and rest[towed] is not None:
-            poses.append(("rest-", rest[tow].rest_position, math.radians(float(rest[tow].rest_yaw)),
-                          rest[towed].rest_position))
-        for prefix, cg, yaw, towed_cg in poses:
-            cg, towed_cg = np.asarray(cg, float)[:2], np.asarray(towed_cg, float)[:2]
-            point = hitch_point(cg, yaw, hitch.point_on_tow)
-            ax.plot(*np.stack([cg, point, towed_cg]).T, "-", color="0.15", lw=0.9, zorder=5.5,
-                    gid=f"{prefix}hitch-line-{towed}")
-            ax.plot(*point, "D", ms=6, mfc=vehicle_color(towed), mec="0.15", mew=1.0, zorder=6,
-                    gid=f"{prefix}hitch-{towed}", label=label)
-            label = None  # one legend entry for every hitch
-
-
-def _draw_measured_rest(ax, names, evidence, sigma):
-    """An x at each vehicle's measured rest position where ``evidence`` gives both its coordinates, and with
-    ``sigma`` (both coordinates' standard errors given) an ellipse of those semi-axes about it: the region
-    within one standard error in each coordinate, which the drawn rest CG is to be compared with."""
-    from matplotlib.patches import Ellipse
-
-    if not evidence:
-        return
-    given = {canonical_path(k): float(v) for k, v in evidence.items()}
-    spread = {canonical_path(k): float(v) for k, v in (sigma or {}).items()}
-    for i in range(len(names)):  # a fixed object (after the vehicles) has no rest position: none is given
-        keys = [f"vehicles[{i}].rest_position[{k}]" for k in (0, 1)]
-        if not all(k in given for k in keys):
-            continue
-        x, y = (given[k] for k in keys)
-        s = [spread.get(k) for k in keys]
-        within = f", +/- ({s[0]:.2f}, {s[1]:.2f}) m dashed" if None not in s else ""
-        ax.plot(x, y, "x", color=vehicle_color(i), ms=10, mew=2.2, zorder=6, gid=f"measured-rest-{i}",
-                label=f"{names[i]} measured rest: ({x:.2f}, {y:.2f}) m, ({x / U.FT:.1f}, {y / U.FT:.1f}) ft{within}")
-        if None not in s:
-            ax.add_patch(Ellipse((x, y), 2 * s[0], 2 * s[1], fill=False, edgecolor=vehicle_color(i), ls="--", lw=1.0,
-                                 zorder=6, gid=f"measured-rest-sigma-{i}"))
 
 
 def _draw_fixed(ax, obj, name, box, near, extent, later=(), gid=None):

@@ -22,7 +22,7 @@ import ks_jax
 from ks_jax import plot
 from ks_jax import units as U
 from ks_jax.cli.fit import case_at_estimate
-from ks_jax.plot.top_view import _draw_measured_rest
+from ks_jax.plot.trajectory import draw_measured_rest
 from ks_jax.solve import cases as solve_cases
 from ks_jax.solve import motion_paths
 
@@ -164,9 +164,9 @@ def test_measured_rest_positions_are_marked(drawn):
 def test_a_mark_needs_both_coordinates(drawn):
     sol, _, _ = drawn
     ax = Figure().subplots()
-    _draw_measured_rest(ax, sol.case.vehicle_names, {"vehicles[0].rest_position[0]": 1.0,
-                                                     "vehicles[1]. rest_position[0]": 2.0,
-                                                     "vehicles[1].rest_position[1]": 3.0}, None)
+    draw_measured_rest(ax, sol.case.vehicle_names, {"vehicles[0].rest_position[0]": 1.0,
+                                                    "vehicles[1]. rest_position[0]": 2.0,
+                                                    "vehicles[1].rest_position[1]": 3.0}, None)
     assert not by_gid(ax, "measured-rest-0")
     (mark,) = by_gid(ax, "measured-rest-1")  # the path written with a space is read as the canonical one
     np.testing.assert_allclose(np.ravel(mark.get_xydata()), [2.0, 3.0])

@@ -27,7 +27,8 @@ from matplotlib.patches import Polygon, Wedge
 import ks_jax
 from ks_jax import plot
 from ks_jax.case import case_from_dict
-from ks_jax.plot.top_view import COLORS, LATER_NORMAL, LATER_SHARE, clip_polygon, top_view_figure
+from ks_jax.plot.outline import COLORS, clip_polygon
+from ks_jax.plot.top_view import LATER_NORMAL, LATER_SHARE, top_view_figure
 from ks_jax.solve import Solution
 from ks_jax import units as U
 from ks_jax.cli import main
