@@ -1,12 +1,12 @@
 """Every command, run as users run it, on every case the project ships.
 
-The cases are found, not listed: every file in ``ks_jax/cases/``, ``docs/examples/`` and ``docs/validation/``,
-and every whole case written out in a JSON or TOML block of ``docs/*.md``, joins the matrix by being there. Each file is
-solved (the panel, ``--json``, ``--plot``, ``--units us`` and ``--units si``); each case with ``unknowns`` is fitted
-(the report, ``--json``, ``--plot``, ``--monte-carlo``, ``--posterior``); each case is swept over one of its inputs into
-every results format and a picture. Every run must end with exit status 0 and no traceback, and every ``--json`` must
-parse, have the one shape every command writes (``{"cases": [...]}``) and carry, for each case, the keys that
-docs/model.md names for it.
+The cases are found, not listed: every file in ``ks_jax/cases/``, ``docs/examples/`` and ``docs/validation/`` (its
+folders too; ``NOT_CASES`` names the one data file there that is not a case file), and every whole case written out
+in a JSON or TOML block of ``docs/*.md``, joins the matrix by being there. Each file is solved (the panel, ``--json``,
+``--plot``, ``--units us`` and ``--units si``); each case with ``unknowns`` is fitted (the report, ``--json``,
+``--plot``, ``--monte-carlo``, ``--posterior``); each case is swept over one of its inputs into every results format
+and a picture. Every run must end with exit status 0 and no traceback, and every ``--json`` must parse, have the one
+shape every command writes (``{"cases": [...]}``) and carry, for each case, the keys that docs/model.md names for it.
 
 The commands run in this process (``ks_jax.cli.main``), so that the runs share their compiled programs.
 """
@@ -29,8 +29,11 @@ from samples import mass_sweep, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGED = Path(ks_jax.__file__).parent / "cases"
+# shipped beside the cases, read by the measured tests' script: the figures recorded for them, not cases
+NOT_CASES = {ROOT / "docs" / "validation" / "measured" / "recorded.json"}
 FILES = sorted(p for folder in (PACKAGED, ROOT / "docs" / "examples", ROOT / "docs" / "validation")
-               for p in folder.iterdir() if p.suffix in (".json", ".toml"))
+               for p in (folder.rglob("*") if folder.name == "validation" else folder.iterdir())
+               if p.suffix in (".json", ".toml") and p not in NOT_CASES)
 
 
 def doc_blocks():
@@ -139,6 +142,8 @@ def test_every_shipped_case_is_in_the_matrix():
     case blocks, among them a reconstruction."""
     assert len(FILES) >= 14 and any(s.startswith("docs/model.md#") for s in SOURCES)
     assert any(s.startswith("docs/") and s in FITTED for s in SOURCES)
+    assert any(s.startswith("docs/validation/measured/") for s in SOURCES)
+    assert all(p.is_file() for p in NOT_CASES)
 
 
 def check_solve(path, cases, capsys, tmp_path):
@@ -177,11 +182,14 @@ def check_fit(path, cases, capsys, tmp_path):
     code, out, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json",
                              "--plot", str(png))
     assert_clean(code, out, err, f"{what} --posterior 6 --chains 2 --json --plot")
-    for case, obj in zip(cases, parse_cases(out, f"{what} --json", len(cases))):
+    fitted = parse_cases(out, f"{what} --json", len(cases))
+    for case, obj in zip(cases, fitted):
         assert obj["name"] == case.name
         assert_documented(obj, "fitted case", f"{what} --json, case '{case.name}'")
         assert set(obj["posterior"]["unknowns"]) == set(obj["estimate"]), f"{what} --posterior: a summary per unknown"
-    assert png.stat().st_size > 0 and (tmp_path / "post_posterior.png").stat().st_size > 0
+    sampled = sum(obj.get("posterior") is not None for obj in fitted)
+    corners = ["post_posterior.png"] if sampled == 1 else [f"post_posterior_{k}.png" for k in range(1, sampled + 1)]
+    assert png.stat().st_size > 0 and all((tmp_path / name).stat().st_size > 0 for name in corners)
 
 
 def solved_value(obj, path):

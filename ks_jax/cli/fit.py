@@ -55,7 +55,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--plot", metavar="PNG",
                         help="write the top view of the case solved at the estimate (.png, .pdf or .svg), with the "
                              "measured rest positions marked (matplotlib); with --posterior also the posterior's "
-                             "corner plot, to PNG's name with '_posterior'")
+                             "corner plot, to PNG's name with '_posterior' ('_posterior_1', '_posterior_2', ... "
+                             "where several cases are sampled)")
 
 
 def run(args) -> int:
@@ -135,8 +136,8 @@ def run(args) -> int:
 
 
 def posterior_path(plot, k=None) -> str:
-    """Where ``--plot FILE`` puts a posterior's corner plot: FILE_posterior (FILE_posterior_2 for the second
-    sampled case of a file), of FILE's type."""
+    """Where ``--plot FILE`` puts a posterior's corner plot, of FILE's type: FILE_posterior where one case of the
+    file is sampled; where several are, FILE_posterior_1, FILE_posterior_2, ... in their order (``k`` from 0)."""
     p = Path(plot)
     return str(p.with_name(f"{p.stem}_posterior{'' if k is None else f'_{k + 1}'}{p.suffix}"))
 
