@@ -95,11 +95,11 @@ def _num(value, kind, where, case_name):
     try:
         x = U.parse_quantity(value, kind)
     except U.UnitError as err:
-        raise CaseError(f"case '{case_name}': {where} = {value!r}: {err}") from None
+        raise CaseError(f"case '{case_name}': {where} = {U.as_typed(value)}: {err}") from None
     except KeyError:
         raise CaseError(f"case '{case_name}': {where}: no unit kind '{kind}'") from None
     if math.isnan(x):
-        raise CaseError(f"case '{case_name}': {where} = {value!r}: must be a number")
+        raise CaseError(f"case '{case_name}': {where} = {U.as_typed(value)}: must be a number")
     return x
 
 
@@ -222,8 +222,12 @@ def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> U
 def evidence_kind(case: Case, path: str):
     """(is_output, period) of an evidence path; CaseError naming the path if it names nothing
     that can be fitted."""
-    if why := on_fixed_object(case, path) or without_road(case, path) or without_approach(case, path) \
-            or follows_tow(case, path) or without_time(case, path):
+    try:
+        why = on_fixed_object(case, path) or without_road(case, path) or without_approach(case, path) \
+            or follows_tow(case, path) or without_time(case, path)
+    except PathError as err:  # a path of no form that names anything
+        raise CaseError(f"case '{case.name}': evidence: {err}") from None
+    if why:
         raise CaseError(f"case '{case.name}': evidence: {why}")
     try:
         group, vi, field, idx = check_output_path(path)
@@ -303,7 +307,8 @@ def parse_unknowns(case: Case, spec, checks: PathChecks | None = None) -> list[U
     elif isinstance(spec, dict):
         items = list(spec.items())
     else:
-        raise CaseError(f"case '{case.name}': unknowns: must be a map from input paths to bounds, got {spec!r}")
+        raise CaseError(f"case '{case.name}': unknowns: must be a map from input paths to bounds, got "
+                        f"{U.as_typed(spec)}")
     if not items:
         raise CaseError(f"case '{case.name}': unknowns: empty (name at least one input to fit)")
     out = []
@@ -319,7 +324,7 @@ def parse_unknowns(case: Case, spec, checks: PathChecks | None = None) -> list[U
         if d is None:
             d = {}
         if not isinstance(d, dict):
-            raise CaseError(f"case '{case.name}': unknowns: {path} = {d!r}: must be a map with 'bounds' "
+            raise CaseError(f"case '{case.name}': unknowns: {path} = {U.as_typed(d)}: must be a map with 'bounds' "
                             "(and optional 'start', 'prior')")
         extra = set(d) - {"bounds", "start", "prior"}
         if extra:
@@ -329,7 +334,8 @@ def parse_unknowns(case: Case, spec, checks: PathChecks | None = None) -> list[U
         if "bounds" in d:
             b = d["bounds"]
             if not isinstance(b, (list, tuple)) or len(b) != 2:
-                raise CaseError(f"case '{case.name}': unknowns: {path}.bounds = {b!r}: must be [lower, upper]")
+                raise CaseError(f"case '{case.name}': unknowns: {path}.bounds = {U.as_typed(b)}: must be "
+                                "[lower, upper]")
             lo = -math.inf if b[0] is None else _num(b[0], kind, f"unknowns: {path}.bounds[0]", case.name)
             hi = math.inf if b[1] is None else _num(b[1], kind, f"unknowns: {path}.bounds[1]", case.name)
         start = None if d.get("start") is None else _num(d["start"], kind, f"unknowns: {path}.start", case.name)
@@ -341,7 +347,7 @@ def parse_unknowns(case: Case, spec, checks: PathChecks | None = None) -> list[U
             elif isinstance(p, (list, tuple)) and len(p) == 2:
                 pm, ps = p
             else:
-                raise CaseError(f"case '{case.name}': unknowns: {path}.prior = {p!r}: must be "
+                raise CaseError(f"case '{case.name}': unknowns: {path}.prior = {U.as_typed(p)}: must be "
                                 "{\"mean\": x, \"sigma\": s}")
             prior = (_num(pm, kind, f"unknowns: {path}.prior.mean", case.name),
                      _num(ps, kind, f"unknowns: {path}.prior.sigma", case.name))
@@ -371,7 +377,7 @@ def parse_evidence(case: Case, spec, checks: PathChecks | None = None) -> list[E
             out.append(check_evidence(case, e, checks))
             continue
         if not isinstance(e, dict):
-            raise CaseError(f"case '{case.name}': evidence[{k}] = {e!r}: must be "
+            raise CaseError(f"case '{case.name}': evidence[{k}] = {U.as_typed(e)}: must be "
                             "{\"quantity\", \"value\", \"sigma\"}")
         extra = set(e) - {"quantity", "path", "value", "sigma", "note", "source", "time"}
         if extra:

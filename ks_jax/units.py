@@ -10,6 +10,7 @@ Unit strings in case files ("21 mph", "3496.531 lbf", "2300 lbf*ft*s^2") are par
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
 import re
@@ -132,6 +133,23 @@ def typed_unit(text):
     return unit or None
 
 
+def as_typed(value) -> str:
+    """A value read from a case file, for a message, as the file wrote it: null, true and false as JSON and TOML
+    write them, a TOML date or time in its own form, lists and tables of them likewise, anything else as
+    ``repr``."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (datetime.date, datetime.time)):  # a datetime is a date
+        return f"{value.isoformat()} (a TOML date or time)"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(as_typed(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k!r}: {as_typed(v)}" for k, v in value.items()) + "}"
+    return repr(value)
+
+
 class UnitError(ValueError):
     """A quantity string that cannot be read, or has the wrong dimension."""
 
@@ -204,7 +222,7 @@ def parse_quantity(value, kind: str) -> float:
     if kind not in SI_UNITS:
         raise KeyError(kind)
     if isinstance(value, bool):
-        raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
+        raise UnitError(f"{as_typed(value)} is not a number or a '<number> <unit>' string")
     if isinstance(value, (int, float)):
         try:
             return float(value) * BARE_NUMBER_SCALE.get(kind, 1.0)
@@ -212,7 +230,7 @@ def parse_quantity(value, kind: str) -> float:
             raise UnitError(f"an integer of about {int(value.bit_length() * 0.30103) + 1} digits is larger than "
                             "any finite number") from None
     if not isinstance(value, str):
-        raise UnitError(f"{value!r} is not a number or a '<number> <unit>' string")
+        raise UnitError(f"{as_typed(value)} is not a number or a '<number> <unit>' string")
     text = value.strip()
     try:
         return float(text) * BARE_NUMBER_SCALE.get(kind, 1.0)

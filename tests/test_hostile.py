@@ -16,7 +16,10 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - a denormal moment of inertia (1e-320) is refused where the file is read, with its value;
 - a fit whose bounds never give a collision exits 1;
 - a stopped sweep keeps its finished points, whole, in a file saying it is incomplete (.csv, .npz, .parquet);
-- every field of the shipped cases, given any of a list of hostile values, is read or refused by name.
+- every field of the shipped cases, given any of a list of hostile values, is read or refused by name;
+- a name that is not text, and a field given twice in one object, refuse their case, naming the field;
+- values are quoted as the file wrote them (null, true, a TOML date), not as Python writes them;
+- evidence named by a path of no form, and a --case that picks a refused case, say which case.
 """
 
 from __future__ import annotations
@@ -25,6 +28,9 @@ import copy
 import json
 import math
 import os
+import subprocess
+import sys
+import re
 import tomllib
 import warnings
 
@@ -372,7 +378,8 @@ def test_hostile_files_and_arguments_give_one_clear_error(tmp_path, capsys):
     base = seed0()
     files = {
         "empty.json": ("", "the file is empty"), "blank.toml": ("  \n", "the file is empty"),
-        "list.json": ("[]", "a case must be an object/table, got list"),
+        "list.json": ("[]", "a case must be an object/table, got []"),
+        "null.json": ("null", "a case must be an object/table, got null"),
         "none.json": (json.dumps({**base, "vehicles": []}), "vehicles: 0 given; a case has 1 to 8 vehicles"),
         "word.json": (json.dumps({**base, "vehicles": "two"}), "vehicles = 'two': not a list"),
         "nan.json": (json.dumps(base).replace('"yaw": 0', '"yaw": NaN', 1), "vehicles[0].yaw = nan: must be a finite"),
@@ -410,3 +417,91 @@ def test_a_terminal_that_cannot_show_a_name_gets_its_escapes(tmp_path, capsys, m
     stdout.flush()
     text = stdout.buffer.getvalue().decode("ascii")
     assert code == 0 and text.startswith("Case: Caf\\xe9 \\u4e2d\n")
+
+
+def test_a_name_that_is_not_text_refuses_its_case_by_field():
+    """A case's, a vehicle's or a fixed object's name must be text: written as text, 5, null or a list would not be
+    the name the file gave. In a file of several cases the case is refused, under its default name ("case 2"), and
+    the others are read."""
+    base = seed0()
+    wall = {"kind": "wall", "point": [30, 0], "normal": 180}
+    bad = [({**base, "name": 5}, "case 'case 2': name = 5: a name must be text"),
+           ({**base, "name": None}, "case 'case 2': name = null: a name must be text"),
+           ({**base, "vehicles": [{**base["vehicles"][0], "name": ["a"]}, base["vehicles"][1]]},
+            "vehicles[0].name = ['a']: a name must be text"),
+           ({**base, "vehicles": base["vehicles"][:1], "fixed": [{**wall, "name": True}]},
+            "fixed[0].name = true: a name must be text")]
+    for case, message in bad:
+        first, second = load_module.cases_from_data({"cases": [base, case]}, "file.json")
+        assert first.valid and first.name == base["name"]
+        assert not second.valid and message in second.error and second.name == (
+            case["name"] if isinstance(case.get("name"), str) else "case 2"), second.error
+    with pytest.raises(CaseError, match="case 'x': name = 3.5: a name must be text"):
+        case_from_dict({**base, "name": 3.5}, "x")
+
+
+def test_a_field_given_twice_in_one_object_refuses_its_case_with_both_values(tmp_path):
+    """JSON's reader would keep the last of a field given twice (TOML's refuses the file): the case is refused,
+    naming the field and both values, and the file's other cases are read; "cases" given twice refuses the file."""
+    base = json.dumps(seed0())
+    twice = base.replace('"speed": ', '"speed": "5 mph", "speed": ', 1)
+    path = written(tmp_path, "twice.json", '{"cases": [' + base + ", " + twice + "]}")
+    first, second = load_cases(path)
+    assert first.valid and not second.valid
+    assert "vehicles[0].speed: given 2 times in one object ('5 mph', " in second.error, second.error
+    nested = base.replace('"contact": {', '"contact": {"friction": 0.3, ', 1)
+    with pytest.raises(CaseError, match=r"contact\.friction: given 2 times in one object \(0\.3, "):
+        load_cases(written(tmp_path, "nested.json", nested))
+    with pytest.raises(CaseError, match='"cases" given 2 times'):
+        load_cases(written(tmp_path, "files.json", '{"cases": [' + base + '], "cases": [' + base + "]}"))
+    assert load_cases(written(tmp_path, "once.json", base))[0].valid
+
+
+def test_values_are_quoted_as_the_file_wrote_them(tmp_path):
+    """null, true and a TOML date in a number's place are quoted as the file wrote them, not as Python's None,
+    True or datetime."""
+    base = seed0()
+    for value, words in ((None, "weight = null: null is not a number"), (True, "weight = true: true is not a"),
+                         ([None, False], "weight = [null, false]: [null, false] is not a number")):
+        vehicles = [{**base["vehicles"][0], "weight": value}, base["vehicles"][1]]
+        with pytest.raises(CaseError, match=re.escape(words)):
+            case_from_dict({**base, "vehicles": vehicles})
+    toml = tomllib.loads("yaw = 1979-05-27T07:32:00Z\nat = 07:32:00")
+    for key in ("yaw", "at"):
+        vehicles = [{**base["vehicles"][0], "yaw": toml[key]}, base["vehicles"][1]]
+        with pytest.raises(CaseError, match=re.escape("(a TOML date or time) is not a number")) as err:
+            case_from_dict({**base, "vehicles": vehicles})
+        assert "datetime" not in str(err.value)
+
+
+def test_evidence_of_no_form_and_a_refused_case_chosen_by_index_say_which_case(tmp_path, capsys):
+    """A path of no form as evidence is refused as evidence of its case; a sweep's --case that picks a refused
+    case names the index and the file's own count of it."""
+    case = ks_jax.load_case(FIT_CASE)
+    for quantity in ("vehicles[0.5].delta_v_magnitude", "vehicles[-1].delta_v_magnitude"):
+        evidence = copy.deepcopy(case.raw["evidence"])
+        evidence[0]["quantity"] = quantity
+        with pytest.raises(CaseError, match=re.escape(f"case '{case.name}': evidence: path '{quantity}'")):
+            fit.reconstruct(case, case.raw["unknowns"], evidence)
+    base = seed0()
+    path = written(tmp_path, "two.json", {"cases": [base, {**base, "contact": 3}]})
+    code, out, err = run_cli(capsys, "sweep", str(path), "--case", "1", "--over", "contact.restitution=0:0.1:2",
+                             "--out", str(tmp_path / "o.csv"))
+    assert code == 2 and err.startswith("ks-jax: error: --case 1 (the file's case 2): case '")
+    assert "': contact: must be a table/object, got 3" in err
+
+
+@pytest.mark.slow
+def test_a_character_the_pictures_font_cannot_draw_is_one_line_of_the_command(tmp_path):
+    """matplotlib warns of a glyph its font lacks with its own source lines, for every text that holds it: the
+    command says it once, on one line, and draws the picture."""
+    d = seed0()
+    d["vehicles"][0]["name"] = "Car \N{AUTOMOBILE}"
+    path = written(tmp_path, "car.json", d)
+    env = {**os.environ, "PYTHONIOENCODING": "utf-8", "KS_JAX_CACHE": "off"}
+    run = subprocess.run([sys.executable, "-m", "ks_jax.cli", "solve", str(path), "--plot", str(tmp_path / "t.png")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert run.returncode == 0, run.stderr
+    note = "ks-jax: note: the pictures' font has no glyph for \N{AUTOMOBILE} (U+1F697); it is drawn as a box"
+    assert run.stderr.splitlines().count(note) == 1 and "UserWarning" not in run.stderr, run.stderr
+    assert (tmp_path / "t.png").stat().st_size > 0

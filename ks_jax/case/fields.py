@@ -43,11 +43,55 @@ def check_keys(d, allowed, path, case_name):
     """A table must be a dict; an unknown field (a typo, or a key of another tool) is ignored with
     a CaseWarning naming it, so that a misspelt optional field does not pass silently."""
     if not isinstance(d, dict):
-        raise CaseError(f"{where(case_name, path)}: must be a table/object, got {d!r}")
+        raise CaseError(f"{where(case_name, path)}: must be a table/object, got {shown(d)}")
     for k in d:
         if k not in allowed:
             warnings.warn(CaseWarning(f"{where(case_name, path + '.' + k if path else k)}: unknown field, ignored "
                                       f"(known: {', '.join(sorted(allowed - {'...'}))})"), stacklevel=2)
+
+
+def text(d, key, default, path, case_name):
+    """``d[key]``, a name: text as the file typed it (a JSON or TOML string), or ``default`` where not given. Any
+    other value is refused: written as text it would not be the name the file gave."""
+    if key not in d:
+        return default
+    if not isinstance(d[key], str):
+        raise CaseError(f"{where(case_name, path)} = {shown(d[key])}: a name must be text, in double quotes: "
+                        f"\"name\": \"...\"")
+    return d[key]
+
+
+def repeated(d, path, case_name):
+    """A CaseError naming the first key given more than once in one object of ``d`` (its tables and lists
+    walked; ``Table.repeated``), with the values given: JSON's reader keeps the last, TOML's refuses the file."""
+    stack = [(d, path)]
+    while stack:
+        x, at = stack.pop()
+        if isinstance(x, dict):
+            for k, values in (getattr(x, "repeated", None) or {}).items():
+                field = f"{at}.{k}" if at else k
+                raise CaseError(f"{where(case_name, field)}: given {len(values)} times in one object ("
+                                f"{', '.join(shown(v, 40) for v in values)}); give each field once")
+            stack.extend((v, f"{at}.{k}" if at else k) for k, v in reversed(list(x.items())))
+        elif isinstance(x, list):
+            stack.extend((v, f"{at}[{i}]") for i, v in reversed(list(enumerate(x))))
+
+
+class Table(dict):
+    """A JSON object of a case file (``load``'s ``object_pairs_hook``), with the keys it gave more than once:
+    ``repeated``, key -> every value given, in order (None where none was)."""
+
+    repeated = None
+
+    @classmethod
+    def of(cls, pairs):
+        table = cls(pairs)
+        if len(table) < len(pairs):
+            given = {}
+            for k, v in pairs:
+                given.setdefault(k, []).append(v)
+            table.repeated = {k: v for k, v in given.items() if len(v) > 1}
+        return table
 
 
 def require(d, key, path, case_name):
@@ -69,9 +113,10 @@ class LongInteger(str):
 
 
 def shown(value, most: int = 80) -> str:
-    """``repr(value)``, cut to ``most`` characters with the count of the rest (a value of thousands of
-    digits or a long list would bury the message)."""
-    text = repr(value)
+    """``value`` as the file wrote it (``units.as_typed``: null, true, a TOML date, else ``repr``), cut to ``most``
+    characters with the count of the rest (a value of thousands of digits or a long list would bury the
+    message)."""
+    text = U.as_typed(value)
     return text if len(text) <= most else f"{text[:most - 20]}... ({len(text)} characters)"
 
 

@@ -24,7 +24,7 @@ from .errors import CaseError, CaseWarning
 from ..model.motion import MAX_FRICTION as MAX_ROAD_FRICTION
 from ..model.motion import TIME_LIMIT as MOTION_LIMIT
 from ..model.motion import TIME_STEP as MOTION_STEP
-from .fields import LongInteger
+from .fields import LongInteger, Table, repeated as _repeated, text as _text
 from .fields import both as _both, check_keys as _check_keys, given as _given, limit as _limit, number as _number
 from .fields import positive as _positive, require as _require, shown as _shown, typed_scale as _typed_scale
 from .fields import vector as _vector, where as _where
@@ -179,8 +179,9 @@ def _contact_inputs(d, case_name):
 def case_from_dict(d: dict, default_name: str = "case", source: str | None = None) -> Case:
     """Read one case (a dict as in a JSON/TOML file). Raises CaseError."""
     if not isinstance(d, dict):
-        raise CaseError(f"case '{default_name}': a case must be an object/table, got {type(d).__name__}")
-    name = str(d.get("name", default_name))  # exactly as given: JSON carries it so, the terminal escapes it
+        raise CaseError(f"case '{default_name}': a case must be an object/table, got {_shown(d)}")
+    name = _text(d, "name", default_name, "name", default_name)  # as given: JSON carries it, the terminal escapes it
+    _repeated(d, "", name)
     _check_keys(d, CASE_FIELDS, "", name)
     vehicles = _require(d, "vehicles", "", name) if "vehicles" in d else None
     if vehicles is None:
@@ -229,9 +230,8 @@ def case_from_dict(d: dict, default_name: str = "case", source: str | None = Non
     motion = dataclasses.replace(motion, approach=kinds) if kinds else motion
     crush = read_crush(vehicles, [(float(v.length), float(v.width)) for v in veh], name)
     inputs = CaseInputs(bodies, contact, road, interaction, pairs, hitches, approach, crush_energies(crush, objects))
-    names = tuple(str(v.get("name", f"vehicle {i + 1}")) if isinstance(v, dict) else f"vehicle {i + 1}"
-                  for i, v in enumerate(vehicles))
-    names += tuple(str(o.get("name", o["kind"])) for o in objects_raw)
+    names = tuple(_text(v, "name", f"vehicle {i + 1}", f"vehicles[{i}].name", name) for i, v in enumerate(vehicles))
+    names += tuple(_text(o, "name", o["kind"], f"{where(k)}.name", name) for k, o in enumerate(objects_raw))
     return Case(name, inputs, auto_point, auto_normal, names, None, d, source, objects, motion, between, crush)
 
 
@@ -476,7 +476,7 @@ def _check_reference(reference, case_name):
     """``reference``: reported results to print beside ks-jax's (an output path -> its value, e.g. the
     manual's panel); checked when the case is read, so that a bad entry costs its case only."""
     if not isinstance(reference, dict):
-        raise CaseError(f"{_where(case_name, 'reference')} = {reference!r}: must map output paths to reported "
+        raise CaseError(f"{_where(case_name, 'reference')} = {_shown(reference)}: must map output paths to reported "
                         "values, e.g. {\"contact.impulse_magnitude\": \"1336.904 lbf*s\"}")
     for path, value in reference.items():
         try:
@@ -516,7 +516,8 @@ def _read(path: Path):
         raise CaseError(f"{path}: the file is empty; a case file holds one case, or several under \"cases\", as "
                         f"{kind} (docs/model.md, \"Case files\")")
     try:
-        data = tomllib.loads(text) if kind == "TOML" else json.loads(text, parse_int=_json_integer)
+        data = tomllib.loads(text) if kind == "TOML" else json.loads(text, parse_int=_json_integer,
+                                                                       object_pairs_hook=Table.of)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
         other = "" if path.suffix.lower() in (".json", ".toml") else \
             f" (case files are JSON or TOML; a '{path.suffix}' file is read as JSON)"
@@ -549,6 +550,9 @@ def cases_from_data(data, source=None) -> list[Case]:
     """All cases of a loaded file. A file with one case raises CaseError on a bad case; in a
     file with ``cases``, a bad case becomes an invalid Case and the others are kept."""
     if isinstance(data, dict) and "cases" in data:
+        for k, values in (getattr(data, "repeated", None) or {}).items():  # a case's own are its case's error
+            raise CaseError(f"{source or 'file'}: \"{k}\" given {len(values)} times in the file's object; give it "
+                            "once (every case in one list under \"cases\")")
         if not isinstance(data["cases"], list) or not data["cases"]:
             raise CaseError(f"{source or 'file'}: cases must be a non-empty list")
         if len(data["cases"]) > MAX_CASES:
@@ -556,11 +560,12 @@ def cases_from_data(data, source=None) -> list[Case]:
                             "file (docs/model.md, \"Limits\"); split it, or sweep the inputs that vary")
         out = []
         for i, d in enumerate(data["cases"]):
-            default = d.get("name", f"case {i + 1}") if isinstance(d, dict) else f"case {i + 1}"
+            given = d.get("name") if isinstance(d, dict) else None
+            default = given if isinstance(given, str) else f"case {i + 1}"
             try:
                 out.append(case_from_dict(d, f"case {i + 1}", source))
             except CaseError as err:
-                out.append(Case(str(default), None, error=str(err), raw=d if isinstance(d, dict) else {},
+                out.append(Case(default, None, error=str(err), raw=d if isinstance(d, dict) else {},
                                 source=source))
         return out
     return [case_from_dict(data, Path(source).stem if source else "case", source)]

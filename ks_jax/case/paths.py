@@ -13,6 +13,7 @@ import numpy as np
 
 from ..model.motion import RestResult
 from ..model.types import ContactResult, VehicleResult
+from ..units import as_typed
 from .errors import CaseError, visible
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, VehicleInputs
 from ..units import UnitError, parse_quantity
@@ -46,7 +47,7 @@ def parse_path(path: str):
     'vehicles[0].position[1]@-2.5' -> ('vehicles', 0, 'at.position', (-2.5, 1)): the time first.
     Remembered per string: a batch of reconstructions reads the same few paths thousands of times."""
     if not isinstance(path, str):
-        raise PathError(f"path {path!r}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
+        raise PathError(f"path {as_typed(path)}: a path is a string, e.g. 'vehicles[1].speed' or 'contact.point[0]'")
     return _parse_path(path)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import threading
 import warnings
@@ -61,13 +62,23 @@ def _compilation_cache():
 
 
 def _show_case_warnings():
-    """A CaseWarning (an unknown field ignored, precision lost) printed as one line, every time."""
+    """A CaseWarning (an unknown field ignored, precision lost) printed as one line, every time; a character of a
+    name that the pictures' font cannot draw (matplotlib's warning, with its source lines) as one line per
+    character."""
     if getattr(warnings.showwarning, "_ks_jax", False):
         return
+    undrawn = set()
 
     def show(message, category, filename, lineno, file=None, line=None):
+        glyph = re.match(r"Glyph (\d+) .*missing from font", str(message))
         if issubclass(category, CaseWarning):
             print(f"ks-jax: warning: {visible(message)}", file=sys.stderr)
+        elif glyph and issubclass(category, UserWarning):
+            code = int(glyph.group(1))
+            if code not in undrawn:
+                undrawn.add(code)
+                print(f"ks-jax: note: the pictures' font has no glyph for {visible(chr(code))} (U+{code:04X}); it "
+                      "is drawn as a box", file=sys.stderr)
         else:
             default_show(message, category, filename, lineno, file, line)
 

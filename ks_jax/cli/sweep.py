@@ -229,8 +229,9 @@ def run(args) -> int:
         if not 0 <= args.case < len(cases):
             raise CaseError(f"--case {args.case}: {args.file} holds {len(cases)} cases (0..{len(cases) - 1})")
         case = cases[args.case]
-    if not case.valid:
-        raise CaseError(case.error)
+    if not case.valid:  # the error names the case as the file does ("case 50" is the 50th); --case counts from 0
+        chosen = "" if args.case is None else f"--case {args.case} (the file's case {args.case + 1}): "
+        raise CaseError(chosen + case.error)
     over, mode = draw_over([parse_over(t, args.units) for t in args.over], args.mode, args.samples, args.seed)
     shape = result_shape({p: len(v) for p, v in over.items()}, mode)  # sweep's rule, checked before a file exists
     sample = _plot_sample(args.plot, over, mode, shape)  # checked before anything is solved
