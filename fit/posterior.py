@@ -23,6 +23,7 @@ as for several.
 from __future__ import annotations
 
 import importlib
+import math
 from dataclasses import dataclass, field
 from functools import partial
 from typing import NamedTuple
@@ -297,6 +298,7 @@ RHAT_UNDEFINED = ("R-hat is undefined: R-hat needs two or more chains, and with 
                   "chains agree (a mode the chain never reached goes unseen); run two chains or more")
 RHAT_ONE_DRAW = "R-hat is undefined: R-hat needs two or more draws per chain"
 ESS_UNDEFINED = "the effective sample size is undefined: it needs two or more draws per chain"
+SPREAD = ("std", "q025", "q16", "q50", "q84", "q975", "ess")  # what a chain that never moved cannot measure
 
 
 @jax.jit
@@ -313,6 +315,12 @@ def _diagnostics(x):
     return rhat, ess
 
 
+def _chains(indices) -> str:
+    """'chain 2', 'chains 1 and 3' (1-based, as the panel counts them)."""
+    k = [str(i + 1) for i in indices]
+    return f"chain {k[0]}" if len(k) == 1 else f"chains {', '.join(k[:-1])} and {k[-1]}"
+
+
 def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> Posterior:
     """The ``Posterior`` of draws ``x`` (chains, draws, n), SI: moments, quantiles, R-hat and effective sample
     size per unknown (NaN where undefined: R-hat with one chain or one draw, the effective sample size with one
@@ -325,6 +333,19 @@ def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> 
                    **{k: float(v[j]) for k, v in q.items()}, "rhat": float(rhat[j]), "ess": float(ess[j])}
                for j, p in enumerate(paths)}
     warnings = []
+    # a chain that never moved (every draw the same: the sampler refused every step, too few adaptation steps or a
+    # density it cannot follow) measures no spread; where no chain moved, the spread is not reported at all
+    still = np.ptp(x, axis=1) == 0 if draws > 1 else np.zeros((chains, len(paths)), bool)
+    stuck = [j for j in range(len(paths)) if still[:, j].any()]
+    for j in stuck:
+        if still[:, j].all():
+            summary[paths[j]].update({k: math.nan for k in SPREAD})
+    if stuck:
+        which = [f"{paths[j]} ({'every chain' if still[:, j].all() else _chains(np.flatnonzero(still[:, j]))})"
+                 for j in stuck]
+        warnings.append(f"a chain never moved: {', '.join(which)}: every draw of it is the same, so it measures no "
+                        "spread (the std, quantiles and ESS of an unknown no chain moved in are undefined); draw "
+                        "more, with more adaptation steps, or run more chains")
     poor = [f"{p} ({s['rhat']:.3f})" for p, s in summary.items() if s["rhat"] > RHAT_LIMIT]
     if poor:
         warnings.append(f"R-hat above {RHAT_LIMIT}: {', '.join(poor)}: the chains disagree (several modes, or "

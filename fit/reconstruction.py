@@ -127,6 +127,16 @@ class FitResult:
         return out
 
 
+def not_fitted_dict(name: str, status: str) -> dict:
+    """The JSON of a case that could not be fitted (docs/fit.md, "JSON"): ``FitResult.to_dict``'s keys, its
+    ``status`` ("invalid: ..."), every table of paths empty, every number null, ``converged`` false: one shape for
+    every case of a file, fitted or not."""
+    return {"name": name, "estimate": {}, "std": {}, "correlation": {}, "residuals": {}, "fitted": {},
+            "converged": False, "unidentified": [], "at_bound": [], "chi2": None, "status": status, "measured": {},
+            "sigma": {}, "iterations": None, "starts": {"total": None, "converged": None, "at_best": None},
+            "notes": []}
+
+
 def _keys(paths):
     """Unique keys for evidence paths (a path named twice gets ' (2)')."""
     keys, seen = [], {}

@@ -213,6 +213,10 @@ def text_report(result) -> str:
                       "2.5% / 50% / 97.5%; R-hat, ESS"]
         for u in result.unknowns:
             kind, s = input_kind(u.path), post.summary[u.path]
+            if not math.isfinite(s["std"]):  # no chain moved: a point, not a distribution (the warning says so)
+                lines.append(f"  {u.path:<{width}} {fmt(s['mean'], kind)}, where every chain stayed: no spread "
+                             "measured (below)")
+                continue
             lines.append(f"  {u.path:<{width}} {fmt(s['mean'], kind)} +/- {fmt(s['std'], kind)}; "
                          + " / ".join(fmt(s[q], kind) for q in ("q025", "q50", "q975"))
                          + f"; R-hat {_diagnostic(s['rhat'], '.3f')}, ESS {_diagnostic(s['ess'], '.0f')}")

@@ -2,8 +2,9 @@
 
 The text report is ``fit.report.text_report``; ``--json`` prints ``{"cases": [...]}``, as ``ks-jax solve --json``
 does, one entry per case of the file (one case or several): ``FitResult.to_dict`` (SI values, null for "not
-determined"), or ``{"name", "status"}`` for a case that was not fitted. Names are written exactly as the file
-gives them in JSON, and escaped (``case.visible``) where they reach the terminal. Monte Carlo shows a progress
+determined"), or for a case that was not fitted the same keys, its status and nothing fitted
+(``fit.reconstruction.not_fitted_dict``). Names are written exactly as the file gives them in JSON, and escaped
+(``case.visible``) where they reach the terminal. Monte Carlo shows a progress
 bar on stderr. ``--plot FILE`` draws the top view of each fitted case solved at its estimate (the case's
 inputs with the unknowns set to it), with the measured rest positions among its evidence marked and their
 sigmas drawn about them: the picture to set beside a scene diagram.
@@ -21,6 +22,7 @@ import numpy as np
 from fit import reconstruct
 from fit.posterior import sampler as posterior_sampler
 from fit.problem import Problem, apply_unknowns
+from fit.reconstruction import not_fitted_dict
 from fit.report import DISPLAY, text_report
 
 from ..case import input_kind, input_ties, load_cases
@@ -100,7 +102,7 @@ def run(args) -> int:
             failed[k] = str(err) if str(err).startswith("invalid") else f"invalid: {err}"
             results.append(None)
     if args.json:
-        dicts = [{"name": c.name, "status": failed[k]} if r is None else r.to_dict()
+        dicts = [not_fitted_dict(c.name, failed[k]) if r is None else r.to_dict()
                  for k, (c, r) in enumerate(zip(cases, results))]
         print(json.dumps({"cases": dicts}, indent=1))
     else:

@@ -257,6 +257,11 @@ def test_one_chain_has_no_r_hat_but_an_effective_sample_size():
     assert f"R-hat undefined, ESS {s['ess']:.0f}" in text and "nan" not in text.lower()
     assert "Posterior (NUTS, 1 chain x 200 draws after 200 adaptation steps" in text
     assert f"warning: {why}" in text
+    # the same fit, had its chain never moved: the value where it stayed, no spread, and the warning
+    stuck = fit.posterior.summarize(["vehicles[1].speed"], np.full((1, 200, 1), 20.0), 0, 200, 1, [1.0])
+    text = text_report(dataclasses.replace(r, posterior=stuck))
+    assert "where every chain stayed: no spread measured (below)" in text and "+/- 0 mph" not in text
+    assert "warning: a chain never moved: vehicles[1].speed (every chain)" in text and "nan" not in text.lower()
 
 
 def test_the_effective_sample_size_of_one_chain_is_that_of_its_autocorrelation():
@@ -281,3 +286,28 @@ def test_the_effective_sample_size_of_one_chain_is_that_of_its_autocorrelation()
     assert any("R-hat needs two or more chains" in w for w in post.warnings)
     assert any("effective sample size is undefined" in w for w in post.warnings)
     assert json.dumps(post.to_dict(), allow_nan=False)
+
+
+def test_a_chain_that_never_moved_measures_no_spread():
+    """A chain whose draws are all one value (the sampler refused every step) measures nothing of the spread: with
+    one chain, or every chain, stuck on an unknown, its std, quantiles and effective sample size are undefined
+    (null in JSON, no "+/- 0" in the panel) and a warning names it; with one chain of two stuck, the spread of
+    both chains is still that of their draws, and the warning names the stuck chain."""
+    rng = np.random.default_rng(4)
+    moving = rng.standard_normal((1, 50, 1))
+    stuck = np.full((1, 50, 1), 5.2)
+    for x, spread in ((stuck, False), (np.concatenate([stuck, stuck + 0.1]), False),
+                      (np.concatenate([moving, stuck]), True)):
+        post = fit.posterior.summarize(["vehicles[1].length"], x, 0, 50, 0, [1.0] * len(x))
+        s = post.summary["vehicles[1].length"]
+        assert s["mean"] == pytest.approx(x.mean())
+        assert [w for w in post.warnings if w.startswith("a chain never moved: vehicles[1].length")]
+        if spread:
+            assert s["std"] == pytest.approx(x.reshape(-1).std(ddof=1)) and "(chain 2)" in post.warnings[0]
+        else:
+            assert all(math.isnan(s[k]) for k in ("std", "q025", "q16", "q50", "q84", "q975", "ess"))
+            assert "(every chain)" in post.warnings[0]
+            d = post.to_dict()["unknowns"]["vehicles[1].length"]
+            assert d["std"] is None and d["q50"] is None and d["mean"] == pytest.approx(x.mean())
+    post = fit.posterior.summarize(["u"], moving, 0, 50, 0, [1.0])
+    assert not any("never moved" in w for w in post.warnings)
