@@ -340,6 +340,10 @@ def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> 
     for j in stuck:
         if still[:, j].all():
             summary[paths[j]].update({k: math.nan for k in SPREAD})
+    if chains * draws == 1:  # one draw in all: no spread either
+        for s in summary.values():
+            s.update({k: math.nan for k in SPREAD})
+        warnings.append("one draw in all measures no spread: the std, quantiles and ESS are undefined; draw more")
     if stuck:
         which = [f"{paths[j]} ({'every chain' if still[:, j].all() else _chains(np.flatnonzero(still[:, j]))})"
                  for j in stuck]

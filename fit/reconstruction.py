@@ -355,10 +355,14 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
     if not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
-    if starts < 1:
-        raise ValueError(f"starts = {starts}: need at least one start")
-    if posterior < 0 or chains < 1:
-        raise ValueError(f"posterior = {posterior}, chains = {chains}: draws must be >= 0 and chains >= 1")
+    for name, value, least in (("starts", starts, 1), ("monte_carlo", monte_carlo, 0), ("posterior", posterior, 0),
+                               ("chains", chains, 1), ("max_starts", max_starts, 1), ("max_iter", max_iter, 1),
+                               ("chunk", chunk, 1)):
+        if value is not None and not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+                                      and value >= least):
+            raise ValueError(f"{name} = {value!r}: must be a whole number >= {least}")
+    if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
+        raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")
     if posterior:
         sampler()  # ImportError naming the extra, before any fit
     cases = list(cases)

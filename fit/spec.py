@@ -186,11 +186,27 @@ def _unknown_faults(field, lo, hi, start, has_start, mean, sigma, has_prior):
                                         & (sigma <= MAX_MAGNITUDE))))
 
 
+def _si_numbers(where, **numbers):
+    """Refuse (CaseError) any of ``numbers`` (name -> value of an ``Unknown`` or ``Evidence`` made in Python) that is
+    not one real number: those are SI; a quantity with its unit is the file format's (``parse_unknowns``,
+    ``parse_evidence``)."""
+    for what, x in numbers.items():
+        if isinstance(x, (bool, np.bool_, str, bytes)) or np.ndim(x) != 0 or not np.isrealobj(x):
+            hint = (f" (made in Python it is SI: a number; {x!r} with its unit belongs in a case file's map, "
+                    "read by fit.parse_unknowns or fit.parse_evidence)") if isinstance(x, str) else ""
+            raise CaseError(f"{where}: {what} = {U.as_typed(x)}: must be one number{hint}")
+
+
 def check_unknown(case: Case, u: Unknown, checks: PathChecks | None = None) -> Unknown:
     """Refuse an unknown whose path, bounds, start or prior break a rule (CaseError). ``checks``: the batch's
     path checks (default: the path checked here)."""
     name, path = case.name, u.path
     (checks or PathChecks()).unknown(case, path)
+    if u.prior is not None and (not isinstance(u.prior, (tuple, list)) or len(u.prior) != 2):
+        raise CaseError(f"case '{name}': unknowns: {path}: prior = {U.as_typed(u.prior)}: must be (mean, sigma)")
+    _si_numbers(f"case '{name}': unknowns: {path}", lower=u.lower, upper=u.upper,
+                **({} if u.start is None else {"start": u.start}),
+                **({} if u.prior is None else {"prior mean": u.prior[0], "prior sigma": u.prior[1]}))
     field = _field(path)
     lo, hi = (float(b) for b in _own_limits(field, float(u.lower), float(u.upper)))
     start = math.nan if u.start is None else u.start
@@ -269,10 +285,11 @@ def check_evidence(case: Case, e: Evidence, checks: PathChecks | None = None) ->
     """Refuse evidence whose path, value or sigma break a rule (CaseError). ``checks``: the batch's path checks
     (default: the path checked here)."""
     (checks or PathChecks()).evidence(case, e.path)  # raises on a bad path
+    _si_numbers(f"case '{case.name}': evidence: {e.path}", value=e.value, sigma=e.sigma)
     broken = next((rule for rule, bad in _evidence_faults(e.value, e.sigma) if bad), None)
     where = f"case '{case.name}': evidence: {e.path}"
     if broken == "value":
-        raise CaseError(f"{where}: value {_q(e.value, e.path)} must be finite")
+        raise CaseError(f"{where}: value {e.value:g} must be finite")  # not _q's "none" (a bound not given)
     if broken == "magnitude":
         raise CaseError(f"{where}: value {_q(e.value, e.path)}: beyond {MAX_MAGNITUDE:g} (SI), no measurement of a "
                         "crash is; the fit cannot compute with it")

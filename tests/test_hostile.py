@@ -35,6 +35,7 @@ import tomllib
 import warnings
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -505,3 +506,67 @@ def test_a_character_the_pictures_font_cannot_draw_is_one_line_of_the_command(tm
     note = "ks-jax: note: the pictures' font has no glyph for \N{AUTOMOBILE} (U+1F697); it is drawn as a box"
     assert run.stderr.splitlines().count(note) == 1 and "UserWarning" not in run.stderr, run.stderr
     assert (tmp_path / "t.png").stat().st_size > 0
+
+
+def test_the_python_api_refuses_what_it_cannot_use_by_name(tmp_path):
+    """From Python: an output path of a vehicle the result has not, a sweep's results stored as integers, booleans
+    or float16 (an invalid row's NaN would read as a number; a valid one would overflow), writing a sweep that kept
+    nothing, a fit's counts that are not whole numbers, an Unknown or Evidence made with a unit string or an array,
+    and a top view of nothing or of a Case: each refused with the argument, its value and the rule."""
+    case = ks_jax.load_case(SEED1)
+    solved = ks_jax.solve(case)
+    with pytest.raises(CaseError, match=r"path 'vehicles\[2\]\.delta_v_magnitude': the result has no vehicles\[2\]"):
+        ks_jax.get_output(solved.result, "vehicles[2].delta_v_magnitude")
+    for dtype in (np.float16, np.int32, bool):
+        with pytest.raises(CaseError, match="output_dtype = .*: must be float32 or float64"):
+            ks_jax.sweep(case, {"vehicles[1].speed": [9.0, 10.0]}, output_dtype=dtype)
+    nothing = ks_jax.sweep(case, {"vehicles[1].speed": [9.0, 10.0]}, outputs=["contact.energy_loss"], keep=False)
+    with pytest.raises(CaseError, match="this sweep kept no results"):
+        ks_jax.sweeps.write_results(nothing, tmp_path / "nothing.csv")
+    assert not (tmp_path / "nothing.csv").exists()
+    fitted = ks_jax.load_case(FIT_CASE)
+    for kwargs, words in (({"monte_carlo": -1}, "monte_carlo = -1: must be a whole number >= 0"),
+                          ({"starts": 2.5}, "starts = 2.5: must be a whole number >= 1"),
+                          ({"max_iter": 0}, "max_iter = 0: must be a whole number >= 1"),
+                          ({"rtol": -1.0}, r"rtol = -1.0: the relative singular-value threshold must be in \(0, 1\)")):
+        with pytest.raises(ValueError, match=words):
+            fit.reconstruct(fitted, **kwargs)
+    speed = "vehicles[1].speed"
+    for unknown, evidence, words in (
+            (fit.Unknown(speed, "0 mph", "60 mph"), None, r"lower = '0 mph': must be one number \(made in Python"),
+            (fit.Unknown(speed, 0.0, 30.0, prior=(10.0,)), None, r"prior = \[10.0\]: must be \(mean, sigma\)"),
+            (None, fit.Evidence(speed, np.array([2.9, 3.0]), 0.1), r"value = array\(\[2.9, 3. \]\): must be one"),
+            (None, fit.Evidence(speed, math.inf, 0.1), "value inf must be finite")):
+        with pytest.raises(CaseError, match=words):
+            fit.reconstruct(fitted, [unknown or fit.Unknown(speed, 0.0, 30.0)],
+                            [evidence or fit.Evidence(speed, 9.0, 0.1)])
+    with pytest.raises(ValueError, match="no solution given"):
+        ks_jax.plot.top_view_figure([])
+    with pytest.raises(TypeError, match="a Solution from ks_jax.solve is drawn, not a Case"):
+        ks_jax.plot.top_view(case)
+
+
+def test_an_exchange_of_inputs_of_the_wrong_kind_or_shape_is_refused_by_name():
+    """``exchange`` (alone or under ``jax.vmap``) and ``exchange_batch`` refuse an input of the wrong shape or kind,
+    naming it, before any work: a mass of (1,) would broadcast over the row and give every result another shape and
+    the status "results overflow", a position of (2,) or a list would fail deep inside."""
+    car = ks_jax.Vehicle.create(1400.0, [500.0, 2000.0, 2200.0], 4.5, 1.8)
+    state = ks_jax.State.create([0.0, 0.0, 0.5], 0.0, speed=10.0)
+    other = ks_jax.State.create([-4.0, 0.5, 0.5], 0.0, speed=15.0)  # catching up: closing
+    contact = ks_jax.Contact.create([-2.0, 0.2, 0.5], [1.0, 0.0, 0.0], 0.1, 0.5)
+    for args, kind, words in (
+            ((car._replace(mass=jnp.array([1400.0])), state, car, other, contact), ValueError,
+             r"exchange: vehicle1\.mass has shape \(1,\); it must be \(\)"),
+            ((car, state._replace(position=jnp.zeros(2)), car, other, contact), ValueError,
+             r"state1\.position has shape \(2,\); it must be \(3,\)"),
+            ((car, state, car, other, contact._replace(point=[0.0, 0.0, 0.5])), TypeError,
+             r"contact\.point = \[0\.0, 0\.0, 0\.5\]: must be an array or a number"),
+            ((state, state, car, other, contact), TypeError, "vehicle1 must be a Vehicle .* got a State")):
+        with pytest.raises(kind, match=words):
+            ks_jax.exchange(*args)
+    rows = [jax.tree_util.tree_map(lambda x: np.stack([np.asarray(x)] * 2), a) for a in (car, state, car, other,
+                                                                                           contact)]
+    rows[1] = rows[1]._replace(position=np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"exchange_batch: state1\.position has shape \(2, 2\); it must be \(N, 3\)"):
+        ks_jax.exchange_batch(*rows)
+    assert np.asarray(ks_jax.exchange(car, state, car, other, contact).contact.status) == 0

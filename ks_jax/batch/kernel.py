@@ -22,6 +22,32 @@ from .chunks import CHUNK_ROWS, batched_in_chunks, cut
 from .stages import run
 
 
+# a row's shape of each input that is not one number (docs/model.md, "Inputs"); every other input is ()
+ROW_SHAPES = {"inertia": ((3,), (3, 3)), "position": ((3,),), "velocity": ((3,),), "angular_velocity": ((3,),),
+              "point": ((3,),), "normal": ((3,),)}
+ARGUMENTS = (("vehicle1", Vehicle), ("state1", State), ("vehicle2", Vehicle), ("state2", State), ("contact", Contact))
+
+
+def check_rows(args, batch_axes: int, who: str):
+    """Refuse inputs of the wrong kind or shape by name (TypeError, ValueError): a mass of shape (1,) would
+    broadcast over the row's other inputs and give every result a shape and a status that say nothing of why,
+    a position of (2,) would fail deep inside. ``batch_axes``: leading axes before a row's own (0 for ``exchange``,
+    whose rows under ``jax.vmap`` are seen one at a time; 1 for ``exchange_batch``)."""
+    for (name, kind), part in zip(ARGUMENTS, args):
+        if not isinstance(part, kind):
+            raise TypeError(f"{who}: {name} must be a {kind.__name__} (ks_jax.{kind.__name__}.create), got a "
+                            f"{type(part).__name__}")
+        for field, x in part._asdict().items():
+            if isinstance(x, (str, bytes, list, tuple, dict)) or x is None:
+                raise TypeError(f"{who}: {name}.{field} = {x!r}: must be an array or a number (SI; "
+                                f"ks_jax.{kind.__name__}.create converts lists)")
+            shape = tuple(np.shape(x))
+            allowed = ROW_SHAPES.get(field, ((),))
+            if len(shape) < batch_axes or shape[batch_axes:] not in allowed:
+                rows = " or ".join(str(("N",) * batch_axes + s).replace("'", "") for s in allowed)
+                raise ValueError(f"{who}: {name}.{field} has shape {shape}; it must be {rows}")
+
+
 @functools.lru_cache(maxsize=None)
 def exchange_stages(smoothing: float):
     """``model.collision.stages(smoothing)``, one tuple per value (the programs built from it are
@@ -38,6 +64,7 @@ def _batched(smoothing: float, plan: Plan):
 @functools.wraps(collision.exchange)
 def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State, contact: Contact,
              smoothing=0.0, plan: Plan | str | None = None) -> ExchangeResult:
+    check_rows((vehicle1, state1, vehicle2, state2, contact), 0, "exchange")
     if isinstance(smoothing, (int, float)):
         check_smoothing(smoothing)
         return _batched(float(smoothing), plan_for(plan))(vehicle1, state1, vehicle2, state2, contact)
@@ -105,6 +132,7 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
                         "jax.grad or jax.vmap; there, use jax.vmap(ks_jax.exchange)")
     if target is not None and not to_host:
         raise ValueError("exchange_batch: out= is written on the host; it cannot go with to_host=False")
+    check_rows(args, 1, "exchange_batch")
     sizes = {int(np.shape(x)[0]) if np.ndim(x) else None for x in jax.tree_util.tree_leaves(args)}
     if len(sizes) != 1 or None in sizes:
         raise ValueError("exchange_batch: every input needs the same leading batch axis; got sizes "

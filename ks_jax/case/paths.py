@@ -484,11 +484,22 @@ def output_leaf(result, path: str):
         whole = inter.time if name == "time" else getattr(inter.exchanges.contact, name)
         axis = whole.ndim - (2 if name in VECTOR_OUTPUTS else 1)  # the slots' axis, after any batch axes
         return jnp.take(whole, vi, axis=axis) if isinstance(whole, jax.Array) else np.take(whole, vi, axis=axis)
-    if name in CUMULATIVE_OUTPUTS:
-        return _cumulative(result, inter, vi, name)
-    if name.startswith("approach."):  # the result at the start of every phase: (..., P) or (..., P, 2)
-        return getattr(_approach_holder(result, vi, idx[0], path), name.partition(".")[2])
-    return getattr(_result_holder(result, group, vi, name, path), name)
+    if name in CUMULATIVE_OUTPUTS and inter is not None and vi >= inter.delta_v_cumulative.shape[-2]:
+        _no_vehicle(path, vi, inter.delta_v_cumulative.shape[-2])  # an array's index past its end would clamp
+    try:
+        if name in CUMULATIVE_OUTPUTS:
+            return _cumulative(result, inter, vi, name)
+        if name.startswith("approach."):  # the result at the start of every phase: (..., P) or (..., P, 2)
+            return getattr(_approach_holder(result, vi, idx[0], path), name.partition(".")[2])
+        return getattr(_result_holder(result, group, vi, name, path), name)
+    except IndexError:  # a tuple of the result's vehicles, shorter than the path's index
+        _no_vehicle(path, vi, None)
+
+
+def _no_vehicle(path, vi, count):
+    """A PathError: the result holds no vehicles[vi] (``count`` of them, where known)."""
+    have = "" if count is None else f" (its vehicles are vehicles[0] to vehicles[{count - 1}])"
+    raise PathError(f"path '{path}': the result has no vehicles[{vi}]{have}")
 
 
 def _cumulative(result, inter, vi, name):

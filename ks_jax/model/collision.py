@@ -52,7 +52,7 @@ def exchange(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: State,
       m/s, pdof deg, crush m, ees m/s, velocity_after, yaw_rate_after rad/s, ...). A row whose inputs
       break a rule has that rule's status code (``ks_jax.status_text`` gives the words) and NaN in every
       number; a contact that is not closing has status "separating" and no impulse. Finite inputs whose
-      results overflow get ``INVALID_OVERFLOW``; their numbers (and derivatives) are left as computed.
+      results overflow get ``INVALID_OVERFLOW`` and, as every invalid row, NaN in every number.
 
     Works under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jacfwd``. ``ks_jax.exchange`` is this
     function with a batching rule for large batches on a CPU (``ks_jax.batch``).
@@ -160,7 +160,8 @@ def impulse(vehicle1, state1, vehicle2, state2, contact, prepared: Prepared, smo
 def results(vehicle1, state1, vehicle2, state2, contact, prepared: Prepared, found: Impulse) -> ExchangeResult:
     """Every result of the exchange from its impulse (``impulse`` of the same inputs). Finite inputs far
     out of scale (a speed of 1e300 m/s), where |J|^2, |u|^2 or m |v|^2 overflows, get status
-    ``INVALID_OVERFLOW`` rather than a silent NaN under "ok"; their numbers are left as computed."""
+    ``INVALID_OVERFLOW`` rather than a silent NaN under "ok", and NaN in every number, as every invalid row:
+    what was computed there (inf, NaN and finite values side by side) would read as results."""
     ok = prepared.status == OK
     vehicle1, state1, vehicle2, state2, contact = benign((vehicle1, state1, vehicle2, state2, contact), ok)
     status = jnp.where(ok & ~found.approaching, jnp.int32(SEPARATING), prepared.status)
@@ -176,4 +177,4 @@ def results(vehicle1, state1, vehicle2, state2, contact, prepared: Prepared, fou
         mass2 * la.dot(state2.velocity, state2.velocity)
     status = jnp.where(ok & ~jnp.isfinite(scale), jnp.int32(INVALID_OVERFLOW), result.contact.status)
     result = result._replace(contact=result.contact._replace(status=status))
-    return mask_invalid(result, ok)
+    return mask_invalid(result, ok & (status != INVALID_OVERFLOW))

@@ -457,6 +457,9 @@ def top_view(solution, ax=None, evidence=None, sigma=None):
     of those, drawn about the marks. Other paths are ignored. Returns the axes."""
     import matplotlib.pyplot as plt
 
+    if not (hasattr(solution, "case") and hasattr(solution, "result")):
+        raise TypeError(f"top_view: a Solution from ks_jax.solve is drawn, not a {type(solution).__name__} (solve a "
+                        "Case first: ks_jax.solve(case))")
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 7))
     case = solution.case
@@ -530,6 +533,8 @@ def top_view_figure(solutions, evidence=None, sigma=None):
     if not isinstance(solutions, (list, tuple)):
         solutions = [solutions]
     n = len(solutions)
+    if n == 0:
+        raise ValueError("save_top_view: no solution given: pass a Solution from ks_jax.solve, or a list of them")
     evidence = list(evidence) if isinstance(evidence, (list, tuple)) else [evidence] * n
     sigma = list(sigma) if isinstance(sigma, (list, tuple)) else [sigma] * n
     if len(evidence) != n or len(sigma) != n:

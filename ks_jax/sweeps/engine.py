@@ -220,8 +220,8 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     progress: None (a bar once a sweep of more than one chunk has run ``PROGRESS_DELAY`` = 2 s), True
     (from the start) or False; tqdm if installed, else a line on stderr.
     devices: the devices to shard every chunk over (default ``jax.local_devices()``, this process's).
-    output_dtype: dtype of the stored float results (default: the compute dtype). In float32, a scene
-    more than 1 km from the origin is solved about its CGs' midpoint (``case.scale.scene_origin``), and its
+    output_dtype: dtype of the stored float results, float32 or float64 (default: the compute dtype). In float32,
+    a scene more than 1 km from the origin is solved about its CGs' midpoint (``case.scale.scene_origin``), and its
     ``contact.point[0]``/``[1]`` outputs are float64.
     on_chunk: called as ``on_chunk(lo, hi, chunk)`` with the flat index range and a dict of
     NumPy arrays (outputs and status) of every chunk, in order. keep: store the results (False:
@@ -354,11 +354,24 @@ class Layout:
     index_dtype: object
 
 
+def _check_output_dtype(output_dtype):
+    """Results are stored as float32 or float64: an integer or boolean type would turn an invalid row's NaN into a
+    number that reads as a result, float16 would overflow a valid one to inf."""
+    try:
+        ok = output_dtype is None or np.dtype(output_dtype) in (np.float32, np.float64)
+    except TypeError:
+        ok = False
+    if not ok:
+        raise CaseError(f"sweep: output_dtype = {output_dtype!r}: must be float32 or float64 (or None, the compute "
+                        "dtype)")
+
+
 def layout(request: Request, chunk_size=None, devices=None, output_dtype=None, plan=None) -> Layout:
     """The ``Layout`` of ``request``: rows per chunk (``chunk_size`` per device, default the plan's,
     ``backend.Plan.rows``; a small sweep is one chunk rounded up to its ``_bucket``), where the scene is solved,
     and its program. ``plan``: a ``backend.Plan`` or its path; default, the path of ``devices``."""
     case, n_points = request.case, request.hi - request.lo
+    _check_output_dtype(output_dtype)
     devices = tuple(jax.local_devices() if devices is None else devices)
     plan = plan_for(plan, devices)
     if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.Plan.rows``)

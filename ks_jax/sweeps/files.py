@@ -16,7 +16,7 @@ from ..case.errors import CaseError
 from ..files import check_output_file
 from ..model.types import STATUS_TEXT
 from .columns import axes_in_units, check_units, columns, invalid_rows, outputs_in_units, status_texts
-from .result import SweepResult
+from .result import SweepResult, check_kept
 
 
 CSV_HINT_POINTS = 100_000  # from this many points, ``ks-jax sweep`` without pyarrow suggests it for a .csv
@@ -372,6 +372,7 @@ class ResultWriter:
 def write_results(result: SweepResult, out, units="si"):
     """Write a kept sweep (``SweepResult``) to .csv (one row per point), .npz (arrays) or .parquet
     (pyarrow), in the format of ``ks-jax sweep`` (``ResultWriter``); units: "si" or "us"."""
+    check_kept(result)
     lo, hi = result.index_range
     writer = ResultWriter(out, result.axes, result.mode, result.shape, first=lo, units=units)
     flat = {p: np.ravel(v) for p, v in result.outputs.items()}

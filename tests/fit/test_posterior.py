@@ -311,3 +311,6 @@ def test_a_chain_that_never_moved_measures_no_spread():
             assert d["std"] is None and d["q50"] is None and d["mean"] == pytest.approx(x.mean())
     post = fit.posterior.summarize(["u"], moving, 0, 50, 0, [1.0])
     assert not any("never moved" in w for w in post.warnings)
+    post = fit.posterior.summarize(["u"], moving[:, :1], 0, 50, 0, [1.0])  # one draw in all: no spread either
+    assert math.isnan(post.summary["u"]["std"]) and math.isnan(post.summary["u"]["q975"])
+    assert any(w.startswith("one draw in all measures no spread") for w in post.warnings)

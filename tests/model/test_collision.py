@@ -477,12 +477,14 @@ def test_smoothing_out_of_range_is_refused_or_flagged(random_cases):
 
 def test_results_that_overflow_get_a_status(random_cases):
     """Finite inputs far too large for float64 (1e300 m/s): INVALID_OVERFLOW in that row, never a NaN
-    under "ok" or "separating"; the other rows of the batch are untouched."""
+    under "ok" or "separating", and NaN in every number of it as in every invalid row (not the inf, NaN and finite
+    values computed there side by side); the other rows of the batch are untouched."""
     cases = [copy.deepcopy(c) for c in random_cases["principal"][:3]]
     cases[1]["vehicles"][1]["velocity"] = np.array([1e300, 0.0, 0.0])
     eng = kit.solve(cases)
     assert list(eng["contact"]["status"]) == [t.OK, t.INVALID_OVERFLOW, t.OK]
-    assert not np.isfinite(eng["contact"]["energy_loss"][1])
+    floats = [np.asarray(x) for x in jax.tree_util.tree_leaves(eng) if np.asarray(x).dtype.kind == "f"]
+    assert len(floats) > 20 and all(np.isnan(x[1]).all() for x in floats)
     for k in (0, 2):
         one = kit.solve([cases[k]])
         np.testing.assert_array_equal(eng["contact"]["impulse"][k], one["contact"]["impulse"][0])
