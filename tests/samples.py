@@ -134,3 +134,21 @@ def reference_jit(fun, **jit_kwargs):
     derivatives (its batching rule, ``sum_over_rows``' chunks), is traced the same whatever XLA's settings.
     The library's own programs (``exchange_batch``, ``sweep``, ``solve``, the fit) compile as users get them."""
     return jax.jit(fun, compiler_options=compiler_options(True), **jit_kwargs)
+
+
+def assert_json_close(a, b, where="json"):
+    """Two parsed JSON documents (or ``to_dict`` results) equal, their numbers to 1e-12 of themselves (1e-12
+    absolute near 0): two compiled programs of one computation may round its last bits apart."""
+    assert type(a) is type(b), where
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            assert_json_close(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), where
+        for k, (x, y) in enumerate(zip(a, b)):
+            assert_json_close(x, y, f"{where}[{k}]")
+    elif isinstance(a, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-12), where
+    else:
+        assert a == b, where

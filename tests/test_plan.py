@@ -20,6 +20,7 @@ from ks_jax.backend import Plan, plan_for
 from ks_jax.cli import main
 from ks_jax.model import linalg as la
 from ks_jax.solve import cases as solve_cases
+from samples import assert_json_close
 
 MODEL = Path(ks_jax.__file__).parent / "model"
 CASES = Path(ks_jax.__file__).parent / "cases"
@@ -133,25 +134,8 @@ def test_the_command_line_reads_the_path_once_and_passes_it_down(monkeypatch, ca
     plain = capsys.readouterr().out
     monkeypatch.setenv("KS_JAX_PATH", "accelerator")
     assert main(["solve", case, "--json"]) == 0
-    _assert_close(json.loads(capsys.readouterr().out), json.loads(plain))
+    assert_json_close(json.loads(capsys.readouterr().out), json.loads(plain))
     assert seen == [None, Plan("accelerator")]
-
-
-def _assert_close(a, b, where="json"):
-    """Two parsed JSON documents equal, their numbers to 1e-12 of themselves (1e-12 absolute near 0)."""
-    assert type(a) is type(b), where
-    if isinstance(a, dict):
-        assert a.keys() == b.keys(), where
-        for k in a:
-            _assert_close(a[k], b[k], f"{where}.{k}")
-    elif isinstance(a, list):
-        assert len(a) == len(b), where
-        for k, (x, y) in enumerate(zip(a, b)):
-            _assert_close(x, y, f"{where}[{k}]")
-    elif isinstance(a, float):
-        assert a == pytest.approx(b, rel=1e-12, abs=1e-12), where
-    else:
-        assert a == b, where
 
 
 def _products_without_precision(source, name):

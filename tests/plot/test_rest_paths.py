@@ -25,6 +25,7 @@ from ks_jax.cli.fit import case_at_estimate
 from ks_jax.plot.trajectory import draw_measured_rest
 from ks_jax.solve import cases as solve_cases
 from ks_jax.solve import motion_paths
+from samples import assert_json_close
 
 pytestmark = pytest.mark.slow  # every test draws the module fixture's solved motion to rest: compiling it is slow
 
@@ -195,29 +196,13 @@ def test_the_paths_drawn_are_the_ones_solve_kept_and_a_solve_without_them_gives_
     monkeypatch.setattr(solve_cases, "PATH_BYTES", 0)
     bare = solve(sol.case)
     assert all(r.path is None for r in bare.result.rest)
-    _same_to_rounding(bare.to_dict(), sol.to_dict())  # two programs (with and without the steps): XLA may round apart
+    assert_json_close(bare.to_dict(), sol.to_dict())  # two programs (with and without the steps)
     again = motion_paths(bare)
     assert [m.path for m in calls] == [True]
     for a, b, rest in zip(again, paths, bare.result.rest):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(a[-1, 1:3], np.asarray(rest.rest_position)[:2], rtol=1e-12, atol=1e-12)
 
-
-def _same_to_rounding(a, b, where="case"):
-    """Two results' JSON alike: every text, flag and code the same, every number to 1e-12 of its size (the last
-    bits of a sum may differ between two compiled programs)."""
-    if isinstance(a, dict):
-        assert a.keys() == b.keys(), where
-        for k in a:
-            _same_to_rounding(a[k], b[k], f"{where}.{k}")
-    elif isinstance(a, list):
-        assert len(a) == len(b), where
-        for k, (x, y) in enumerate(zip(a, b)):
-            _same_to_rounding(x, y, f"{where}[{k}]")
-    elif isinstance(a, float) and not isinstance(b, bool):
-        assert math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-15), (where, a, b)
-    else:
-        assert a == b, (where, a, b)
 
 
 def test_fit_plot_solves_the_case_at_the_estimate(drawn):
