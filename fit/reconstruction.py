@@ -72,10 +72,10 @@ class FitResult:
     not_determined: list  # unknowns with no usable standard error: not determined or poorly determined
     cost: float
     status: str
-    starts: int
-    starts_converged: int
-    starts_at_best: int
-    iterations: int
+    starts: int | None  # None: refused, nothing was tried
+    starts_converged: int | None  # None: refused, nothing was tried
+    starts_at_best: int | None  # None: refused, nothing was tried
+    iterations: int | None  # None: refused, nothing was tried
     singular_values: list
     covariance: np.ndarray = field(repr=False)
     evidence_kinds: list = field(default_factory=list, repr=False)
@@ -127,14 +127,18 @@ class FitResult:
         return out
 
 
-def not_fitted_dict(name: str, status: str) -> dict:
-    """The JSON of a case that could not be fitted (docs/fit.md, "JSON"): ``FitResult.to_dict``'s keys, its
-    ``status`` ("invalid: ..."), every table of paths empty, every number null, ``converged`` false: one shape for
-    every case of a file, fitted or not."""
-    return {"name": name, "estimate": {}, "std": {}, "correlation": {}, "residuals": {}, "fitted": {},
-            "converged": False, "unidentified": [], "at_bound": [], "chi2": None, "status": status, "measured": {},
-            "sigma": {}, "iterations": None, "starts": {"total": None, "converged": None, "at_best": None},
-            "notes": []}
+    @classmethod
+    def refused(cls, name: str, error) -> FitResult:
+        """The result of a case that could not be fitted because it breaks a rule (``error``, a CaseError or its
+        message): status "invalid: <the message>", every table of paths empty, every count None, ``converged``
+        false. Its ``to_dict`` has every key of a fitted case's (docs/fit.md, "JSON"), so that every case of a
+        file or a batch has one shape, fitted or not."""
+        message = str(error)
+        return cls(case_name=name, unknowns=[], evidence=[], estimate={}, std={}, correlation={}, fitted={},
+                   residuals={}, converged=False, unidentified=[], at_bound=[], not_determined=[], cost=math.nan,
+                   status=message if message.startswith("invalid") else f"invalid: {message}", starts=None,
+                   starts_converged=None, starts_at_best=None, iterations=None, singular_values=[],
+                   covariance=np.zeros((0, 0)))
 
 
 def _keys(paths):
@@ -278,26 +282,39 @@ def _collector_paused():
             gc.enable()
 
 
-def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo):
-    """Each case's (unknowns, evidence, Problem), checked (CaseError), and the batch's one Problem: every case must
-    have the same; and the rows the fit and its refits hold at once checked against the memory there is."""
+def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors):
+    """Each case's (unknowns, evidence, Problem), checked, or the CaseError of a case that breaks a rule; and the
+    batch's one Problem, that of its first case that breaks none: every case must have the same, and one that
+    has another is refused too. ``errors``: "raise" the first case's error instead. The rows the fit and its
+    refits hold at once are checked against the memory there is."""
     specs_u = [None] * len(cases) if unknowns is None else list(unknowns)
     specs_e = [None] * len(cases) if evidence is None else list(evidence)
     if len(specs_u) != len(cases) or len(specs_e) != len(cases):
         raise ValueError("reconstruct_batch: give one unknowns spec and one evidence spec per case")
     checks = PathChecks()
-    prepared = [p or _prepare(c, u, e, checks)
-                for p, c, u, e in zip(check_batch(cases, specs_u, specs_e, checks), cases, specs_u, specs_e)]
-    problem = prepared[0][2]
-    for c, (_, _, p) in zip(cases, prepared):
-        if p != problem:
-            raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
-                            f"in every case (differs from case '{cases[0].name}')")
+    prepared, problem, first = [], None, None
+    for p, c, u, e in zip(check_batch(cases, specs_u, specs_e, checks), cases, specs_u, specs_e):
+        try:
+            p = p or _prepare(c, u, e, checks)
+            if problem is not None and p[2] != problem:
+                raise CaseError(f"case '{c.name}': a batch needs the same unknowns, evidence paths and contact mode "
+                                f"in every case (differs from case '{first}')")
+        except CaseError as err:
+            if errors == "raise":
+                raise
+            p = err
+        else:
+            if problem is None:
+                problem, first = p[2], c.name
+        prepared.append(p)
+    if problem is None:
+        return prepared, None
     # every start of every case is a row held at once (its inputs, Jacobian and state), as is every start of
     # the Monte Carlo refits drawn at once: refused up front where that cannot fit in memory
     m, n = len(problem.evidence), len(problem.unknowns)
     row_bytes = 8 * (3 * (m + n) * (n + 1) + 8 * n) + 2048
-    check_memory(len(cases) * starts * row_bytes, f"{len(cases)} case(s) x {starts} starts",
+    fitted = sum(not isinstance(p, CaseError) for p in prepared)
+    check_memory(fitted * starts * row_bytes, f"{fitted} case(s) x {starts} starts",
                  "give fewer starts (--starts) or fit fewer cases at once")
     check_memory(int(monte_carlo) * starts * row_bytes, f"--monte-carlo {int(monte_carlo)} x {starts} starts",
                  "give fewer refits")
@@ -335,22 +352,28 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
                              None if evidence is None else [evidence], starts=starts, seed=seed,
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
                              rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices,
-                             max_starts=max_starts, posterior=posterior, chains=chains, plan=plan)[0]
+                             max_starts=max_starts, posterior=posterior, chains=chains, plan=plan,
+                             errors="raise")[0]
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
                       dtype=None, devices=None, max_starts: int | None = None, posterior: int = 0,
-                      chains: int = 4, plan=None) -> list[FitResult]:
+                      chains: int = 4, plan=None, errors: str = "report") -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
     the same length as ``cases``), or None to read each case file's own. All cases must name
     the same unknown paths and the same evidence paths, in the same order (bounds, priors,
     values and sigmas may differ). Other arguments as ``reconstruct``; every start of every case is a row,
-    and over several ``devices`` the rows are split among them.
+    and over several ``devices`` the rows are split among them. errors: "report" (default), a case that breaks a
+    rule (a bad path, unit, bound or sigma, an invalid case, or paths other than the batch's first good case's)
+    is not fitted and its result says why (``FitResult.refused``: status "invalid: ..."), and the others are
+    fitted; "raise", its CaseError is raised before any fit. An argument that is not a Case is a TypeError.
     """
+    if errors not in ("report", "raise"):
+        raise ValueError(f"errors = {errors!r}: must be 'report' (a bad case's result says why) or 'raise'")
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
     if not 0.0 <= smoothing < 1.0:
@@ -371,7 +394,12 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     dtype = dtype or jnp.result_type(float)
     rtol = default_rtol(dtype) if rtol is None else rtol
     max_iter = max_iter or {"lm": 50, "lbfgs": 200, "adam": 2000}[solver]
-    prepared, problem = _prepared_batch(cases, unknowns, evidence, starts, monte_carlo)
+    prepared, problem = _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors)
+    out = [FitResult.refused(c.name, p) if isinstance(p, CaseError) else None for c, p in zip(cases, prepared)]
+    fitting = [i for i, r in enumerate(out) if r is None]
+    if not fitting:
+        return out
+    cases, prepared = [cases[i] for i in fitting], [prepared[i] for i in fitting]  # from here on, those fitted
     problem = dataclasses.replace(problem, plan=plan_for(plan, jax.local_devices() if devices is None else devices))
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
@@ -456,4 +484,6 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,
                                             smoothing, dtype, progress, chunk, block, devices, everywhere)
             r.notes += linearisation_notes(r)
-    return results
+    for i, r in zip(fitting, results):
+        out[i] = r
+    return out

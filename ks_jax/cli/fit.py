@@ -3,7 +3,7 @@
 The text report is ``fit.report.text_report``; ``--json`` prints ``{"cases": [...]}``, as ``ks-jax solve --json``
 does, one entry per case of the file (one case or several): ``FitResult.to_dict`` (SI values, null for "not
 determined"), or for a case that was not fitted the same keys, its status and nothing fitted
-(``fit.reconstruction.not_fitted_dict``). Names are written exactly as the file gives them in JSON, and escaped
+(``FitResult.refused``). Names are written exactly as the file gives them in JSON, and escaped
 (``case.visible``) where they reach the terminal. Monte Carlo shows a progress
 bar on stderr. ``--plot FILE`` draws the top view of each fitted case solved at its estimate (the case's
 inputs with the unknowns set to it), with the measured rest positions among its evidence marked and their
@@ -22,7 +22,7 @@ import numpy as np
 from fit import reconstruct
 from fit.posterior import sampler as posterior_sampler
 from fit.problem import Problem, apply_unknowns
-from fit.reconstruction import not_fitted_dict
+from fit.reconstruction import FitResult
 from fit.report import DISPLAY, text_report
 
 from ..case import input_kind, input_ties, load_cases
@@ -82,8 +82,8 @@ def run(args) -> int:
             raise CaseError(f"--posterior: {err}") from None
     if args.monte_carlo < 0:
         raise CaseError(f"--monte-carlo {args.monte_carlo}: must be >= 0")
-    results, failed = [], {}
-    for k, case in enumerate(cases):
+    results = []
+    for case in cases:
         try:
             if not case.valid:
                 raise CaseError(case.error)
@@ -99,29 +99,26 @@ def run(args) -> int:
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
                 raise
-            failed[k] = str(err) if str(err).startswith("invalid") else f"invalid: {err}"
-            results.append(None)
+            results.append(FitResult.refused(case.name, err))
     if args.json:
-        dicts = [not_fitted_dict(c.name, failed[k]) if r is None else r.to_dict()
-                 for k, (c, r) in enumerate(zip(cases, results))]
-        print(json.dumps({"cases": dicts}, indent=1))
+        print(json.dumps({"cases": [r.to_dict() for r in results]}, indent=1))
     else:
-        print("\n\n".join(f"Reconstruction: {visible(c.name)}\n  not fitted: {visible(failed[k])}" if r is None
-                           else visible_lines(text_report(dataclasses.replace(r, case_name=visible(r.case_name))))
-                           for k, (c, r) in enumerate(zip(cases, results))))
-    failed.update((k, r.status) for k, r in enumerate(results) if r is not None and r.status.startswith("invalid"))
+        print("\n\n".join(visible_lines(text_report(dataclasses.replace(r, case_name=visible(r.case_name),
+                                                                              status=visible(r.status))))
+                           for r in results))
+    failed = {k: r.status for k, r in enumerate(results) if r.status.startswith("invalid")}
     for k, message in sorted(failed.items()):
         print(f"ks-jax: case '{visible(cases[k].name)}' not fitted: {visible(message)}", file=sys.stderr)
     # a fit that ended without converging, or where the vehicles exchange no impulse, is no answer either: a
     # script reading the exit status must be able to tell
-    unfinished = {k: r for k, r in enumerate(results) if r is not None and k not in failed
+    unfinished = {k: r for k, r in enumerate(results) if k not in failed
                   and not (r.converged and r.status == "ok")}
     for k, r in sorted(unfinished.items()):
         why = "did not converge" if not r.converged else f"ended where the exchange is '{r.status}'"
         print(f"ks-jax: case '{visible(cases[k].name)}': the fit {why} (see its notes); its estimate is not an answer",
               file=sys.stderr)
     if args.plot:
-        drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if r is not None and k not in failed]
+        drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if k not in failed]
         if drawn:
             save_top_view(solve([case_at_estimate(c, r) for c, r in drawn], plan=args.plan), args.plot,
                           evidence=[{e.path: e.value for e in r.evidence} for _, r in drawn],

@@ -30,7 +30,7 @@ from fit.rounds import OFF_BOUND, other_side
 from fit.synthetic import EVIDENCE, UNKNOWNS, oblique_case
 from ks_jax import units as U
 from ks_jax.backend import Plan
-from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, set_input
+from ks_jax.case import CaseError, case_from_dict, get_input, get_output, load_case, load_cases, set_input
 from ks_jax.model.types import OK
 from ks_jax.solve import solve
 from samples import CASES
@@ -529,6 +529,51 @@ def test_evidence_that_cannot_be_computed_is_reported_not_fitted(tmp_path, capsy
     cases = json.loads(capsys.readouterr().out)["cases"]
     assert cases[0]["estimate"] == {"vehicles[1].speed": None} and cases[0]["status"].startswith("invalid")
     assert cases[1]["estimate"]["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
+
+
+@pytest.mark.slow
+def test_a_batch_reports_each_case_that_breaks_a_rule_and_fits_the_others(tmp_path):
+    """In a batch, a case that breaks a rule (an invalid case from a file, bounds upside down, other unknowns than
+    the batch's first good case) is not fitted: its result names the case and says why, with every key of a
+    fitted case's and nothing fitted. The others are fitted exactly as a batch of them alone fits them (the same
+    starts, the same program); ``errors="raise"`` raises the first one's error instead. (2 good cases x 4 starts:
+    8 rows, the program of the other tests' fits here.)"""
+    good = load_case(SEED)
+
+    def named(name, **change):
+        raw = json.loads(json.dumps(good.raw))
+        raw.update(name=name, **change)
+        return raw
+
+    bad_mass = named("bad mass")
+    bad_mass["vehicles"][0]["mass"] = "-100 slug"
+    (tmp_path / "two.json").write_text(json.dumps({"cases": [bad_mass, named("kept")]}))
+    invalid = load_cases(tmp_path / "two.json")[0]
+    assert not invalid.valid
+    second, reversed_bounds, other = (case_from_dict(named(n)) for n in ("second", "bounds reversed", "other"))
+    speed = {"vehicles[1].speed": {"bounds": ["0 mph", "40 mph"]}}
+    cases = [invalid, good, reversed_bounds, second, other]
+    unknowns = [speed, speed, {"vehicles[1].speed": {"bounds": ["40 mph", "0 mph"]}}, speed,
+                {"contact.restitution": {"bounds": [0, 0.5]}}]
+    results = fit.reconstruct_batch(cases, unknowns, [SEED_EVIDENCE] * 5, starts=4)
+    alone = fit.reconstruct_batch([good, second], [speed] * 2, [SEED_EVIDENCE] * 2, starts=4)
+    assert [r.case_name for r in results] == [c.name for c in cases]
+    for r, words in ((results[0], ("invalid: case 'bad mass'", "mass", "-100 slug")),
+                     (results[2], ("invalid: case 'bounds reversed'", "vehicles[1].speed", "bounds")),
+                     (results[4], ("invalid: case 'other'", "the same unknowns", f"differs from case '{good.name}'"))):
+        assert all(w in r.status for w in words), r.status
+        d = r.to_dict()
+        assert d.keys() == results[1].to_dict().keys() and not r.converged
+        assert d["estimate"] == {} and d["chi2"] is None and d["starts"]["total"] is None
+        assert fit.report.text_report(r) == f"Reconstruction: {r.case_name}\n  not fitted: {r.status}"
+    assert [results[1].to_dict(), results[3].to_dict()] == [r.to_dict() for r in alone]
+    assert results[1].estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.3)
+    with pytest.raises(CaseError, match="bad mass"):
+        fit.reconstruct_batch(cases, unknowns, [SEED_EVIDENCE] * 5, starts=4, errors="raise")
+    with pytest.raises(ValueError, match="errors = 'skip'"):
+        fit.reconstruct_batch(cases, unknowns, [SEED_EVIDENCE] * 5, errors="skip")
+    nothing = fit.reconstruct_batch([invalid, reversed_bounds], unknowns[1:3], [SEED_EVIDENCE] * 2)
+    assert [r.status.startswith("invalid: case") for r in nothing] == [True, True]
 
 
 def _evidence_of(case, paths, sigmas, digits=7):
