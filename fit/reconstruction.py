@@ -193,8 +193,8 @@ def _results(cases, prepared, problem, rows, at_best, stick_threshold, found, in
     texts = {code: status_text(code) for code in set(status.tolist())}
     for k in np.flatnonzero(stalled):
         i = F[k]
-        reached = int(count[k]) - int(np.count_nonzero(found.table.stalled[i] & found.table.present[i]))
-        info.statements[k] = [stalled_statement(texts[status[k]], reached, count[k])]
+        ended = int(count[k]) - int(np.count_nonzero(found.table.stalled[i] & found.table.present[i]))
+        info.statements[k] = [stalled_statement(texts[status[k]], ended, count[k])]
         info.undetermined[k] = True
         info.std[k] = np.inf
     chi2 = 2.0 * cost

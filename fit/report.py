@@ -122,12 +122,16 @@ def friction_statement(least, sliding=None, within=None, prior=False) -> str:
     return text
 
 
-def stalled_statement(status, reached, starts) -> str:
-    """A fit that ended where nothing collides (``status``: the exchange's status text there)."""
+def stalled_statement(status, ended, starts) -> str:
+    """A fit that ended where nothing collides (``status``: the exchange's status text there; ``ended``: how many
+    of the ``starts`` ended where the vehicles exchange an impulse). A start where they collide can end where
+    they do not: the solver takes any step that lowers chi^2, and with evidence far from the start a miss can fit
+    better than the start's collision."""
     return (f"nothing is determined: the fit ended where the exchange is '{status}' (no impulse), and there "
-            f"no unknown changes any evidence; {reached} of {starts} starts reached an exchange. This says nothing "
-            "about the evidence: give starts or bounds where the vehicles collide (e.g. a speed's lower bound), or "
-            "more starts (--starts)")
+            f"no unknown changes any evidence; {ended} of {starts} starts ended at an exchange (a start where the "
+            "vehicles collide can run off the exchange, where a miss fits the evidence better than the start "
+            "does). This says nothing about the evidence: give more starts (--starts), or starts or bounds nearer "
+            "the answer (e.g. a speed's lower bound)")
 
 
 # Notes on a fit (``reconstruction``, ``monte_carlo``)

@@ -691,8 +691,18 @@ def test_a_fit_that_never_reaches_a_collision_says_so():
     assert again.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.1)
     (words,) = r.unidentified
     assert words.startswith("nothing is determined: the fit ended where the exchange is 'separating'")
-    assert "0 of 1 starts reached an exchange" in words and "says nothing about the evidence" in words
+    assert "0 of 1 starts ended at an exchange" in words and "says nothing about the evidence" in words
     assert not any("disagrees" in n for n in r.notes)
+    # a start where the vehicles collide (62.6 mph, the case solved there exchanges an impulse) can run off the
+    # exchange to a miss that fits the 20 mph evidence better: the words do not say that no start collided
+    fast = [fit.Unknown("vehicles[1].speed", 0.0, 30.0, start=28.0)]
+    at_start = solve(case_from_dict({**case.raw, "vehicles": [case.raw["vehicles"][0],
+                                                               {**case.raw["vehicles"][1], "speed": "28 m/s"}]}))
+    assert int(at_start.result.contact.status) == OK and float(at_start.result.contact.impulse_magnitude) > 0
+    r = fit.reconstruct_batch([case] * COPIES, [fast] * COPIES, starts=1, max_starts=1)[0]
+    assert r.status == "separating" and r.estimate["vehicles[1].speed"] < 5.0
+    (words,) = r.unidentified
+    assert "0 of 1 starts ended at an exchange (a start where the vehicles collide can run off the exchange" in words
     d = json.loads(case.source and Path(case.source).read_text())
     d["vehicles"][1]["speed"] = "0 mph"
     r = fit.reconstruct(case_from_dict(d), {"vehicles[1].speed": {}})
