@@ -17,7 +17,8 @@ many starts. It was measured against optax's L-BFGS and Adam on the same problem
 Multi-start: ``starts`` starts (the first at each unknown's ``start`` or the middle of its bounds,
 the others a Latin hypercube within the bounds), vmapped in one compiled call, the best kept. Where fewer than
 two starts reach the best fit, or its chi^2 is improbable, more rounds of starts follow (``max_starts``).
-``reconstruct_batch`` fits many cases in one vmapped call (cases x starts).
+``reconstruct_batch`` fits many cases in one vmapped call (cases x starts). ``case_at(case, result.estimate)``
+is the case at a fit's estimate, to solve and draw.
 
 The package: ``spec`` (unknowns and evidence, read and checked), ``problem`` (what a fit compiles: the
 residual vector), ``solvers`` (Levenberg-Marquardt, optax),
@@ -34,9 +35,9 @@ scaled Jacobian, in words, with std = inf (null in JSON) for those unknowns rath
 confident number; ``at_bound``: unknowns pinned at a bound.
 """
 
-from .problem import Problem
+from .problem import Problem, case_at
 from .spec import Evidence, Unknown, parse_evidence, parse_unknowns
 from .reconstruction import FitResult, reconstruct, reconstruct_batch
 
-__all__ = ["Evidence", "FitResult", "Problem", "Unknown", "parse_evidence", "parse_unknowns", "reconstruct",
-           "reconstruct_batch"]
+__all__ = ["Evidence", "FitResult", "Problem", "Unknown", "case_at", "parse_evidence", "parse_unknowns",
+           "reconstruct", "reconstruct_batch"]

@@ -15,6 +15,7 @@ only an upper bound: x = hi - softplus(-z); none: x = z.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import jax
@@ -22,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ks_jax.backend import Plan
-from ks_jax.case import Motion, get_input, get_output, set_input
+from ks_jax.case import Motion, get_input, get_output, input_ties, set_input
 from ks_jax.solve import solve_inputs
 
 
@@ -89,6 +90,15 @@ def apply_unknowns(problem: Problem, inputs, x):
     for i, path in problem.ties:
         inputs = set_input(inputs, path, x[i])
     return inputs
+
+
+def case_at(case, values: dict, name: str | None = None):
+    """``case`` with its inputs at ``values`` (path -> SI: a fit's ``estimate``, or any scalar inputs), and the
+    inputs tied to them moved with them (a course that follows its yaw, ``ks_jax.case.input_ties``), as a fit
+    solves it; named ``name`` where one is given. ``ks_jax.solve`` of it is the case at a fit's estimate."""
+    paths = tuple(values)
+    inputs = apply_unknowns(Problem(paths, input_ties(case, paths), ()), case.inputs, [values[p] for p in paths])
+    return dataclasses.replace(case, inputs=inputs, name=case.name if name is None else name)
 
 
 def predict(problem: Problem, inputs, x, smoothing):

@@ -22,7 +22,6 @@
 # rest positions alone cannot tell apart: the road's friction and the speeds.
 
 # %%
-import dataclasses
 from importlib import resources
 
 import jax
@@ -105,20 +104,13 @@ for path, r in res.residuals.items():
 # foot of uncertainty in where a vehicle stopped is worth well under a mile an hour here, because the pickup
 # slides to rest over some 25 ft and the sedan over some 76 ft.
 #
-# The case at the estimate: its unknowns set to the fitted speeds (`ks_jax.set_input`) and solved again. Its rest
+# The case at the estimate: its unknowns set to the fitted speeds (`fit.case_at`) and solved again. Its rest
 # outlines now sit on the measured marks. (`ks-jax fit fit_rest_positions.json --plot fit.png` draws the same
 # picture from the command line.)
 
 # %%
-def at(case, values, name):
-    """The case with the inputs at ``values`` (path -> SI) and a new name."""
-    inputs = case.inputs
-    for path, value in values.items():
-        inputs = ks_jax.set_input(inputs, path, value)
-    return dataclasses.replace(case, inputs=inputs, name=name)
-
-best = ks_jax.solve(at(case, res.estimate, f"{case.name}\nat the estimate: "
-                        + ", ".join(f"{res.estimate[p] / U.MPH:.1f} mph" for p in res.estimate)))
+best = ks_jax.solve(fit.case_at(case, res.estimate, f"{case.name}\nat the estimate: "
+                                + ", ".join(f"{res.estimate[p] / U.MPH:.1f} mph" for p in res.estimate)))
 report_rest(best)
 ax = top_view(best, evidence=measured, sigma=sigma)
 ax.figure.set_size_inches(7, 7.5)
@@ -161,7 +153,7 @@ for a in paths:
 
 # %%
 frictions = (0.6, 0.75, 0.9)
-fixed = [fit.reconstruct(at(case, {"road.friction": mu}, case.name)) for mu in frictions]
+fixed = [fit.reconstruct(fit.case_at(case, {"road.friction": mu})) for mu in frictions]
 for mu, r in zip(frictions, fixed):
     worst = max(abs(r.residuals[p]) for p in r.residuals)
     print(f"friction {mu:4.2f}: sedan {r.estimate['vehicles[0].speed'] / U.MPH:5.1f} +- {r.std['vehicles[0].speed'] / U.MPH:4.2f} mph,"

@@ -21,11 +21,11 @@ import numpy as np
 
 from fit import reconstruct
 from fit.posterior import sampler as posterior_sampler
-from fit.problem import Problem, apply_unknowns
+from fit.problem import case_at
 from fit.reconstruction import FitResult
 from fit.report import DISPLAY, text_report
 
-from ..case import input_kind, input_ties, load_cases
+from ..case import input_kind, load_cases
 from ..case.errors import CaseError, visible, visible_lines
 from ..plot import check_picture_path, save_corner, save_top_view
 from ..solve import solve
@@ -120,7 +120,8 @@ def run(args) -> int:
     if args.plot:
         drawn = [(c, r) for k, (c, r) in enumerate(zip(cases, results)) if k not in failed]
         if drawn:
-            save_top_view(solve([case_at_estimate(c, r) for c, r in drawn], plan=args.plan), args.plot,
+            save_top_view(solve([case_at(c, r.estimate, f"{c.name}\nat the fit's estimate") for c, r in drawn],
+                                plan=args.plan), args.plot,
                           evidence=[{e.path: e.value for e in r.evidence} for _, r in drawn],
                           sigma=[{e.path: e.sigma for e in r.evidence} for _, r in drawn])
             print(f"\ntop view at the estimate written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
@@ -154,12 +155,3 @@ def save_posterior(result, path):
     return save_corner(path, samples, labels, estimate, np.asarray(result.covariance) / np.outer(scale, scale),
                        title=f"{visible(result.case_name)}: posterior ({post.chains} chains x {post.draws} draws) "
                              "and Laplace")
-
-
-def case_at_estimate(case, result):
-    """``case`` with its unknowns set to ``result``'s estimate (SI), and the inputs tied to them moved with them
-    (a course that follows its yaw, ``case.input_ties``), as the fit solved it; named as such for the picture."""
-    paths = tuple(result.estimate)
-    inputs = apply_unknowns(Problem(paths, input_ties(case, paths), ()), case.inputs,
-                            [result.estimate[p] for p in paths])
-    return dataclasses.replace(case, inputs=inputs, name=f"{case.name}\nat the fit's estimate")

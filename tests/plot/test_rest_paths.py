@@ -3,7 +3,6 @@ the measured rest positions are drawn where the results, a hand calculation and 
 
 import dataclasses
 import math
-import types
 from importlib import resources
 
 import jax
@@ -18,10 +17,10 @@ pytest.importorskip("matplotlib")
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
+import fit
 import ks_jax
 from ks_jax import plot
 from ks_jax import units as U
-from ks_jax.cli.fit import case_at_estimate
 from ks_jax.plot.trajectory import draw_measured_rest
 from ks_jax.solve import cases as solve_cases
 from ks_jax.solve import motion_paths
@@ -206,11 +205,12 @@ def test_the_paths_drawn_are_the_ones_solve_kept_and_a_solve_without_them_gives_
 
 
 def test_fit_plot_solves_the_case_at_the_estimate(drawn):
-    """``ks-jax fit --plot`` draws the case with its unknowns at the estimate, and the inputs that follow
-    them (a course that follows its yaw) moved too, as the fit solved it."""
+    """``ks-jax fit --plot`` draws the case with its unknowns at the estimate (``fit.case_at``), and the inputs
+    that follow them (a course that follows its yaw) moved too, as the fit solved it."""
     sol, _, _ = drawn
     estimate = {"vehicles[0].speed": 12.5, "vehicles[1].yaw": math.radians(80.0)}
-    case = case_at_estimate(sol.case, types.SimpleNamespace(estimate=estimate))
+    assert fit.case_at(sol.case, estimate).name == sol.case.name
+    case = fit.case_at(sol.case, estimate, f"{sol.case.name}\nat the fit's estimate")
     assert float(ks_jax.get_input(case.inputs, "vehicles[0].speed")) == 12.5
     assert float(ks_jax.get_input(case.inputs, "vehicles[1].yaw")) == pytest.approx(math.radians(80.0))
     assert float(ks_jax.get_input(case.inputs, "vehicles[1].course")) == pytest.approx(math.radians(80.0))
