@@ -19,7 +19,9 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - every field of the shipped cases, given any of a list of hostile values, is read or refused by name;
 - a name that is not text, and a field given twice in one object, refuse their case, naming the field;
 - values are quoted as the file wrote them (null, true, a TOML date), not as Python writes them;
-- evidence named by a path of no form, and a --case that picks a refused case, say which case.
+- evidence named by a path of no form, and a --case that picks a refused case, say which case;
+- State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
+  number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before.
 """
 
 from __future__ import annotations
@@ -570,3 +572,36 @@ def test_an_exchange_of_inputs_of_the_wrong_kind_or_shape_is_refused_by_name():
     with pytest.raises(ValueError, match=r"exchange_batch: state1\.position has shape \(2, 2\); it must be \(N, 3\)"):
         ks_jax.exchange_batch(*rows)
     assert np.asarray(ks_jax.exchange(car, state, car, other, contact).contact.status) == 0
+
+
+def test_the_constructors_refuse_a_negative_speed_a_list_or_nothing_by_name_and_still_trace():
+    """``State.create`` refuses a negative speed as a case file does (the course turned by pi is backwards travel;
+    a velocity of -5 along the course was made without a word), a yaw rate of three numbers (it gave an angular
+    velocity of shape (3, 3)); ``Vehicle.create`` a mass of None (an error from inside jnp.array) or of two numbers
+    (a mass of shape (2,)). Under jax.vmap, jax.jit and jax.grad, where a value is traced, the same calls give the
+    numbers they gave before: speed times the course's cosine and sine."""
+    here = [1.0, 2.0, 0.5]
+    with pytest.raises(ValueError, match=re.escape("State.create: speed = -5.0: speed must be >= 0 (reverse the "
+                                                   "course for backwards travel: speed=5.0, course=yaw + pi)")):
+        ks_jax.State.create(here, yaw=0.0, speed=-5.0)
+    with pytest.raises(ValueError, match=r"State.create: yaw_rate has shape \(3,\): give one number, the rate about z "
+                                         r"in rad/s; angular_velocity= takes \(wx, wy, wz\)"):
+        ks_jax.State.create(here, speed=1.0, yaw_rate=[0.1, 0.2, 0.3])
+    with pytest.raises(TypeError, match="Vehicle.create: mass = None: give one number, in kg"):
+        ks_jax.Vehicle.create(mass=None, inertia=[1, 2, 3], length=1, width=1)
+    with pytest.raises(ValueError, match=r"Vehicle.create: mass has shape \(2,\): give one number, in kg "
+                                         r"\(Vehicle.create makes one row: for a batch, jax.vmap it\)"):
+        ks_jax.Vehicle.create(mass=[1400.0, 1500.0], inertia=[500, 2000, 2200], length=4.5, width=1.8)
+    speeds, yaw = np.array([-3.0, 0.0, 7.5]), 0.3  # traced: not seen as negative, and the same numbers as before
+    want = np.stack([speeds * math.cos(yaw), speeds * math.sin(yaw), 0 * speeds], -1)
+    states = jax.vmap(lambda v: ks_jax.State.create(here, yaw, speed=v, yaw_rate=v))(jnp.asarray(speeds))
+    np.testing.assert_allclose(states.velocity, want, rtol=1e-15, atol=1e-15)
+    np.testing.assert_array_equal(states.angular_velocity, np.stack([0 * speeds, 0 * speeds, speeds], -1))
+    np.testing.assert_allclose(jax.jit(lambda v: ks_jax.State.create(here, yaw, speed=v).velocity)(-3.0), want[0],
+                               rtol=1e-15)
+    assert float(jax.grad(lambda v: ks_jax.State.create(here, yaw, speed=v).velocity[0])(-3.0)) == pytest.approx(
+        math.cos(yaw), rel=1e-15)
+    mass = jax.vmap(lambda m: ks_jax.Vehicle.create(m, [500.0, 2000.0, 2200.0], 4.5, 1.8).mass)
+    np.testing.assert_array_equal(mass(jnp.array([1400.0, 1500.0])), [1400.0, 1500.0])
+    plain = ks_jax.State.create(here, yaw, speed=7.5)
+    np.testing.assert_allclose(plain.velocity, want[2], rtol=1e-15)
