@@ -21,7 +21,8 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - values are quoted as the file wrote them (null, true, a TOML date), not as Python writes them;
 - evidence named by a path of no form, and a --case that picks a refused case, say which case;
 - State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
-  number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before.
+  number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
+- load_case given a dict, and a chunk that is not a whole number of rows, say what they take.
 """
 
 from __future__ import annotations
@@ -605,3 +606,22 @@ def test_the_constructors_refuse_a_negative_speed_a_list_or_nothing_by_name_and_
     np.testing.assert_array_equal(mass(jnp.array([1400.0, 1500.0])), [1400.0, 1500.0])
     plain = ks_jax.State.create(here, yaw, speed=7.5)
     np.testing.assert_allclose(plain.velocity, want[2], rtol=1e-15)
+
+
+def test_the_python_api_entry_points_say_what_they_take(tmp_path):
+    """From Python, an argument of another kind than an entry point takes: a case as a dict to load_case (a pathlib
+    TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), each refused naming the
+    argument, its value or kind, and what to give."""
+    with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
+                                                  "got a dict: a case given as a dict is read by "
+                                                  "ks_jax.case.case_from_dict")):
+        ks_jax.load_case({"vehicles": []})
+    car = ks_jax.Vehicle.create(1400.0, [500.0, 2000.0, 2200.0], 4.5, 1.8)
+    rows = [jax.tree_util.tree_map(lambda x: np.stack([np.asarray(x)] * 2), a) for a in (
+        car, ks_jax.State.create([0.0, 0.0, 0.5], speed=10.0), car, ks_jax.State.create([-4.0, 0.5, 0.5], speed=15.0),
+        ks_jax.Contact.create([-2.0, 0.2, 0.5], [1.0, 0.0, 0.0], 0.1, 0.5))]
+    for chunk in ("a", 2.5):
+        with pytest.raises(ValueError, match=re.escape(f"exchange_batch: chunk = {chunk!r}: chunk must be a positive "
+                                                       "number of rows (a whole number >= 1)")):
+            ks_jax.exchange_batch(*rows, chunk=chunk)
+    assert np.all(ks_jax.exchange_batch(*rows, chunk=np.int64(1)).contact.status == 0)
