@@ -22,7 +22,8 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - evidence named by a path of no form, and a --case that picks a refused case, say which case;
 - State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
   number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
-- load_case given a dict, and a chunk that is not a whole number of rows, say what they take.
+- load_case given a dict, a chunk that is not a whole number of rows, and a sweep's outputs or on_chunk of
+  another kind say what they take.
 """
 
 from __future__ import annotations
@@ -610,8 +611,9 @@ def test_the_constructors_refuse_a_negative_speed_a_list_or_nothing_by_name_and_
 
 def test_the_python_api_entry_points_say_what_they_take(tmp_path):
     """From Python, an argument of another kind than an entry point takes: a case as a dict to load_case (a pathlib
-    TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), each refused naming the
-    argument, its value or kind, and what to give."""
+    TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), a sweep's outputs of 5 or
+    on_chunk of 5 ("'int' object is not iterable", "not callable"), each refused naming the argument, its value or
+    kind, and what to give."""
     with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
                                                   "got a dict: a case given as a dict is read by "
                                                   "ks_jax.case.case_from_dict")):
@@ -625,3 +627,10 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
                                                        "number of rows (a whole number >= 1)")):
             ks_jax.exchange_batch(*rows, chunk=chunk)
     assert np.all(ks_jax.exchange_batch(*rows, chunk=np.int64(1)).contact.status == 0)
+    case, over = ks_jax.load_case(SEED1), {"vehicles[1].speed": [9.0]}
+    with pytest.raises(CaseError, match=re.escape("sweep: outputs = 5: give output paths, a string or a list of "
+                                                  "strings")):
+        ks_jax.sweep(case, over, outputs=5)
+    with pytest.raises(CaseError, match=re.escape("sweep: on_chunk = 5: must be a function, called as on_chunk(lo, "
+                                                  "hi, chunk) for every chunk")):
+        ks_jax.sweep(case, over, on_chunk=5)
