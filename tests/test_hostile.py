@@ -22,8 +22,8 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - evidence named by a path of no form, and a --case that picks a refused case, say which case;
 - State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
   number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
-- load_case given a dict, a chunk that is not a whole number of rows, and a sweep's outputs or on_chunk of
-  another kind say what they take.
+- load_case given a dict, a chunk that is not a whole number of rows, a sweep's outputs or on_chunk of another
+  kind, a Case where a case's inputs belong and a Solution where its result belongs say what they take.
 """
 
 from __future__ import annotations
@@ -612,7 +612,8 @@ def test_the_constructors_refuse_a_negative_speed_a_list_or_nothing_by_name_and_
 def test_the_python_api_entry_points_say_what_they_take(tmp_path):
     """From Python, an argument of another kind than an entry point takes: a case as a dict to load_case (a pathlib
     TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), a sweep's outputs of 5 or
-    on_chunk of 5 ("'int' object is not iterable", "not callable"), each refused naming the argument, its value or
+    on_chunk of 5 ("'int' object is not iterable", "not callable"), a Case to get_input, set_input or solve_inputs
+    and a Solution to get_output (an AttributeError from inside), each refused naming the argument, its value or
     kind, and what to give."""
     with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
                                                   "got a dict: a case given as a dict is read by "
@@ -634,3 +635,14 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
     with pytest.raises(CaseError, match=re.escape("sweep: on_chunk = 5: must be a function, called as on_chunk(lo, "
                                                   "hi, chunk) for every chunk")):
         ks_jax.sweep(case, over, on_chunk=5)
+    for call, name in ((lambda: ks_jax.get_input(case, "vehicles[1].speed"), "get_input"),
+                       (lambda: ks_jax.set_input(case, "vehicles[1].speed", 9.0), "set_input"),
+                       (lambda: ks_jax.solve_inputs(case), "solve_inputs")):
+        with pytest.raises(TypeError, match=re.escape(f"{name} takes a case's inputs (case.inputs), got a Case")):
+            call()
+    solved = ks_jax.solve(case)
+    with pytest.raises(TypeError, match=re.escape("get_output takes a result (an ExchangeResult: solution.result of a "
+                                                  "Solution, or what solve_inputs and exchange return), got a "
+                                                  "Solution")):
+        ks_jax.get_output(solved, "contact.impulse_magnitude")
+    assert float(ks_jax.get_output(solved.result, "contact.impulse_magnitude")) > 0  # what it takes: the result
