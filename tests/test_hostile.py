@@ -23,7 +23,8 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
   number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
 - load_case given a dict, a chunk that is not a whole number of rows, a sweep's outputs or on_chunk of another
-  kind, a Case where a case's inputs belong and a Solution where its result belongs say what they take.
+  kind, a Case where a case's inputs belong, a Solution where its result belongs, and status_text given an array
+  of codes or a code that is not a whole number say what they take.
 """
 
 from __future__ import annotations
@@ -613,7 +614,8 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
     """From Python, an argument of another kind than an entry point takes: a case as a dict to load_case (a pathlib
     TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), a sweep's outputs of 5 or
     on_chunk of 5 ("'int' object is not iterable", "not callable"), a Case to get_input, set_input or solve_inputs
-    and a Solution to get_output (an AttributeError from inside), each refused naming the argument, its value or
+    and a Solution to get_output (an AttributeError from inside), status codes as an array (int()'s "only
+    0-dimensional arrays") or of 10.5 (read as 10), each refused naming the argument, its value or
     kind, and what to give."""
     with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
                                                   "got a dict: a case given as a dict is read by "
@@ -646,3 +648,12 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
                                                   "Solution")):
         ks_jax.get_output(solved, "contact.impulse_magnitude")
     assert float(ks_jax.get_output(solved.result, "contact.impulse_magnitude")) > 0  # what it takes: the result
+    with pytest.raises(TypeError, match=re.escape("status_text takes one status code, got an array of shape (2,): "
+                                                  "for the words of each, [ks_jax.status_text(c) for c in "
+                                                  "codes.tolist()]")):
+        ks_jax.status_text(np.array([0, 10]))
+    for code in (10.5, math.nan, True):  # 10.5 read as 10: "an input is NaN or infinite"
+        with pytest.raises(ValueError, match=re.escape(f"status_text: code = {code!r}: a status code is a whole "
+                                                       "number")):
+            ks_jax.status_text(code)
+    assert ks_jax.status_text(np.int8(10)) == ks_jax.status_text(10.0) == "invalid: an input is NaN or infinite"

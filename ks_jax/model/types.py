@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import linalg as la
 
@@ -317,5 +318,14 @@ STATUS_TEXT = {
 
 
 def status_text(code) -> str:
-    """The words for a status code (an int or a 0-d array)."""
-    return STATUS_TEXT.get(int(code), f"invalid: unknown status {int(code)}")
+    """The words for one status code (an int, or an array of one code: shape ()). An array of codes is refused,
+    naming its shape: the words of each are one call each (``[status_text(c) for c in codes.tolist()]``). A code is
+    a whole number: 10.5 would read as 10, NaN failed in int()."""
+    value = np.asarray(code)
+    if value.ndim:
+        raise TypeError(f"status_text takes one status code, got an array of shape {value.shape}: for the words of "
+                        "each, [ks_jax.status_text(c) for c in codes.tolist()]")
+    if value.dtype.kind not in "iuf" or not (np.isfinite(value) and value == np.floor(value)):
+        raise ValueError(f"status_text: code = {code!r}: a status code is a whole number (a result's "
+                         "contact.status)")
+    return STATUS_TEXT.get(int(value), f"invalid: unknown status {int(value)}")
