@@ -22,9 +22,9 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - evidence named by a path of no form, and a --case that picks a refused case, say which case;
 - State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
   number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
-- load_case given a dict, a chunk that is not a whole number of rows, a sweep's outputs or on_chunk of another
-  kind, a Case where a case's inputs belong, a Solution where its result belongs, and status_text given an array
-  of codes or a code that is not a whole number say what they take.
+- from Python, an argument of another kind than an entry point takes (a dict to load_case, a chunk of "a", a
+  sweep's outputs of 5, a Case for its inputs, a Solution for its result, an array to status_text, None to
+  sweep_view) is refused, saying what it takes.
 """
 
 from __future__ import annotations
@@ -615,8 +615,8 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
     TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), a sweep's outputs of 5 or
     on_chunk of 5 ("'int' object is not iterable", "not callable"), a Case to get_input, set_input or solve_inputs
     and a Solution to get_output (an AttributeError from inside), status codes as an array (int()'s "only
-    0-dimensional arrays") or of 10.5 (read as 10), each refused naming the argument, its value or
-    kind, and what to give."""
+    0-dimensional arrays") or of 10.5 (read as 10), a sweep's picture of None (no attribute 'outputs'): each is
+    refused naming the argument, its value or kind, and what to give."""
     with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
                                                   "got a dict: a case given as a dict is read by "
                                                   "ks_jax.case.case_from_dict")):
@@ -657,3 +657,8 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
                                                        "number")):
             ks_jax.status_text(code)
     assert ks_jax.status_text(np.int8(10)) == ks_jax.status_text(10.0) == "invalid: an input is NaN or infinite"
+    for draw, given in ((ks_jax.plot.sweep_view, None), (ks_jax.plot.save_sweep_view, case)):
+        with pytest.raises(TypeError, match=re.escape(f"{draw.__name__}: a sweep's result (the SweepResult of "
+                                                      f"ks_jax.sweep) is drawn, not a {type(given).__name__}")):
+            draw(given, tmp_path / "s.png") if given is case else draw(given)
+    assert not (tmp_path / "s.png").exists()
