@@ -25,6 +25,7 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - from Python, an argument of another kind than an entry point takes (a dict to load_case, a chunk of "a", a
   sweep's outputs of 5, a Case for its inputs, a Solution for its result, an array to status_text, None to
   sweep_view) is refused, saying what it takes.
+- a posterior's corner plot of draws with a NaN or an inf draws the finite ones and says how many it left out.
 """
 
 from __future__ import annotations
@@ -662,3 +663,26 @@ def test_the_python_api_entry_points_say_what_they_take(tmp_path):
                                                       f"ks_jax.sweep) is drawn, not a {type(given).__name__}")):
             draw(given, tmp_path / "s.png") if given is case else draw(given)
     assert not (tmp_path / "s.png").exists()
+
+
+def test_a_corner_plot_of_draws_with_nan_or_inf_draws_the_finite_ones_and_says_so():
+    """A posterior's corner plot given draws with a NaN (dropped by matplotlib without a word) or an inf (a ValueError
+    from numpy's histogram, no picture): the finite draws are drawn, as the plot of them alone is, and the legend
+    says how many were left out; draws of which none is finite are refused."""
+    pytest.importorskip("matplotlib")
+    from matplotlib.figure import Figure
+
+    draws = np.random.default_rng(2).normal([20.0, 0.3], [0.5, 0.02], (600, 2))
+    bad = draws.copy()
+    bad[5, 1], bad[7, 0], bad[9] = np.nan, np.inf, -np.inf
+    axes = ks_jax.plot.corner(Figure(), bad, ["a", "b"], [20.0, 0.3], np.diag([0.25, 4e-4]))
+    alone = ks_jax.plot.corner(Figure(), draws[np.all(np.isfinite(bad), 1)], ["a", "b"], [20.0, 0.3],
+                               np.diag([0.25, 4e-4]))
+    for i in range(2):
+        assert [p.get_height() for p in axes[i, i].patches] == [p.get_height() for p in alone[i, i].patches]
+    assert len(axes[1, 0].lines[0].get_xdata()) == 597
+    legend = [t.get_text() for t in axes[0, 0].get_legend().get_texts()]
+    assert legend[0] == "posterior (NUTS)\n3 of 600 draws not finite\n(NaN or inf): left out", legend
+    with pytest.raises(ValueError, match=re.escape("corner: none of the 600 draws is finite (each holds a NaN or an "
+                                                   "inf): nothing to draw")):
+        ks_jax.plot.corner(Figure(), np.where(np.arange(2) == 1, np.nan, bad), ["a", "b"])
