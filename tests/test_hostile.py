@@ -19,7 +19,13 @@ value and the rule, the documented exit status, no traceback, the other cases ke
 - every field of the shipped cases, given any of a list of hostile values, is read or refused by name;
 - a name that is not text, and a field given twice in one object, refuse their case, naming the field;
 - values are quoted as the file wrote them (null, true, a TOML date), not as Python writes them;
-- evidence named by a path of no form, and a --case that picks a refused case, say which case.
+- evidence named by a path of no form, and a --case that picks a refused case, say which case;
+- State.create refuses a negative speed (turn the course instead), and the constructors a list or None where one
+  number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
+- from Python, an argument of another kind than an entry point takes (a dict to load_case, a chunk of "a", a
+  sweep's outputs of 5, a Case for its inputs, a Solution for its result, an array to status_text, None to
+  sweep_view) is refused, saying what it takes.
+- a posterior's corner plot of draws with a NaN or an inf draws the finite ones and says how many it left out.
 """
 
 from __future__ import annotations
@@ -570,3 +576,113 @@ def test_an_exchange_of_inputs_of_the_wrong_kind_or_shape_is_refused_by_name():
     with pytest.raises(ValueError, match=r"exchange_batch: state1\.position has shape \(2, 2\); it must be \(N, 3\)"):
         ks_jax.exchange_batch(*rows)
     assert np.asarray(ks_jax.exchange(car, state, car, other, contact).contact.status) == 0
+
+
+def test_the_constructors_refuse_a_negative_speed_a_list_or_nothing_by_name_and_still_trace():
+    """``State.create`` refuses a negative speed as a case file does (the course turned by pi is backwards travel;
+    a velocity of -5 along the course was made without a word), a yaw rate of three numbers (it gave an angular
+    velocity of shape (3, 3)); ``Vehicle.create`` a mass of None (an error from inside jnp.array) or of two numbers
+    (a mass of shape (2,)). Under jax.vmap, jax.jit and jax.grad, where a value is traced, the same calls give the
+    numbers they gave before: speed times the course's cosine and sine."""
+    here = [1.0, 2.0, 0.5]
+    with pytest.raises(ValueError, match=re.escape("State.create: speed = -5.0: speed must be >= 0 (reverse the "
+                                                   "course for backwards travel: speed=5.0, course=yaw + pi)")):
+        ks_jax.State.create(here, yaw=0.0, speed=-5.0)
+    with pytest.raises(ValueError, match=r"State.create: yaw_rate has shape \(3,\): give one number, the rate about z "
+                                         r"in rad/s; angular_velocity= takes \(wx, wy, wz\)"):
+        ks_jax.State.create(here, speed=1.0, yaw_rate=[0.1, 0.2, 0.3])
+    with pytest.raises(TypeError, match="Vehicle.create: mass = None: give one number, in kg"):
+        ks_jax.Vehicle.create(mass=None, inertia=[1, 2, 3], length=1, width=1)
+    with pytest.raises(ValueError, match=r"Vehicle.create: mass has shape \(2,\): give one number, in kg "
+                                         r"\(Vehicle.create makes one row: for a batch, jax.vmap it\)"):
+        ks_jax.Vehicle.create(mass=[1400.0, 1500.0], inertia=[500, 2000, 2200], length=4.5, width=1.8)
+    speeds, yaw = np.array([-3.0, 0.0, 7.5]), 0.3  # traced: not seen as negative, and the same numbers as before
+    want = np.stack([speeds * math.cos(yaw), speeds * math.sin(yaw), 0 * speeds], -1)
+    states = jax.vmap(lambda v: ks_jax.State.create(here, yaw, speed=v, yaw_rate=v))(jnp.asarray(speeds))
+    np.testing.assert_allclose(states.velocity, want, rtol=1e-15, atol=1e-15)
+    np.testing.assert_array_equal(states.angular_velocity, np.stack([0 * speeds, 0 * speeds, speeds], -1))
+    np.testing.assert_allclose(jax.jit(lambda v: ks_jax.State.create(here, yaw, speed=v).velocity)(-3.0), want[0],
+                               rtol=1e-15)
+    assert float(jax.grad(lambda v: ks_jax.State.create(here, yaw, speed=v).velocity[0])(-3.0)) == pytest.approx(
+        math.cos(yaw), rel=1e-15)
+    mass = jax.vmap(lambda m: ks_jax.Vehicle.create(m, [500.0, 2000.0, 2200.0], 4.5, 1.8).mass)
+    np.testing.assert_array_equal(mass(jnp.array([1400.0, 1500.0])), [1400.0, 1500.0])
+    plain = ks_jax.State.create(here, yaw, speed=7.5)
+    np.testing.assert_allclose(plain.velocity, want[2], rtol=1e-15)
+
+
+def test_the_python_api_entry_points_say_what_they_take(tmp_path):
+    """From Python, an argument of another kind than an entry point takes: a case as a dict to load_case (a pathlib
+    TypeError), a chunk of "a" or 2.5 rows (int()'s ValueError, or 2 rows without a word), a sweep's outputs of 5 or
+    on_chunk of 5 ("'int' object is not iterable", "not callable"), a Case to get_input, set_input or solve_inputs
+    and a Solution to get_output (an AttributeError from inside), status codes as an array (int()'s "only
+    0-dimensional arrays") or of 10.5 (read as 10), a sweep's picture of None (no attribute 'outputs'): each is
+    refused naming the argument, its value or kind, and what to give."""
+    with pytest.raises(TypeError, match=re.escape("load_case takes the path of a case file (a str or a pathlib.Path), "
+                                                  "got a dict: a case given as a dict is read by "
+                                                  "ks_jax.case.case_from_dict")):
+        ks_jax.load_case({"vehicles": []})
+    car = ks_jax.Vehicle.create(1400.0, [500.0, 2000.0, 2200.0], 4.5, 1.8)
+    rows = [jax.tree_util.tree_map(lambda x: np.stack([np.asarray(x)] * 2), a) for a in (
+        car, ks_jax.State.create([0.0, 0.0, 0.5], speed=10.0), car, ks_jax.State.create([-4.0, 0.5, 0.5], speed=15.0),
+        ks_jax.Contact.create([-2.0, 0.2, 0.5], [1.0, 0.0, 0.0], 0.1, 0.5))]
+    for chunk in ("a", 2.5):
+        with pytest.raises(ValueError, match=re.escape(f"exchange_batch: chunk = {chunk!r}: chunk must be a positive "
+                                                       "number of rows (a whole number >= 1)")):
+            ks_jax.exchange_batch(*rows, chunk=chunk)
+    assert np.all(ks_jax.exchange_batch(*rows, chunk=np.int64(1)).contact.status == 0)
+    case, over = ks_jax.load_case(SEED1), {"vehicles[1].speed": [9.0]}
+    with pytest.raises(CaseError, match=re.escape("sweep: outputs = 5: give output paths, a string or a list of "
+                                                  "strings")):
+        ks_jax.sweep(case, over, outputs=5)
+    with pytest.raises(CaseError, match=re.escape("sweep: on_chunk = 5: must be a function, called as on_chunk(lo, "
+                                                  "hi, chunk) for every chunk")):
+        ks_jax.sweep(case, over, on_chunk=5)
+    for call, name in ((lambda: ks_jax.get_input(case, "vehicles[1].speed"), "get_input"),
+                       (lambda: ks_jax.set_input(case, "vehicles[1].speed", 9.0), "set_input"),
+                       (lambda: ks_jax.solve_inputs(case), "solve_inputs")):
+        with pytest.raises(TypeError, match=re.escape(f"{name} takes a case's inputs (case.inputs), got a Case")):
+            call()
+    solved = ks_jax.solve(case)
+    with pytest.raises(TypeError, match=re.escape("get_output takes a result (an ExchangeResult: solution.result of a "
+                                                  "Solution, or what solve_inputs and exchange return), got a "
+                                                  "Solution")):
+        ks_jax.get_output(solved, "contact.impulse_magnitude")
+    assert float(ks_jax.get_output(solved.result, "contact.impulse_magnitude")) > 0  # what it takes: the result
+    with pytest.raises(TypeError, match=re.escape("status_text takes one status code, got an array of shape (2,): "
+                                                  "for the words of each, [ks_jax.status_text(c) for c in "
+                                                  "codes.tolist()]")):
+        ks_jax.status_text(np.array([0, 10]))
+    for code in (10.5, math.nan, True):  # 10.5 read as 10: "an input is NaN or infinite"
+        with pytest.raises(ValueError, match=re.escape(f"status_text: code = {code!r}: a status code is a whole "
+                                                       "number")):
+            ks_jax.status_text(code)
+    assert ks_jax.status_text(np.int8(10)) == ks_jax.status_text(10.0) == "invalid: an input is NaN or infinite"
+    for draw, given in ((ks_jax.plot.sweep_view, None), (ks_jax.plot.save_sweep_view, case)):
+        with pytest.raises(TypeError, match=re.escape(f"{draw.__name__}: a sweep's result (the SweepResult of "
+                                                      f"ks_jax.sweep) is drawn, not a {type(given).__name__}")):
+            draw(given, tmp_path / "s.png") if given is case else draw(given)
+    assert not (tmp_path / "s.png").exists()
+
+
+def test_a_corner_plot_of_draws_with_nan_or_inf_draws_the_finite_ones_and_says_so():
+    """A posterior's corner plot given draws with a NaN (dropped by matplotlib without a word) or an inf (a ValueError
+    from numpy's histogram, no picture): the finite draws are drawn, as the plot of them alone is, and the legend
+    says how many were left out; draws of which none is finite are refused."""
+    pytest.importorskip("matplotlib")
+    from matplotlib.figure import Figure
+
+    draws = np.random.default_rng(2).normal([20.0, 0.3], [0.5, 0.02], (600, 2))
+    bad = draws.copy()
+    bad[5, 1], bad[7, 0], bad[9] = np.nan, np.inf, -np.inf
+    axes = ks_jax.plot.corner(Figure(), bad, ["a", "b"], [20.0, 0.3], np.diag([0.25, 4e-4]))
+    alone = ks_jax.plot.corner(Figure(), draws[np.all(np.isfinite(bad), 1)], ["a", "b"], [20.0, 0.3],
+                               np.diag([0.25, 4e-4]))
+    for i in range(2):
+        assert [p.get_height() for p in axes[i, i].patches] == [p.get_height() for p in alone[i, i].patches]
+    assert len(axes[1, 0].lines[0].get_xdata()) == 597
+    legend = [t.get_text() for t in axes[0, 0].get_legend().get_texts()]
+    assert legend[0] == "posterior (NUTS)\n3 of 600 draws not finite\n(NaN or inf): left out", legend
+    with pytest.raises(ValueError, match=re.escape("corner: none of the 600 draws is finite (each holds a NaN or an "
+                                                   "inf): nothing to draw")):
+        ks_jax.plot.corner(Figure(), np.where(np.arange(2) == 1, np.nan, bad), ["a", "b"])

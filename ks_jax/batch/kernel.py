@@ -18,7 +18,7 @@ from ..compilation import compiler_options
 from ..model import collision
 from ..model.checks import check_smoothing
 from ..model.types import Contact, ExchangeResult, State, Vehicle
-from .chunks import CHUNK_ROWS, batched_in_chunks, cut
+from .chunks import CHUNK_ROWS, batched_in_chunks, check_chunk, cut
 from .stages import run
 
 
@@ -126,6 +126,8 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     default devices.
     """
     check_smoothing(float(smoothing))
+    if chunk is not None:
+        check_chunk(chunk, "exchange_batch")
     args, target = (vehicle1, state1, vehicle2, state2, contact), out
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
         raise TypeError("exchange_batch computes values into NumPy arrays and cannot run under jax.jit, "
@@ -141,8 +143,6 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     on = {d for x in jax.tree_util.tree_leaves(args) if isinstance(x, jax.Array) for d in x.devices()}
     plan = plan_for(plan, on or None)  # the path of the devices that hold the rows (or JAX's default devices)
     chunk = plan.rows(2 * row_bytes(args)) if chunk is None else chunk
-    if int(chunk) < 1:
-        raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
     given = [x for x in jax.tree_util.tree_leaves(args) if isinstance(x, np.ndarray)]
     cpu = plan.cpu
     on_host = not cpu and len(given) == len(jax.tree_util.tree_leaves(args))  # sent to the device by chunks

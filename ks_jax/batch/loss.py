@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
 from ..backend import Plan, plan_for
-from .chunks import CHUNK_ROWS
+from .chunks import CHUNK_ROWS, check_chunk
 from .stages import as_chunks
 from .stages import fenced_by
 
@@ -36,9 +36,7 @@ def sum_over_rows(fn, in_axes=0, chunk: int = CHUNK_ROWS, plan: Plan | str | Non
     ``backend.Plan`` or its path ("cpu", "accelerator"); default, the path of JAX's default devices.
     """
     plan = plan_for(plan)
-    if int(chunk) < 1:
-        raise ValueError(f"chunk = {chunk}: chunk must be a positive number of rows")
-    chunk = int(chunk)
+    chunk = check_chunk(chunk, "sum_over_rows")
 
     def axes_of(args):
         axes = (in_axes,) * len(args) if in_axes is None or isinstance(in_axes, int) else tuple(in_axes)

@@ -26,7 +26,7 @@ from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
 from .paths import CUMULATIVE_OUTPUTS, PathError, automatic_part, canonical_path, check_output_path, follows_tow
-from .paths import get_input
+from .paths import check_inputs, check_result, get_input
 from .paths import get_output
 from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, path_key
 from .paths import AT_OUTPUTS, at_time, set_input, with_times, without_approach, without_road, without_time
@@ -38,7 +38,8 @@ __all__ = [
     "CaseWarning", "ContactInputs", "HitchInputs", "InteractionInputs", "PairInputs", "PathError", "VehicleInputs",
     "as_arrays",
     "at_rest_after", "automatic_part", "body_states",
-    "canonical_path", "case_from_dict", "cases_from_data", "check_output_path", "defined_output", "follow_tows",
+    "canonical_path", "case_from_dict", "cases_from_data", "check_inputs", "check_output_path", "check_result",
+    "defined_output", "follow_tows",
     "follows_tow", "get_input",
     "get_output", "impulse_exchanged", "input_kind", "input_leaf", "input_ties", "load_case", "load_cases",
     "on_fixed_object", "output_kind", "parse_output_value", "parse_path", "path_key", "set_input", "to_pytrees",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import tomllib
 import warnings
 from pathlib import Path
@@ -570,9 +571,20 @@ def cases_from_data(data, source=None) -> list[Case]:
         return out
     return [case_from_dict(data, Path(source).stem if source else "case", source)]
 
+def _file_path(path, who) -> Path:
+    """``path`` as a Path, refused unless it is one (a str or an os.PathLike): a case given as a dict is read by
+    ``case_from_dict``, not here."""
+    if not isinstance(path, (str, os.PathLike)):
+        read = (": a case given as a dict is read by ks_jax.case.case_from_dict (a dict of \"cases\" by "
+                "ks_jax.case.cases_from_data)") if isinstance(path, dict) else ""
+        raise TypeError(f"{who} takes the path of a case file (a str or a pathlib.Path), got a "
+                        f"{type(path).__name__}{read}")
+    return Path(path)
+
+
 def load_cases(path) -> list[Case]:
     """Every case in a JSON or TOML file (see ``cases_from_data``)."""
-    path = Path(path)
+    path = _file_path(path, "load_cases")
     if not path.exists():
         raise CaseError(f"{path}: no such file")
     if path.is_dir():
@@ -581,7 +593,7 @@ def load_cases(path) -> list[Case]:
 
 def load_case(path):
     """The case in a file: a ``Case`` if the file holds one, a list of Case if it holds ``cases``."""
-    cases = load_cases(path)
+    cases = load_cases(_file_path(path, "load_case"))
     data = _read(Path(path))
     return cases if isinstance(data, dict) and "cases" in data else cases[0]
 

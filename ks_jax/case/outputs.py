@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.types import NO_CONTACT
-from .paths import get_output, output_leaf, parse_path
+from .paths import check_result, get_output, output_leaf, parse_path
 
 
 CIRCULAR_OUTPUTS = frozenset({"pdof", "impulse_azimuth", "course_after", "rest_yaw", "delta_v_cumulative_pdof",
@@ -74,6 +74,7 @@ def defined_output(result, path: str):
     returns NaN and its gradients stay finite; the JSON of ``ks-jax solve`` writes them null. EES is NaN
     already where both crushes are 0 or the energy loss is negative. ``path`` may name a whole vector
     ("contact.point")."""
+    check_result(result, "defined_output")
     group, vi, name, idx = parse_path(path)
     x = get_output(result, path) if idx else output_leaf(result, path)
     kind = undefined_kind(path)

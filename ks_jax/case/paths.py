@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.motion import RestResult
-from ..model.types import ContactResult, VehicleResult
+from ..model.types import ContactResult, ExchangeResult, VehicleResult
 from ..units import as_typed
 from .errors import CaseError, visible
 from .inputs import AfterInputs, Case, CaseInputs, ContactInputs, InteractionInputs, VehicleInputs
@@ -148,11 +148,27 @@ def input_kind(path) -> str:
     input_leaf(path)
     return INPUT_KINDS[name]
 
+def check_inputs(inputs, who: str):
+    """Refuse anything but a case's inputs (a ``CaseInputs``), naming what was given: a Case, say, failed deep inside
+    with "'Case' object has no attribute 'vehicles'"."""
+    if not isinstance(inputs, CaseInputs):
+        raise TypeError(f"{who} takes a case's inputs (case.inputs), got a {type(inputs).__name__}")
+
+
+def check_result(result, who: str):
+    """Refuse anything but a result (an ``ExchangeResult``), naming what was given: a Solution, say, failed deep
+    inside with "'Solution' object has no attribute 'contact'"."""
+    if not isinstance(result, ExchangeResult):
+        raise TypeError(f"{who} takes a result (an ExchangeResult: solution.result of a Solution, or what "
+                        f"solve_inputs and exchange return), got a {type(result).__name__}")
+
+
 def get_input(inputs: CaseInputs, path: str):
     """The value of the input ``path`` (section 6: "vehicles[1].speed", "contact.point[0]",
     "vehicles[0].yaw_rate", ...) in ``inputs`` (a case's ``inputs``, or inputs stacked along leading axes: then
     one value per row), SI (angles in rad); a PathError names a path that is not an input. ``set_input`` is its
     converse."""
+    check_inputs(inputs, "get_input")
     group, vi, name, idx = input_leaf(path)
     leaf = getattr(_holder(inputs, group, vi, path), name)
     if not idx:
@@ -166,6 +182,7 @@ def set_input(inputs: CaseInputs, path: str, value, *, links=()) -> CaseInputs:
     product of inertia (``inertia[i][j]``, i != j) sets [j][i] too: the tensor stays symmetric. ``links``: the
     case's hitches (``Motion.links``), which ``inputs`` does not hold: a towed vehicle's position (x, y), speed and
     course follow its tow's (``case.hitch.follow_tows``), and a path to them is refused."""
+    check_inputs(inputs, "set_input")
     group, vi, name, idx = input_leaf(path)
     tow = next((w for t, w, _ in links if t == vi), None) if group == "vehicles" else None
     if tow is not None and _followed(name, idx):
@@ -453,7 +470,8 @@ def without_time(case: "Case", path) -> str | None:
 
 
 def get_output(result, path: str):
-    """The number at an output path of a (possibly batched) ExchangeResult."""
+    """The number at an output path of a (possibly batched) ExchangeResult (of a ``Solution``: its ``result``)."""
+    check_result(result, "get_output")
     group, vi, name, idx = check_output_path(path)
     if name.startswith("at."):
         return _at_output(result, path, vi, name.partition(".")[2], idx)

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import linalg as la
 
@@ -22,13 +24,26 @@ def _f(x):
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
-def _last(where, name, x, sizes, meaning):
-    """``x`` as ``_f`` gives it, after checking that its last axis has one of ``sizes`` entries (a
-    leading batch axis is allowed): a clear error naming the field instead of one from deep inside."""
-    x = _f(x)
-    if x.ndim == 0 or x.shape[-1] not in sizes:
-        raise ValueError(f"{where}: {name} has shape {x.shape}: give {meaning}")
+def _given(where, name, x, shapes, meaning):
+    """``x`` as ``_f`` gives it, after checking that it is numbers of one of ``shapes``: a clear error naming the
+    argument instead of one from deep inside (None, a string) or a result of another shape. ``create`` makes one
+    row; a list where one number belongs would give that field a batch axis no other field has (a batch is
+    ``jax.vmap`` of ``create``). Shapes only: a traced value (under jit, vmap or grad) is checked as any other."""
+    if x is None or isinstance(x, (str, bytes, dict)):
+        raise TypeError(f"{where}: {name} = {x!r}: give {meaning}")
+    try:
+        x = _f(x)
+    except (TypeError, ValueError):
+        raise TypeError(f"{where}: {name} = {x!r}: give {meaning}") from None
+    if x.shape not in shapes:
+        raise ValueError(f"{where}: {name} has shape {x.shape}: give {meaning} ({where} makes one row: for a batch, "
+                         "jax.vmap it)")
     return x
+
+
+def _one(where, name, x, unit=None):
+    """``_given`` of one number, in ``unit`` (None: a pure number)."""
+    return _given(where, name, x, ((),), "one number" + (f", in {unit}" if unit else ""))
 
 
 class Vehicle(NamedTuple):
@@ -51,12 +66,15 @@ class Vehicle(NamedTuple):
 
     @classmethod
     def create(cls, mass, inertia, length, width, height=1.4, cg_to_front=None, cg_height=0.55):
-        """Vehicle from SI values; ``cg_to_front`` defaults to half the length."""
-        if cg_to_front is None:
-            cg_to_front = 0.5 * jnp.asarray(length)
-        inertia = _last("Vehicle.create", "inertia", inertia, (3,),
-                        "the principal moments (Ixx, Iyy, Izz) or a (3, 3) tensor, in kg m^2")
-        return cls(*(_f(a) for a in (mass, inertia, length, width, height, cg_to_front, cg_height)))
+        """One vehicle from SI values: each argument one number, ``inertia`` (3,) or (3, 3) (a batch: ``jax.vmap``
+        this); ``cg_to_front`` defaults to half the length."""
+        where = "Vehicle.create"
+        length = _one(where, "length", length, "m")
+        cg_to_front = 0.5 * length if cg_to_front is None else cg_to_front
+        inertia = _given(where, "inertia", inertia, ((3,), (3, 3)),
+                         "the principal moments (Ixx, Iyy, Izz) or a (3, 3) tensor, in kg m^2")
+        sizes = (("width", width), ("height", height), ("cg_to_front", cg_to_front), ("cg_height", cg_height))
+        return cls(_one(where, "mass", mass, "kg"), inertia, length, *(_one(where, n, x, "m") for n, x in sizes))
 
 
 class State(NamedTuple):
@@ -88,21 +106,23 @@ class State(NamedTuple):
         roll=0.0,
         cg_height=None,
     ):
-        """State from SI values (angles in rad, rates in rad/s).
+        """One vehicle's state from SI values (angles in rad, rates in rad/s); a batch: ``jax.vmap`` this.
 
         position: (2,) or (3,); a 2D position gets z = ``cg_height``, the vehicle's (docs/model.md,
         "Inputs"), which must then be given (a State does not know its vehicle).
-        Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw).
-        Either ``yaw_rate`` or ``angular_velocity`` (3,).
+        Either ``velocity`` ((2,) or (3,)) or ``speed`` with ``course`` (default: yaw). A speed is >= 0: backwards
+        travel is the course turned by pi, and a negative speed is refused, as a case file refuses it (a traced
+        speed, under jit, vmap or grad, has no value to check here; the exchange does not see a speed).
+        Either ``yaw_rate`` (one number, about z) or ``angular_velocity`` (3,). Every other argument is one number.
         """
-        position = _last("State.create", "position", position, (2, 3), "(x, y, z) or (x, y), in m")
+        where = "State.create"
+        position = _given(where, "position", position, ((2,), (3,)), "(x, y, z) or (x, y), in m")
         if position.shape[-1] == 2:
             if cg_height is None:
                 raise ValueError("State.create: position (x, y) has no z: give (x, y, z), or cg_height= (the "
                                  "vehicle's: z defaults to cg_height)")
-            z = _f(cg_height)
-            position = jnp.concatenate([position, jnp.broadcast_to(z, position.shape[:-1])[..., None]], -1)
-        yaw = _f(yaw)
+            position = jnp.concatenate([position, _one(where, "cg_height", cg_height, "m")[None]])
+        yaw = _one(where, "yaw", yaw, "rad")
         for given, other, this in ((velocity, speed, "speed"), (velocity, course, "course"),
                                    (angular_velocity, yaw_rate, "yaw_rate")):
             if given is not None and other is not None:
@@ -111,18 +131,24 @@ class State(NamedTuple):
         if velocity is None:
             if speed is None:
                 raise ValueError("State.create needs velocity or speed")
-            course = yaw if course is None else _f(course)
-            speed = _f(speed)
+            speed = _one(where, "speed", speed, "m/s")
+            if not isinstance(speed, jax.core.Tracer) and speed < 0:
+                raise ValueError(f"State.create: speed = {float(speed)!r}: speed must be >= 0 (reverse the course for "
+                                 f"backwards travel: speed={-float(speed)!r}, course="
+                                 f"{'yaw + pi' if course is None else 'the course given + pi'})")
+            course = yaw if course is None else _one(where, "course", course, "rad")
             sin, cos = la.sincos(course)
-            velocity = jnp.stack([speed * cos, speed * sin, jnp.zeros_like(speed)], -1)
-        velocity = _last("State.create", "velocity", velocity, (2, 3), "(vx, vy, vz) or (vx, vy), in m/s")
+            velocity = jnp.stack([speed * cos, speed * sin, jnp.zeros_like(speed)])
+        velocity = _given(where, "velocity", velocity, ((2,), (3,)), "(vx, vy, vz) or (vx, vy), in m/s")
         if velocity.shape[-1] == 2:
-            velocity = jnp.concatenate([velocity, jnp.zeros_like(velocity[..., :1])], -1)
+            velocity = jnp.concatenate([velocity, jnp.zeros_like(velocity[:1])])
         if angular_velocity is None:
-            wz = _f(0.0 if yaw_rate is None else yaw_rate)
-            angular_velocity = jnp.stack([jnp.zeros_like(wz), jnp.zeros_like(wz), wz], -1)
-        angular_velocity = _last("State.create", "angular_velocity", angular_velocity, (3,), "(wx, wy, wz), in rad/s")
-        return cls(position, velocity, yaw, _f(pitch), _f(roll), angular_velocity)
+            wz = _given(where, "yaw_rate", 0.0 if yaw_rate is None else yaw_rate, ((),),
+                        "one number, the rate about z in rad/s; angular_velocity= takes (wx, wy, wz)")
+            angular_velocity = jnp.stack([jnp.zeros_like(wz), jnp.zeros_like(wz), wz])
+        angular_velocity = _given(where, "angular_velocity", angular_velocity, ((3,),), "(wx, wy, wz), in rad/s")
+        return cls(position, velocity, yaw, _one(where, "pitch", pitch, "rad"), _one(where, "roll", roll, "rad"),
+                   angular_velocity)
 
 
 def normal_from_angles(azimuth, pitch=0.0):
@@ -149,16 +175,20 @@ class Contact(NamedTuple):
     @classmethod
     def create(cls, point, normal=None, restitution=0.0, friction=0.5, *, azimuth=None, normal_pitch=0.0,
                penetration_time=0.0):
-        """Contact from SI values: give ``normal`` as a vector or ``azimuth`` (rad) and ``normal_pitch`` (rad)."""
+        """One contact from SI values: give ``normal`` as a vector or ``azimuth`` (rad) and ``normal_pitch`` (rad);
+        every other argument but ``point`` (3,) is one number (a batch: ``jax.vmap`` this)."""
+        where = "Contact.create"
         if normal is not None and azimuth is not None:
             raise ValueError("Contact.create: give normal (a vector) or azimuth, not both (azimuth would be ignored)")
         if normal is None:
             if azimuth is None:
                 raise ValueError("Contact.create needs normal or azimuth")
-            normal = normal_from_angles(azimuth, normal_pitch)
-        point = _last("Contact.create", "point", point, (3,), "(x, y, z), in m")
-        normal = _last("Contact.create", "normal", normal, (3,), "a vector (nx, ny, nz), or azimuth=")
-        return cls(point, normal, _f(restitution), _f(friction), _f(penetration_time))
+            normal = normal_from_angles(_one(where, "azimuth", azimuth, "rad"),
+                                        _one(where, "normal_pitch", normal_pitch, "rad"))
+        point = _given(where, "point", point, ((3,),), "(x, y, z), in m")
+        normal = _given(where, "normal", normal, ((3,),), "a vector (nx, ny, nz), or azimuth=")
+        return cls(point, normal, _one(where, "restitution", restitution), _one(where, "friction", friction),
+                   _one(where, "penetration_time", penetration_time, "s"))
 
 
 class ContactResult(NamedTuple):
@@ -288,5 +318,14 @@ STATUS_TEXT = {
 
 
 def status_text(code) -> str:
-    """The words for a status code (an int or a 0-d array)."""
-    return STATUS_TEXT.get(int(code), f"invalid: unknown status {int(code)}")
+    """The words for one status code (an int, or an array of one code: shape ()). An array of codes is refused,
+    naming its shape: the words of each are one call each (``[status_text(c) for c in codes.tolist()]``). A code is
+    a whole number: 10.5 would read as 10, NaN failed in int()."""
+    value = np.asarray(code)
+    if value.ndim:
+        raise TypeError(f"status_text takes one status code, got an array of shape {value.shape}: for the words of "
+                        "each, [ks_jax.status_text(c) for c in codes.tolist()]")
+    if value.dtype.kind not in "iuf" or not (np.isfinite(value) and value == np.floor(value)):
+        raise ValueError(f"status_text: code = {code!r}: a status code is a whole number (a result's "
+                         "contact.status)")
+    return STATUS_TEXT.get(int(value), f"invalid: unknown status {int(value)}")

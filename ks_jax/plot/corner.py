@@ -16,9 +16,20 @@ MAX_POINTS = 4000  # draws shown in each pair's scatter (every k-th), enough to 
 def corner(fig, samples, labels, estimate=None, covariance=None):
     """Draw the corner plot of ``samples`` (draws, n) on ``fig`` (a matplotlib Figure), one axis label per unknown
     (``labels``, with its unit); ``estimate`` (n,) and ``covariance`` (n, n) in the same units: the Laplace
-    approximation drawn over the draws where finite. Returns the (n, n) axes (None above the diagonal)."""
+    approximation drawn over the draws where finite. Returns the (n, n) axes (None above the diagonal).
+
+    A draw with a NaN or an infinite value is left out, and the legend says how many were (matplotlib dropped a NaN
+    without a word, and refused the whole picture over an inf); draws none of which is finite are refused."""
     samples = np.asarray(samples, float)
     n = samples.shape[1]
+    finite = np.all(np.isfinite(samples), axis=1)
+    if len(samples) and not finite.any():
+        raise ValueError(f"corner: none of the {len(samples)} draws is finite (each holds a NaN or an inf): nothing "
+                         "to draw")
+    label = "posterior (NUTS)"
+    if not finite.all():
+        label += f"\n{np.count_nonzero(~finite)} of {len(samples)} draws not finite\n(NaN or inf): left out"
+        samples = samples[finite]
     axes = fig.subplots(n, n, squeeze=False)
     thin = samples[:: max(1, math.ceil(len(samples) / MAX_POINTS))]
     est = None if estimate is None else np.asarray(estimate, float)
@@ -30,7 +41,7 @@ def corner(fig, samples, labels, estimate=None, covariance=None):
                 ax.set_visible(False)
                 continue
             if i == j:
-                ax.hist(samples[:, i], bins=40, density=True, color="0.6", label="posterior (NUTS)")
+                ax.hist(samples[:, i], bins=40, density=True, color="0.6", label=label)
                 s = math.sqrt(cov[i, i]) if cov is not None and np.isfinite(cov[i, i]) and cov[i, i] > 0 else None
                 if est is not None and s is not None:
                     grid = np.linspace(*ax.get_xlim(), 200)

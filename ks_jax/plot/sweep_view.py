@@ -14,7 +14,7 @@ from ..case import CIRCULAR_OUTPUTS, input_kind, output_kind, parse_path
 from ..case.errors import CaseError, visible
 from ..model.types import STATUS_TEXT, status_text
 from ..report import angle_text
-from ..sweeps import check_kept
+from ..sweeps import SweepResult, check_kept
 from .text import wrap_to_width
 
 CONSTANT_SIZE = 10.0  # points: the line above a figure's panels that says the outputs constant over the sweep
@@ -146,6 +146,14 @@ class _Panel(NamedTuple):
         """The label of the ``k``-th input's axis: its path, vehicle and unit."""
         path, _, unit, _ = self.axes[k]
         return named(path, self.names) + _bracket(unit)
+
+
+def _check_sweep(result, who):
+    """Refuse anything but a sweep's result by its kind: None, say, failed inside with "'NoneType' object has no
+    attribute 'outputs'"."""
+    if not isinstance(result, SweepResult):
+        raise TypeError(f"{who}: a sweep's result (the SweepResult of ks_jax.sweep) is drawn, not a "
+                        f"{type(result).__name__}")
 
 
 def _drawable(result, output):
@@ -318,6 +326,7 @@ def sweep_view(result, output=None, ax=None, contours=True, units="si", typed=No
     """
     import matplotlib.pyplot as plt
 
+    _check_sweep(result, "sweep_view")
     result, output = _drawable(result, output)
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 5))
@@ -344,6 +353,7 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    _check_sweep(result, "sweep_figure")
     outputs = list(outputs or result.output_paths or [p for p in result.outputs if p != "status"] or ["status"])
     check_kept(result)
     shown_in = display_units(result, units, typed)
@@ -377,5 +387,6 @@ def sweep_figure(result, outputs=None, units="si", typed=None):
 def save_sweep_view(result, path, outputs=None, units="si", typed=None):
     """Write ``sweep_figure`` of ``outputs`` (default: the sweep's outputs) to ``path`` (PNG, PDF, SVG: by the
     file name), in ``units`` and the ``typed`` units (as ``sweep_view``). Returns the path."""
+    _check_sweep(result, "save_sweep_view")
     sweep_figure(result, outputs, units=units, typed=typed).savefig(path, dpi=110)
     return path

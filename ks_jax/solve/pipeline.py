@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from ..backend import Plan, plan_for
 from ..batch.stages import blocked, run_row
-from ..case import CaseInputs, Motion, body_states, follow_tows, to_pytrees
+from ..case import CaseInputs, Motion, body_states, check_inputs, follow_tows, to_pytrees
 from ..model import collision
 from ..model import linalg as la
 from ..model.contact import advance, automatic_stage, exchange_at_contact
@@ -40,6 +40,7 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``. ``plan``
     (static): a ``backend.Plan`` or its path ("cpu", "accelerator"), whose fence that is; default, the path of
     JAX's default devices."""
+    check_inputs(inputs, "solve_inputs")
     auto = auto_point or auto_normal
     return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between), (inputs,),
                    fenced=1 if auto else 0, plan=plan_for(plan) if auto else None)

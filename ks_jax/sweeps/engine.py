@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import operator
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -231,6 +231,9 @@ def sweep(case, over, outputs=None, mode="grid", chunk_size=None, smoothing=0.0,
     plan: how the rows are computed, a ``backend.Plan`` or its path ("cpu", "accelerator"); default, the path of
     ``devices``.
     """
+    if on_chunk is not None and not callable(on_chunk):
+        raise CaseError(f"sweep: on_chunk = {on_chunk!r}: must be a function, called as on_chunk(lo, hi, chunk) for "
+                        "every chunk (or None)")
     request = check(case, over, outputs, mode, smoothing, index_range)
     return run_layout(layout(request, chunk_size, devices, output_dtype, plan), keep, on_chunk, progress)
 
@@ -302,6 +305,9 @@ def _checked_outputs(case, outputs, axes):
     """The canonical output paths to keep (``"status"`` apart, always kept): ``outputs``, or the defaults."""
     if outputs is None:
         outputs = default_outputs(case)
+    if not isinstance(outputs, (str, Iterable)) or isinstance(outputs, (bytes, Mapping)):
+        raise CaseError(f"sweep: outputs = {outputs!r}: give output paths, a string or a list of strings (e.g. "
+                        "['contact.impulse_magnitude', 'vehicles[0].delta_v_magnitude']), or None (the defaults)")
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     for p in outputs:
         if not isinstance(p, str):
