@@ -321,6 +321,26 @@ def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors):
     return prepared, problem
 
 
+def _check_arguments(errors, solver, smoothing, rtol, **counts):
+    """``reconstruct_batch``'s arguments, each against its rule (ValueError naming it), before any work; with a
+    posterior, the sampler's extra (ImportError naming it)."""
+    least = {"starts": 1, "chains": 1, "max_starts": 1, "max_iter": 1, "chunk": 1}
+    if errors not in ("report", "raise"):
+        raise ValueError(f"errors = {errors!r}: must be 'report' (a bad case's result says why) or 'raise'")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
+    if not 0.0 <= smoothing < 1.0:
+        raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
+    for name, value in counts.items():
+        if value is not None and not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+                                      and value >= least.get(name, 0)):
+            raise ValueError(f"{name} = {value!r}: must be a whole number >= {least.get(name, 0)}")
+    if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
+        raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")
+    if counts["posterior"]:
+        sampler()  # ImportError naming the extra, before any fit
+
+
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None, devices=None,
@@ -372,22 +392,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     is not fitted and its result says why (``FitResult.refused``: status "invalid: ..."), and the others are
     fitted; "raise", its CaseError is raised before any fit. An argument that is not a Case is a TypeError.
     """
-    if errors not in ("report", "raise"):
-        raise ValueError(f"errors = {errors!r}: must be 'report' (a bad case's result says why) or 'raise'")
-    if solver not in SOLVERS:
-        raise ValueError(f"solver = {solver!r}: known solvers are {', '.join(SOLVERS)}")
-    if not 0.0 <= smoothing < 1.0:
-        raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
-    for name, value, least in (("starts", starts, 1), ("monte_carlo", monte_carlo, 0), ("posterior", posterior, 0),
-                               ("chains", chains, 1), ("max_starts", max_starts, 1), ("max_iter", max_iter, 1),
-                               ("chunk", chunk, 1)):
-        if value is not None and not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-                                      and value >= least):
-            raise ValueError(f"{name} = {value!r}: must be a whole number >= {least}")
-    if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
-        raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")
-    if posterior:
-        sampler()  # ImportError naming the extra, before any fit
+    _check_arguments(errors, solver, smoothing, rtol, starts=starts, monte_carlo=monte_carlo, posterior=posterior,
+                     chains=chains, max_starts=max_starts, max_iter=max_iter, chunk=chunk)
     cases = list(cases)
     if not cases:
         return []

@@ -9,7 +9,6 @@ import json
 import math
 import re
 import tomllib
-import types
 import warnings
 
 import numpy as np
@@ -22,6 +21,7 @@ from ks_jax.case import get_output, output_kind, parse_path, path_key, without_a
 from ks_jax.case.outputs import CIRCULAR_OUTPUTS
 from ks_jax.case.scale import xy_index
 from ks_jax.model.approach import ApproachResult
+from ks_jax.model.types import ExchangeResult
 from ks_jax.sweeps.engine import check as check_sweep
 from samples import CASES, run_cli
 
@@ -277,13 +277,13 @@ def test_get_output_reads_the_approach_from_a_result():
     k = np.arange(rows * phases, dtype=float).reshape(rows, phases)
     found = ApproachResult(speed=10 + k, time=-k, position=np.stack([k, -k], -1), yaw=5 * k, distance=2 * k,
                            velocity=np.zeros((rows, phases, 2)), yaw_rate=np.zeros((rows, phases)))
-    result = types.SimpleNamespace(approach=(found, None), interactions=None)
+    result = ExchangeResult(None, (), approach=(found, None), interactions=None)  # only what the paths read
     np.testing.assert_array_equal(get_output(result, "vehicles[0].approach[1].speed"), 10 + k[:, 1])
     np.testing.assert_array_equal(get_output(result, "vehicles[0].approach[0].time"), -k[:, 0])
     np.testing.assert_array_equal(get_output(result, "vehicles[0].approach[1].position[1]"), -k[:, 1])
     np.testing.assert_array_equal(get_output(result, "vehicles[0].approach[1].yaw"), 5 * k[:, 1])
     np.testing.assert_array_equal(get_output(result, "vehicles[0].approach[0].distance"), 2 * k[:, 0])
-    one = types.SimpleNamespace(approach=(ApproachResult(*(x[2] for x in found[:7])), None), interactions=None)
+    one = ExchangeResult(None, (), approach=(ApproachResult(*(x[2] for x in found[:7])), None), interactions=None)
     assert float(get_output(one, "vehicles[0].approach[1].position[0]")) == k[2, 1]
     for path, words in [("vehicles[1].approach[0].speed", "vehicles[1] has no approach"),
                         ("vehicles[0].approach[2].speed", "vehicles[0]'s approach has 2 phases"),
@@ -291,7 +291,7 @@ def test_get_output_reads_the_approach_from_a_result():
         with pytest.raises(PathError, match=re.escape(f"path '{path}': {words}")):
             get_output(result, path)
     with pytest.raises(PathError, match="vehicles\\[0\\] has no approach"):
-        get_output(types.SimpleNamespace(approach=None, interactions=None), "vehicles[0].approach[0].speed")
+        get_output(ExchangeResult(None, (), approach=None, interactions=None), "vehicles[0].approach[0].speed")
 
 
 V, D, YAW = 20 * U.MPH, 12.0, 30.0  # the impact speed, the skid's length (m), the heading (deg)
