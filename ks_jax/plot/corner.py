@@ -21,6 +21,7 @@ def corner(fig, samples, labels, estimate=None, covariance=None):
     A draw with a NaN or an infinite value is left out, and the legend says how many were (matplotlib dropped a NaN
     without a word, and refused the whole picture over an inf); draws none of which is finite are refused."""
     samples = np.asarray(samples, float)
+    _check_shapes(samples, labels, estimate, covariance)
     n = samples.shape[1]
     finite = np.all(np.isfinite(samples), axis=1)
     if len(samples) and not finite.any():
@@ -80,11 +81,26 @@ def corner(fig, samples, labels, estimate=None, covariance=None):
     return axes
 
 
+def _check_shapes(samples, labels, estimate, covariance):
+    """The draws (draws, n) with n labels, an estimate (n,) and a covariance (n, n) where given: a ValueError
+    naming the argument and both shapes, where each failed inside matplotlib or NumPy with an IndexError."""
+    if samples.ndim != 2 or not samples.shape[1]:
+        raise ValueError(f"corner: samples has shape {samples.shape}: give the draws as (draws, unknowns)")
+    n = samples.shape[1]
+    if len(labels) != n:
+        raise ValueError(f"corner: {len(labels)} labels for {n} unknowns: give one label per column of samples")
+    for name, value, shape in (("estimate", estimate, (n,)), ("covariance", covariance, (n, n))):
+        if value is not None and np.shape(value) != shape:
+            raise ValueError(f"corner: {name} has shape {np.shape(value)}: give {shape} for samples of {n} unknowns")
+
+
 def save_corner(path, samples, labels, estimate=None, covariance=None, title=None):
     """Write ``corner`` to ``path`` (PNG, PDF or SVG by its name), titled ``title``. Returns the path."""
     from matplotlib.figure import Figure  # no pyplot: works without a display, leaves no state
 
-    n = np.asarray(samples).shape[1]
+    samples = np.asarray(samples, float)
+    _check_shapes(samples, labels, estimate, covariance)
+    n = samples.shape[1]
     fig = Figure(figsize=(2.4 * n + 1.5, 2.4 * n + 1.0))
     corner(fig, samples, labels, estimate, covariance)
     if title:

@@ -2,6 +2,7 @@
 mean and covariance, whose Laplace overlay is then exact."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -57,3 +58,20 @@ def test_an_undetermined_unknown_gets_no_laplace_overlay():
     axes = corner(Figure(), draws, LABELS, MEAN, cov)
     assert len(axes[1, 1].lines) == 0 and len(axes[0, 0].lines) == 1
     assert len(axes[1, 0].lines) == 1 and len(axes[2, 1].lines) == 1 and len(axes[2, 0].lines) == 3
+
+
+@pytest.mark.parametrize("samples, labels, estimate, covariance, words", [
+    (MEAN, LABELS, None, None, "samples has shape (3,): give the draws as (draws, unknowns)"),
+    (np.zeros((5, 0)), [], None, None, "samples has shape (5, 0)"),
+    (np.zeros((5, 3)), LABELS[:2], None, None, "2 labels for 3 unknowns"),
+    (np.zeros((5, 3)), LABELS, MEAN[:2], None, "estimate has shape (2,): give (3,)"),
+    (np.zeros((5, 3)), LABELS, MEAN, COV[:2], "covariance has shape (2, 3): give (3, 3)"),
+])
+def test_draws_labels_estimate_and_covariance_of_other_shapes_are_refused_by_name(tmp_path, samples, labels,
+                                                                                  estimate, covariance, words):
+    """Each failed inside matplotlib or NumPy with an IndexError; the picture and the file are refused alike."""
+    with pytest.raises(ValueError, match=re.escape(words)):
+        corner(Figure(), samples, labels, estimate, covariance)
+    with pytest.raises(ValueError, match=re.escape(words)):
+        save_corner(tmp_path / "c.png", samples, labels, estimate, covariance)
+    assert not (tmp_path / "c.png").exists()
