@@ -22,7 +22,7 @@ import numpy as np
 from ks_jax.backend import plan_for
 from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
-from ks_jax.limits import check_memory
+from ks_jax.limits import check_memory, is_count
 from ks_jax.model.types import OK, status_text
 
 from .arrays import batch_arrays
@@ -72,10 +72,10 @@ class FitResult:
     not_determined: list  # unknowns with no usable standard error: not determined or poorly determined
     cost: float
     status: str
-    starts: int | None  # None: refused, nothing was tried
-    starts_converged: int | None  # None: refused, nothing was tried
-    starts_at_best: int | None  # None: refused, nothing was tried
-    iterations: int | None  # None: refused, nothing was tried
+    starts: int | None  # these four None where the case was refused: nothing was tried
+    starts_converged: int | None
+    starts_at_best: int | None
+    iterations: int | None
     singular_values: list
     covariance: np.ndarray = field(repr=False)
     evidence_kinds: list = field(default_factory=list, repr=False)
@@ -332,8 +332,7 @@ def _check_arguments(errors, solver, smoothing, rtol, **counts):
     if not 0.0 <= smoothing < 1.0:
         raise ValueError(f"smoothing = {smoothing}: must be in [0, 1) (use > 0 for a differentiable fit)")
     for name, value in counts.items():
-        if value is not None and not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-                                      and value >= least.get(name, 0)):
+        if value is not None and not is_count(value, least.get(name, 0)):
             raise ValueError(f"{name} = {value!r}: must be a whole number >= {least.get(name, 0)}")
     if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
         raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")

@@ -1,11 +1,20 @@
 """Work refused before it starts because it would not fit in this machine's memory (a sweep's values, its kept
-results, the rows of a fit): a message with the figure, rather than an allocation that fails part way."""
+results, the rows of a fit): a message with the figure, rather than an allocation that fails part way; and what a
+count of rows, starts or draws must be."""
 
 from __future__ import annotations
 
 import os
 
+import numpy as np
+
 from .case.errors import CaseError
+
+
+def is_count(value, least: int) -> bool:
+    """``value`` is a whole number (an int, not a bool, or a NumPy integer) >= ``least``: int() would have taken
+    "3" or 2.5 (as 2) without a word."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= least
 
 
 def memory_bytes():

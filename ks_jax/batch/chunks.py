@@ -13,9 +13,9 @@ import functools
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ..backend import CPU_CHUNK_ROWS, Plan
+from ..limits import is_count
 from .stages import run, run_row
 
 CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
@@ -24,7 +24,7 @@ CHUNK_ROWS = CPU_CHUNK_ROWS  # rows per chunk on a CPU
 def check_chunk(chunk, who: str) -> int:
     """``chunk``, rows per chunk, refused by name unless it is a whole number >= 1: int() of "a" failed with
     int's own words, and of 2.5 gave 2 without a word."""
-    if not (isinstance(chunk, (int, np.integer)) and not isinstance(chunk, bool) and chunk >= 1):
+    if not is_count(chunk, 1):
         raise ValueError(f"{who}: chunk = {chunk!r}: chunk must be a positive number of rows (a whole number >= 1)")
     return int(chunk)
 
