@@ -24,7 +24,7 @@ value and the rule, the documented exit status, no traceback, the other cases ke
   number belongs, naming the argument; under jit, vmap and grad they give the numbers they gave before;
 - from Python, an argument of another kind than an entry point takes (a dict to load_case, a chunk of "a", a
   sweep's outputs of 5, a Case for its inputs, a Solution for its result, an array to status_text, None to
-  sweep_view) is refused, saying what it takes.
+  sweep_view) is refused, saying what it takes;
 - a posterior's corner plot of draws with a NaN or an inf draws the finite ones and says how many it left out.
 """
 

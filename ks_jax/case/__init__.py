@@ -22,7 +22,8 @@ from .hitch import follow_tows
 from .inputs import AfterInputs, ApproachInputs, Case, CaseInputs, ContactInputs, HitchInputs, InteractionInputs
 from .inputs import Motion, PairInputs, RoadInputs, VehicleInputs
 from .inputs import as_arrays, body_states, to_pytrees
-from .load import case_from_dict, cases_from_data, load_case, load_cases, parse_output_value
+from .build import case_from_dict, parse_output_value
+from .load import cases_from_data, load_case, load_cases
 from .outputs import CIRCULAR_OUTPUTS, UNDEFINED_REASONS, at_rest_after, defined_output, impulse_exchanged
 from .outputs import undefined_kind
 from .paths import CUMULATIVE_OUTPUTS, PathError, automatic_part, canonical_path, check_output_path, follows_tow

@@ -30,7 +30,7 @@ class PathError(CaseError):
     pass
 
 
-MAX_VEHICLES = 8  # a case's vehicles at most (``case.load``)
+MAX_VEHICLES = 8  # a case's vehicles at most (``case.build``)
 MAX_PHASES = 8  # an approach's phases at most (``case.approach``)
 MAX_TIME = 3600.0  # s: a state at a time at most this far from the impact
 
