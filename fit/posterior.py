@@ -44,7 +44,7 @@ QUANTILES = {"q025": 2.5, "q16": 16.0, "q50": 50.0, "q84": 84.0, "q975": 97.5}
 RHAT_LIMIT = 1.01  # above: the chains disagree
 ESS_PER_CHAIN = 100  # below this many effective draws per chain: too few for the tails' quantiles
 START_JITTER = 0.1  # the chains' starts about the estimate, in z
-TARGET_ACCEPTANCE = 0.8  # the warmup's aim for NUTS's mean acceptance (Stan's)
+TARGET_ACCEPTANCE = 0.8  # the warmup's default aim for NUTS's mean acceptance (Stan's)
 SEGMENT = 100  # transitions per compiled call of the sampler, between which its progress is shown
 MISSING = "the posterior needs BlackJAX (the 'posterior' extra): pip install 'ks-jax[posterior]'"
 
@@ -63,7 +63,8 @@ def sampler():
 class Posterior:
     """NUTS draws of a fit's unknowns. ``samples``: (chains, draws, n) SI, columns in the order of ``paths``;
     ``summary``: path -> {"mean", "std", "q025", "q16", "q50", "q84", "q975", "rhat", "ess"} (SI);
-    ``divergences``: divergent transitions, all chains; ``warnings``: what makes the draws doubtful."""
+    ``divergences``: divergent transitions, all chains; ``warnings``: what makes the draws doubtful;
+    ``target_acceptance``: the mean acceptance the warmup tuned each chain's step size toward."""
 
     paths: list
     chains: int
@@ -75,12 +76,14 @@ class Posterior:
     divergences: int
     step_size: list
     warnings: list
+    target_acceptance: float = TARGET_ACCEPTANCE
 
     def to_dict(self) -> dict:
         """JSON-ready: per unknown its summary (SI; a non-finite value as null), and the run's settings."""
         num = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
         return {"chains": self.chains, "draws": self.draws, "warmup": self.warmup, "seed": self.seed,
-                "divergences": self.divergences, "warnings": list(self.warnings),
+                "target_acceptance": self.target_acceptance, "divergences": self.divergences,
+                "warnings": list(self.warnings),
                 "unknowns": {p: {k: num(v) for k, v in s.items()} for p, s in self.summary.items()}}
 
 
@@ -142,13 +145,13 @@ class _Tuning(NamedTuple):
     inverse_mass: jax.Array
 
 
-def _tuned(blackjax, tuning: _Tuning, slow, window_end, last, position, acceptance) -> _Tuning:
+def _tuned(blackjax, target, tuning: _Tuning, slow, window_end, last, position, acceptance) -> _Tuning:
     """``tuning`` after one warmup transition (``acceptance``, now at ``position``), as Stan's window adaptation
-    has it: the step size follows the acceptance rate by dual averaging throughout; in a slow window the mass
-    matrix's variance gathers the positions, and at the window's end becomes the new inverse mass matrix while
-    the averaging restarts from its mean step size; after the ``last`` warmup transition the step size is the
-    averaging's mean."""
-    da_init, da_update, da_final = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)
+    has it: the step size follows the acceptance rate toward ``target`` by dual averaging throughout; in a slow
+    window the mass matrix's variance gathers the positions, and at the window's end becomes the new inverse mass
+    matrix while the averaging restarts from its mean step size; after the ``last`` warmup transition the step size
+    is the averaging's mean."""
+    da_init, da_update, da_final = blackjax.adaptation.step_size.dual_averaging_adaptation(target)
     _, mm_update, mm_final = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)
     pick = lambda flag, a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(flag, u, v), a, b)  # noqa: E731
     averaging = da_update(tuning.averaging, acceptance)
@@ -161,12 +164,13 @@ def _tuned(blackjax, tuning: _Tuning, slow, window_end, last, position, acceptan
     return _Tuning(averaging, variance, step_size, inverse_mass)
 
 
-def _pieces(blackjax, density):
+def _pieces(blackjax, density, target=TARGET_ACCEPTANCE):
     """A chain's first carry (its NUTS state at ``start`` and its untuned adaptation) and the step of its scan:
     one NUTS transition at the carried step size and mass matrix, then (while ``adapting``) Stan's adaptation
-    of them (``_tuned``). The step's inputs per transition: (key, slow, window_end, last, adapting)."""
+    of them toward the mean acceptance ``target`` (``_tuned``; a number or a traced scalar). The step's inputs per
+    transition: (key, slow, window_end, last, adapting)."""
     transition = blackjax.nuts.build_kernel()
-    da_init = blackjax.adaptation.step_size.dual_averaging_adaptation(TARGET_ACCEPTANCE)[0]
+    da_init = blackjax.adaptation.step_size.dual_averaging_adaptation(target)[0]
     mm_init = blackjax.adaptation.mass_matrix.mass_matrix_adaptation(is_diagonal_matrix=True)[0]
 
     def first(start):
@@ -179,7 +183,7 @@ def _pieces(blackjax, density):
         state, tuning = carry
         key, slow, window_end, last, adapting = xs
         state, info = transition(key, state, density, tuning.step_size, tuning.inverse_mass)
-        after = _tuned(blackjax, tuning, slow, window_end, last, state.position, info.acceptance_rate)
+        after = _tuned(blackjax, target, tuning, slow, window_end, last, state.position, info.acceptance_rate)
         tuning = jax.tree_util.tree_map(lambda a, b: jnp.where(adapting, a, b), after, tuning)
         return (state, tuning), (state.position, info.is_divergent)
 
@@ -206,7 +210,7 @@ def _step_keys(key, warmup: int, draws: int, steps: int):
     return jnp.concatenate([keys, jnp.repeat(keys[-1:], steps - warmup - draws, axis=0)])
 
 
-def run_chains(density, keys, z0, draws: int, warmup: int):
+def run_chains(density, keys, z0, draws: int, warmup: int, target_acceptance=TARGET_ACCEPTANCE):
     """NUTS chains of ``density`` (z (n,) -> log-density), one per key (keys (C,), starts z0 (C, n)), each
     adapted for ``warmup`` transitions by Stan's window adaptation, then ``draws`` draws: the draws
     (C, draws, n), their divergences (C, draws) and each chain's step size (C,).
@@ -214,9 +218,10 @@ def run_chains(density, keys, z0, draws: int, warmup: int):
     Each chain's adaptation and draws are one scan of one NUTS transition, its step size and mass matrix
     carried along (fixed once the warmup ends), so that the transition, with the density's gradient inside,
     is traced and compiled once. The draws are those of BlackJAX's ``window_adaptation`` run on the chain's
-    first key and a NUTS scan on its second. ``sample`` runs the same scan in segments."""
+    first key and a NUTS scan on its second (whose target acceptance is 0.8, the default here). ``sample`` runs
+    the same scan in segments."""
     blackjax = sampler()
-    first, step = _pieces(blackjax, density)
+    first, step = _pieces(blackjax, density, target_acceptance)
     flags = _schedule(blackjax, warmup, warmup + draws)
 
     def chain(key, start):
@@ -228,12 +233,12 @@ def run_chains(density, keys, z0, draws: int, warmup: int):
 
 
 @partial(quick_jit, static_argnames=("problem",))
-def _segment(problem: Problem, d, smoothing, carry, z0, begin, keys, flags):
+def _segment(problem: Problem, d, smoothing, target, carry, z0, begin, keys, flags):
     """Every chain's next transitions (keys (C, S), flags: four (S,) of ``_schedule``) from ``carry``, or where
-    ``begin`` from each chain's first carry at z0 (C, n): the carry after them, and their draws (C, S, n) in z and
-    divergences (C, S). The program of a posterior, one for all its segments: most of its first call is
-    compiling it."""
-    first, step = _pieces(sampler(), lambda z: _density(problem, z, d, smoothing))
+    ``begin`` from each chain's first carry at z0 (C, n), the warmup aiming at the mean acceptance ``target``: the
+    carry after them, and their draws (C, S, n) in z and divergences (C, S). The program of a posterior, one for all
+    its segments and targets: most of its first call is compiling it."""
+    first, step = _pieces(sampler(), lambda z: _density(problem, z, d, smoothing), target)
     carry = jax.lax.cond(begin, lambda _: jax.vmap(first)(z0), lambda c: c, carry)
     return jax.vmap(lambda c, k: jax.lax.scan(step, c, (k, *flags)))(carry, keys)
 
@@ -247,14 +252,16 @@ def _no_carry(problem: Problem, d, smoothing, z0):
 
 def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int = 4, warmup: int | None = None,
            seed: int = 0, smoothing: float = 1e-3, dtype=None, devices=None, offset=None,
-           progress: bool = False) -> Posterior:
+           progress: bool = False, target_acceptance: float = TARGET_ACCEPTANCE) -> Posterior:
     """``draws`` NUTS draws per chain from the posterior of one fit's unknowns (the module's docstring).
 
     row: the fit's arrays of one case (``FitArrays.row``); z_best (n,): its
     estimate in z. warmup: adaptation steps per chain (default ``draws``). devices: where the chains run (default
     this process's; over several, the chains are split among them where their count divides evenly). offset (n,):
     added to the draws (a scene fitted about its own origin: ``FitArrays.x_offset``). progress: a bar (stderr)
-    once the draws have taken ``PROGRESS_DELAY`` s: they run in compiled segments of ``SEGMENT`` transitions."""
+    once the draws have taken ``PROGRESS_DELAY`` s: they run in compiled segments of ``SEGMENT`` transitions.
+    target_acceptance: the mean acceptance the warmup tunes the step size toward, in (0, 1): higher, smaller
+    steps, fewer divergences where the density bends sharply (at a bound), more gradients per draw."""
     sampler()
     if draws < 1 or chains < 1:
         raise ValueError(f"posterior: draws = {draws}, chains = {chains}: need at least one of each")
@@ -271,7 +278,7 @@ def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int 
     if len(devices) > 1 and chains % len(devices) == 0:
         place = row_placement(devices)
         keys, z0 = jax.device_put(keys, place.rows), jax.device_put(z0, place.rows)
-    smoothing = jnp.asarray(smoothing, dtype)
+    smoothing, target = jnp.asarray(smoothing, dtype), jnp.asarray(target_acceptance, dtype)
     steps = warmup + draws
     segment = min(SEGMENT, steps)
     total = -(-steps // segment) * segment  # padded: the transitions after the last draw are not kept
@@ -281,7 +288,7 @@ def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int 
     bar = Progress(steps, "ks-jax posterior", "step", progress, PROGRESS_DELAY)
     parts = []
     for lo in range(0, total, segment):
-        carry, part = _segment(problem, d, smoothing, carry, z0, lo == 0, step_keys[:, lo:lo + segment],
+        carry, part = _segment(problem, d, smoothing, target, carry, z0, lo == 0, step_keys[:, lo:lo + segment],
                                tuple(jnp.asarray(f[lo:lo + segment]) for f in flags))
         parts.append(jax.tree_util.tree_map(np.asarray, part))
         bar.update(min(segment, steps - lo))
@@ -291,7 +298,7 @@ def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int 
     x = np.asarray(jax.vmap(jax.vmap(lambda z: to_x(z, d.lo, d.hi)))(zs), np.float64)
     x = x + (0.0 if offset is None else np.asarray(offset, np.float64))
     return summarize(list(problem.unknowns), x, int(np.sum(np.asarray(divergent))), warmup, seed,
-                     [float(s) for s in np.asarray(step_size)])
+                     [float(s) for s in np.asarray(step_size)], float(target_acceptance))
 
 
 RHAT_UNDEFINED = ("R-hat is undefined: R-hat needs two or more chains, and with one the draws cannot show whether "
@@ -321,7 +328,8 @@ def _chains(indices) -> str:
     return f"chain {k[0]}" if len(k) == 1 else f"chains {', '.join(k[:-1])} and {k[-1]}"
 
 
-def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> Posterior:
+def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size,
+              target_acceptance: float = TARGET_ACCEPTANCE) -> Posterior:
     """The ``Posterior`` of draws ``x`` (chains, draws, n), SI: moments, quantiles, R-hat and effective sample
     size per unknown (NaN where undefined: R-hat with one chain or one draw, the effective sample size with one
     draw, each with a warning that says why), and the warnings they call for."""
@@ -367,5 +375,7 @@ def summarize(paths, x, divergences: int, warmup: int, seed: int, step_size) -> 
     if divergences:
         warnings.append(f"{divergences} divergent transition{'s' * (divergences != 1)} of {chains * draws}: the "
                         "sampler could not follow the density everywhere (a sharp stick/slide edge, or a bound); "
-                        "the draws may miss part of the posterior")
-    return Posterior(list(paths), chains, draws, warmup, seed, x, summary, divergences, list(step_size), warnings)
+                        "the draws may miss part of the posterior; a target acceptance nearer 1 than "
+                        f"{target_acceptance:g} takes smaller steps, which follow it more closely")
+    return Posterior(list(paths), chains, draws, warmup, seed, x, summary, divergences, list(step_size), warnings,
+                     target_acceptance)

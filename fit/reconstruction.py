@@ -29,7 +29,7 @@ from .arrays import batch_arrays
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
-from .posterior import sampler
+from .posterior import TARGET_ACCEPTANCE, sampler
 from .problem import Problem, predict, to_z
 from .spec import PathChecks, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
@@ -321,7 +321,7 @@ def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors):
     return prepared, problem
 
 
-def _check_arguments(errors, solver, smoothing, rtol, **counts):
+def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, **counts):
     """``reconstruct_batch``'s arguments, each against its rule (ValueError naming it), before any work; with a
     posterior, the sampler's extra (ImportError naming it)."""
     least = {"starts": 1, "chains": 1, "max_starts": 1, "max_iter": 1, "chunk": 1}
@@ -336,6 +336,9 @@ def _check_arguments(errors, solver, smoothing, rtol, **counts):
             raise ValueError(f"{name} = {value!r}: must be a whole number >= {least.get(name, 0)}")
     if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
         raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")
+    if not (isinstance(target_acceptance, (int, float, np.floating)) and 0 < target_acceptance < 1):
+        raise ValueError(f"target_acceptance = {target_acceptance!r}: the posterior's mean acceptance must be in "
+                         "(0, 1) (Stan's default 0.8; 0.9 or 0.95 where transitions diverge)")
     if counts["posterior"]:
         sampler()  # ImportError naming the extra, before any fit
 
@@ -343,7 +346,8 @@ def _check_arguments(errors, solver, smoothing, rtol, **counts):
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                 smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None, rtol: float | None = None,
                 progress: bool = False, chunk: int = 250, dtype=None, devices=None,
-                max_starts: int | None = None, posterior: int = 0, chains: int = 4, plan=None) -> FitResult:
+                max_starts: int | None = None, posterior: int = 0, chains: int = 4, plan=None,
+                target_acceptance: float = TARGET_ACCEPTANCE) -> FitResult:
     """Fit unknown inputs of ``case`` to ``evidence`` (docs/fit.md).
 
     case: a ks_jax Case with explicit or automatic contact. unknowns: a map path -> {"bounds",
@@ -358,8 +362,10 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     monte_carlo: number of refits with the evidence perturbed by its sigmas (0: none); their
     5/50/95 percentiles go to ``result.monte_carlo``. posterior: NUTS draws per chain from the posterior of
     the unknowns (0: none), ``chains`` chains started at the estimate, after as many adaptation steps
-    (``fit.posterior``; the ``posterior`` extra): ``result.posterior``. smoothing: the engine's smooth friction
-    cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
+    (``fit.posterior``; the ``posterior`` extra): ``result.posterior``; their warmup tunes each chain's step size
+    toward a mean acceptance of ``target_acceptance`` (in (0, 1); nearer 1, smaller steps and fewer divergent
+    transitions where the posterior bends sharply, as at a bound, for more gradients per draw). smoothing: the
+    engine's smooth friction cone tau (> 0 so that the loss is differentiable). solver: "lm" (default), "lbfgs" or
     "adam" (optax). rtol: relative singular-value threshold for ``unidentified`` (default 1e-6
     in float64, 1e-3 in float32). progress: show a progress bar for Monte Carlo (chunks of
     ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved
@@ -372,14 +378,15 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
                              monte_carlo=monte_carlo, smoothing=smoothing, solver=solver, max_iter=max_iter,
                              rtol=rtol, progress=progress, chunk=chunk, dtype=dtype, devices=devices,
                              max_starts=max_starts, posterior=posterior, chains=chains, plan=plan,
-                             errors="raise")[0]
+                             target_acceptance=target_acceptance, errors="raise")[0]
 
 
 def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
                       smoothing: float = 1e-3, solver: str = "lm", max_iter: int | None = None,
                       rtol: float | None = None, progress: bool = False, chunk: int = 250,
                       dtype=None, devices=None, max_starts: int | None = None, posterior: int = 0,
-                      chains: int = 4, plan=None, errors: str = "report") -> list[FitResult]:
+                      chains: int = 4, plan=None, target_acceptance: float = TARGET_ACCEPTANCE,
+                      errors: str = "report") -> list[FitResult]:
     """Many reconstructions in one compiled, vmapped call (cases x starts).
 
     cases: list of Case (same contact mode). unknowns / evidence: one spec per case (lists of
@@ -391,8 +398,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     is not fitted and its result says why (``FitResult.refused``: status "invalid: ..."), and the others are
     fitted; "raise", its CaseError is raised before any fit. An argument that is not a Case is a TypeError.
     """
-    _check_arguments(errors, solver, smoothing, rtol, starts=starts, monte_carlo=monte_carlo, posterior=posterior,
-                     chains=chains, max_starts=max_starts, max_iter=max_iter, chunk=chunk)
+    _check_arguments(errors, solver, smoothing, rtol, target_acceptance, starts=starts, monte_carlo=monte_carlo,
+                     posterior=posterior, chains=chains, max_starts=max_starts, max_iter=max_iter, chunk=chunk)
     cases = list(cases)
     if not cases:
         return []
@@ -483,7 +490,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         if posterior:
             r.posterior = sample_posterior(problem, arrays_of(i), z, draws=int(posterior), chains=int(chains),
                                            seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
-                                           offset=arrays.x_offset[i], progress=progress)
+                                           offset=arrays.x_offset[i], progress=progress,
+                                           target_acceptance=float(target_acceptance))
         if monte_carlo:
             everywhere = several_minima(found.table.cost[i], found.table.converged[i])
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,

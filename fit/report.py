@@ -213,7 +213,8 @@ def text_report(result) -> str:
     if result.posterior is not None:
         post = result.posterior
         lines += ["", f"Posterior (NUTS, {_count(post.chains, 'chain')} x {_count(post.draws, 'draw')} after "
-                      f"{_count(post.warmup, 'adaptation step')}; {post.divergences} divergent): mean +/- std; "
+                      f"{_count(post.warmup, 'adaptation step')} toward acceptance {post.target_acceptance:g}; "
+                      f"{post.divergences} divergent): mean +/- std; "
                       "2.5% / 50% / 97.5%; R-hat, ESS"]
         for u in result.unknowns:
             kind, s = input_kind(u.path), post.summary[u.path]

@@ -534,7 +534,10 @@ def test_the_python_api_refuses_what_it_cannot_use_by_name(tmp_path):
     for kwargs, words in (({"monte_carlo": -1}, "monte_carlo = -1: must be a whole number >= 0"),
                           ({"starts": 2.5}, "starts = 2.5: must be a whole number >= 1"),
                           ({"max_iter": 0}, "max_iter = 0: must be a whole number >= 1"),
-                          ({"rtol": -1.0}, r"rtol = -1.0: the relative singular-value threshold must be in \(0, 1\)")):
+                          ({"rtol": -1.0}, r"rtol = -1.0: the relative singular-value threshold must be in \(0, 1\)"),
+                          ({"target_acceptance": 1.0}, r"target_acceptance = 1.0: the posterior's mean acceptance "
+                                                       r"must be in \(0, 1\)"),
+                          ({"target_acceptance": math.nan}, r"target_acceptance = nan: .* must be in \(0, 1\)")):
         with pytest.raises(ValueError, match=words):
             fit.reconstruct(fitted, **kwargs)
     speed = "vehicles[1].speed"

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from fit import reconstruct
+from fit.posterior import TARGET_ACCEPTANCE
 from fit.posterior import sampler as posterior_sampler
 from fit.problem import case_at
 from fit.reconstruction import FitResult
@@ -29,7 +30,7 @@ from ..case import input_kind, load_cases
 from ..case.errors import CaseError, visible, visible_lines
 from ..plot import check_picture_path, save_corner, save_top_view
 from ..solve import solve
-from .options import seed_option, smoothing_option
+from .options import acceptance_option, seed_option, smoothing_option
 
 
 def add_arguments(parser) -> None:
@@ -48,6 +49,10 @@ def add_arguments(parser) -> None:
                         help="draw N samples per chain of the unknowns' posterior by NUTS, after as many adaptation "
                              "steps (the 'posterior' extra); report mean, std, quantiles, R-hat and ESS")
     parser.add_argument("--chains", type=int, default=4, help="NUTS chains for --posterior (default 4)")
+    parser.add_argument("--target-acceptance", type=acceptance_option, default=TARGET_ACCEPTANCE, metavar="P",
+                        help="the mean acceptance that --posterior's adaptation tunes NUTS's step size toward, in "
+                             f"(0, 1) (default {TARGET_ACCEPTANCE}); 0.9 or 0.95 where transitions diverge (a bound, "
+                             "a sharp edge): smaller steps, more gradients per draw")
     parser.add_argument("--seed", type=seed_option, default=0, help="random seed for the starts, Monte Carlo and "
                                                                        "the posterior")
     parser.add_argument("--smoothing", type=smoothing_option, default=1e-3,
@@ -95,7 +100,7 @@ def run(args) -> int:
                                        smoothing=args.smoothing, solver=args.solver,
                                        progress=args.monte_carlo > 0 or args.posterior > 0,
                                        max_starts=args.max_starts, posterior=args.posterior, chains=args.chains,
-                                       plan=args.plan))
+                                       plan=args.plan, target_acceptance=args.target_acceptance))
         except CaseError as err:  # in a file of several cases: reported, and the others are fitted
             if len(cases) == 1:
                 raise

@@ -5,15 +5,27 @@ from __future__ import annotations
 import argparse
 
 
-def smoothing_option(text: str) -> float:
-    """``--smoothing``: a number in [0, 1)."""
+def _number(text: str) -> float:
     try:
-        tau = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def smoothing_option(text: str) -> float:
+    """``--smoothing``: a number in [0, 1)."""
+    tau = _number(text)
     if not 0.0 <= tau < 1.0:  # NaN fails too
         raise argparse.ArgumentTypeError(f"{text}: smoothing must be in [0, 1)")
     return tau
+
+
+def acceptance_option(text: str) -> float:
+    """``--target-acceptance``: a number in (0, 1)."""
+    target = _number(text)
+    if not 0.0 < target < 1.0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"{text}: the target acceptance must be in (0, 1)")
+    return target
 
 
 def seed_option(text: str) -> int:

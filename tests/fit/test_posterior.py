@@ -20,6 +20,7 @@ import fit
 from fit.arrays import case_arrays
 from fit.posterior import run_chains
 from fit.report import text_report
+import ks_jax.cli.fit
 from ks_jax.cli import main
 from ks_jax.cli.fit import posterior_path, save_posterior
 from ks_jax.case import get_output, load_case, set_input
@@ -30,7 +31,7 @@ pytestmark = pytest.mark.slow  # samplers and batches of fits: each compiles pro
 
 EVIDENCE = [("vehicles[0].delta_v_magnitude", 0.15), ("vehicles[1].delta_v_magnitude", 0.15),
             ("vehicles[0].speed_after", 0.15), ("vehicles[1].speed_after", 0.15)]
-DRAWS = 500
+DRAWS = 1000  # per chain: over 100 seeds the chains' R-hat stayed below 1.007 and their ESS above 1000
 
 # Compiled once each with the quick settings (``samples.reference_jit``; XLA's defaults take 2-4 times as long to
 # compile the same arithmetic): the sampler's gradient (which users run inside the sampler's program, ``_segment``,
@@ -40,15 +41,16 @@ _log_density = reference_jit(fit.posterior.log_density, static_argnums=0)
 _run_chains = reference_jit(run_chains, static_argnums=(0, 3, 4))
 
 
-def _fit(restitution, seed=3):
+def _fit(restitution, seed=3, target_acceptance=0.8):
     """The seed case with ``restitution``, its evidence the engine's own values, refitted with the Kia's speed
-    and restitution unknown, and 4 chains x ``DRAWS`` draws of their posterior."""
+    and restitution unknown, and 4 chains x ``DRAWS`` draws of their posterior, adapted toward
+    ``target_acceptance``."""
     case = load_case(CASES / "fit_seed_001.json")
     case = dataclasses.replace(case, inputs=set_input(case.inputs, "contact.restitution", restitution))
     result = solve(case, smoothing=1e-3).result
     evidence = [fit.Evidence(p, float(get_output(result, p)), s) for p, s in EVIDENCE]
     unknowns = [fit.Unknown("vehicles[1].speed", 0.0, 30.0), fit.Unknown("contact.restitution", 0.0, 0.6)]
-    return fit.reconstruct(case, unknowns, evidence, posterior=DRAWS, seed=seed)
+    return fit.reconstruct(case, unknowns, evidence, posterior=DRAWS, seed=seed, target_acceptance=target_acceptance)
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +58,16 @@ def gaussian():
     return _fit(0.3)
 
 
+# At the bound, the draws' density in the unbounded coordinate falls steeply on one side. Over 100 seeds (each a
+# different path of the chains, as another machine's rounding gives; ``benchmarks/posterior_paths.py``), adapted
+# toward Stan's mean acceptance of 0.8 the chains of 35 diverged, up to 9 transitions of 4000; toward 0.9 those of
+# 3, one transition each. Both drew the half-normal within the checks below.
+BOUND_ACCEPTANCE = 0.9
+
+
 @pytest.fixture(scope="module")
 def at_bound():
-    return _fit(0.0)
+    return _fit(0.0, target_acceptance=BOUND_ACCEPTANCE)
 
 
 def test_a_well_determined_posterior_is_the_laplace_gaussian(gaussian):
@@ -85,27 +94,36 @@ def test_restitution_on_its_bound_has_the_half_normal_posterior_that_laplace_mis
     (the Laplace standard error, which ignores the bound), and the uniform prior cuts it at 0. Its posterior is
     then half-normal: mean sigma sqrt(2/pi), median 0.674 sigma, 97.5% quantile 2.241 sigma, std
     sigma sqrt(1 - 2/pi), where Laplace's interval would be 0 +/- 1.96 sigma, half of it below the bound. Each
-    within its Monte Carlo error (a quantile's: sqrt(p (1 - p) / ESS) over the density there)."""
+    within its Monte Carlo error (a quantile's: sqrt(p (1 - p) / ESS) over the density there; the std's from the
+    half-normal's fourth central moment mu4: sqrt((mu4 - var^2) / (4 var ESS)), about 1.2 times the normal's
+    std / sqrt(2 ESS)). Adapted toward a mean acceptance of ``BOUND_ACCEPTANCE``, at most one transition in a
+    thousand diverges, and the warnings count any that did."""
     r = at_bound
     sigma = r.std["contact.restitution"]
     s = r.posterior.summary["contact.restitution"]
     assert r.estimate["contact.restitution"] < 1e-9 and any("contact.restitution" in b for b in r.at_bound)
     draws = r.posterior.samples[:, :, 1]
-    assert np.all(draws >= 0.0) and s["rhat"] < 1.01 and r.posterior.divergences == 0
+    post = r.posterior
+    assert np.all(draws >= 0.0) and s["rhat"] < 1.01 and post.divergences <= post.chains * post.draws / 1000
+    assert post.target_acceptance == BOUND_ACCEPTANCE == r.to_dict()["posterior"]["target_acceptance"]
+    assert any(f"{post.divergences} divergent" in w for w in post.warnings) == (post.divergences > 0)
     ess = s["ess"]
     assert abs(s["mean"] - sigma * math.sqrt(2 / math.pi)) < 4 * s["std"] / math.sqrt(ess)
-    assert abs(s["std"] - sigma * math.sqrt(1 - 2 / math.pi)) < 4 * s["std"] / math.sqrt(2 * ess)
+    var, mu4 = (1 - 2 / math.pi) * sigma ** 2, (3 - 4 / math.pi - 12 / math.pi ** 2) * sigma ** 4
+    assert abs(s["std"] - math.sqrt(var)) < 4 * math.sqrt((mu4 - var * var) / (4 * var * ess))
     for key, p, z in (("q50", 0.5, 0.6745), ("q975", 0.975, 2.2414)):
         density = 2 * math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) / sigma  # the half-normal's, at its quantile
         assert abs(s[key] - z * sigma) < 4 * math.sqrt(p * (1 - p) / ess) / density, key
     assert s["q025"] > 0 > r.estimate["contact.restitution"] - 1.96 * sigma  # Laplace's interval crosses the bound
 
 
-def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_draw():
+@pytest.mark.parametrize("target", [0.8, 0.9])
+def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_draw(target):
     """``run_chains`` adapts and draws in one scan of one NUTS transition (so that it compiles once); run as
-    BlackJAX's own two steps (``window_adaptation(nuts, ...).run`` on a chain's first key, then a scan of
-    ``nuts`` at the adapted step size and mass matrix on its second), the same keys give the same draws and
-    step sizes, here on a correlated Gaussian whose scales differ by 1e4 (so that the mass matrix matters)."""
+    BlackJAX's own two steps (``window_adaptation(nuts, ..., target_acceptance_rate=target).run`` on a chain's first
+    key, then a scan of ``nuts`` at the adapted step size and mass matrix on its second), the same keys give the
+    same draws and step sizes, here on a correlated Gaussian whose scales differ by 1e4 (so that the mass matrix
+    matters), at Stan's target acceptance and at a higher one (the same program: the target is an argument)."""
     blackjax = pytest.importorskip("blackjax")
     scale = np.sqrt([1.0, 100.0, 0.01])
     precision = np.linalg.inv(np.array([[1.0, 0.8, 0.0], [0.8, 2.0, 0.3], [0.0, 0.3, 0.5]]) * np.outer(scale, scale))
@@ -115,12 +133,13 @@ def test_the_one_scan_sampler_draws_what_blackjax_window_adaptation_then_nuts_dr
 
     def blackjax_chain(key, start):
         adapt_key, draw_key = jax.random.split(key)
-        (state, tuned), _ = blackjax.window_adaptation(blackjax.nuts, density).run(adapt_key, start, warmup)
+        (state, tuned), _ = blackjax.window_adaptation(blackjax.nuts, density, target_acceptance_rate=target).run(
+            adapt_key, start, warmup)
         kernel = blackjax.nuts(density, **tuned)
         step = lambda state, k: (kernel.step(k, state)[0],) * 2  # noqa: E731
         return jax.lax.scan(step, state, jax.random.split(draw_key, draws))[1].position, tuned["step_size"]
 
-    zs, divergent, step_size = _run_chains(density, keys, z0, draws, warmup)
+    zs, divergent, step_size = _run_chains(density, keys, z0, draws, warmup, target)
     expected, expected_step = reference_jit(jax.vmap(blackjax_chain))(keys, z0)
     assert zs.shape == (2, draws, 3) and divergent.shape == (2, draws)
     np.testing.assert_allclose(step_size, expected_step, rtol=1e-12)
@@ -156,17 +175,27 @@ def test_a_seeded_posterior_draws_the_same_again_and_another_seed_does_not(gauss
     assert not np.array_equal(other.posterior.samples, gaussian.posterior.samples)
 
 
-def test_the_panel_shows_the_posterior_and_bad_draws_are_refused(gaussian, capsys):
+def test_the_panel_shows_the_posterior_and_bad_draws_are_refused(gaussian, capsys, monkeypatch):
     """The panel's posterior rows give each unknown's mean, quantiles, R-hat and ESS in the trade's units; ``ks-jax
-    fit --posterior -1`` and ``--chains 0`` are refused before any fit, naming the option and the rule."""
+    fit --posterior -1``, ``--chains 0`` and a ``--target-acceptance`` outside (0, 1) are refused before any fit,
+    naming the option and the rule; ``--target-acceptance`` reaches the fit."""
     text = text_report(gaussian)
     (row,) = [line for line in text.splitlines() if line.strip().startswith("vehicles[1].speed") and "R-hat" in line]
     s = gaussian.posterior.summary["vehicles[1].speed"]
     assert "mph" in row and f"R-hat {s['rhat']:.3f}" in row and f"ESS {s['ess']:.0f}" in row
-    assert "Posterior (NUTS, 4 chains x 500 draws after 500 adaptation steps; 0 divergent)" in text
+    assert ("Posterior (NUTS, 4 chains x 1000 draws after 1000 adaptation steps toward acceptance 0.8; 0 divergent)"
+            in text)
     for option in (["--posterior", "-1"], ["--posterior", "10", "--chains", "0"]):
         assert main(["fit", str(CASES / "fit_seed_001.json"), *option]) == 2
         assert "draws must be >= 0 and chains >= 1" in capsys.readouterr().err
+    for value, words in (("1", "1: the target acceptance must be in (0, 1)"), ("x", "'x' is not a number")):
+        with pytest.raises(SystemExit) as usage:
+            main(["fit", str(CASES / "fit_seed_001.json"), "--posterior", "10", "--target-acceptance", value])
+        assert usage.value.code == 2 and words in capsys.readouterr().err
+    given = []
+    monkeypatch.setattr(ks_jax.cli.fit, "reconstruct", lambda case, **kw: given.append(kw) or gaussian)
+    assert main(["fit", str(CASES / "fit_seed_001.json"), "--posterior", "10", "--target-acceptance", "0.95"]) == 0
+    assert given[0]["target_acceptance"] == 0.95 and given[0]["posterior"] == 10
 
 
 def test_the_corner_plot_is_drawn_in_the_trades_units_beside_the_top_view(gaussian, tmp_path):
