@@ -1,7 +1,7 @@
-"""How the posterior tests' checks fare over many chain paths: the two problems of ``tests/fit/test_posterior.py``
+"""How the posterior tests' checks fare over many chain paths: the problems of ``tests/fit/test_posterior.py``
 drawn with many seeds, each seed a different path, as another machine's rounding gives. Not a test.
 
-    .venv/bin/python benchmarks/posterior_paths.py [--seeds 100] [--draws 1000] [--targets 0.8 0.9]
+    .venv/bin/python benchmarks/posterior_paths.py [--seeds 100] [--draws 1000] [--targets 0.8 0.9] [--one-draws 500]
 
 The problems: the seed chapter's rear impact (``fit_seed_001.json``) refitted from its own delta-Vs and speeds after
 (sigma 0.15 m/s each), the Kia's speed and the restitution unknown (bounds [0, 30] m/s and [0, 0.6]); the truth's
@@ -13,6 +13,11 @@ R-hat and smallest ESS over every unknown, and each check's largest error in Mon
 tests allow 4) with the seeds above 4: the mean and std against the Laplace Gaussian's, and the 16-84% span
 against two standard errors (a relative error; the test allows 0.1); at the bound, the mean,
 std (its error from the half-normal's fourth moment), median and 97.5% quantile against the half-normal's.
+
+Then the one-unknown problem: the Kia's speed from an EDR's 9 m/s (sigma 0.3) and a Gaussian prior of 9.6 +/- 0.4
+m/s, whose posterior is a Gaussian in closed form; 2 chains and 1 chain x ``--one-draws`` draws at Stan's target
+acceptance: the smallest ESS (the tests ask above 50), the largest R-hat of two chains (the test asks below 1.05),
+and the largest error of the mean, std and median in Monte Carlo standard errors.
 """
 
 from __future__ import annotations
@@ -109,19 +114,45 @@ def paths(restitution: float, target: float, seeds: int, draws: int) -> None:
               + (f" {above}" if above else ""))
 
 
+def one_unknown_paths(seeds: int, draws: int) -> None:
+    case = load_case(CASE)
+    edr, edr_sigma, prior, prior_sigma = 9.0, 0.3, 9.6, 0.4
+    precision = 1 / edr_sigma ** 2 + 1 / prior_sigma ** 2
+    mean, std = (edr / edr_sigma ** 2 + prior / prior_sigma ** 2) / precision, precision ** -0.5
+    unknowns = [fit.Unknown("vehicles[1].speed", 0.0, 30.0, prior=(prior, prior_sigma))]
+    evidence = [fit.Evidence("vehicles[1].speed", edr, edr_sigma)]
+    for chains in (2, 1):
+        ess, rhat, worst, diverged = [], [], 0.0, 0
+        for seed in range(seeds):
+            post = fit.reconstruct(case, unknowns, evidence, posterior=draws, chains=chains, seed=seed).posterior
+            s = post.summary["vehicles[1].speed"]
+            ess.append(s["ess"])
+            rhat.append(s["rhat"])
+            diverged += post.divergences > 0
+            worst = max(worst, abs(s["mean"] - mean) / (std / math.sqrt(s["ess"])),
+                        abs(s["std"] - std) / (std / math.sqrt(2 * s["ess"])),
+                        abs(s["q50"] - mean) / (1.2533 * std / math.sqrt(s["ess"])))
+        print(f"\none unknown (closed-form Gaussian), {seeds} seeds x {chains} chain(s) x {draws} draws: ESS at least "
+              f"{min(ess):.0f} (5% quantile {np.percentile(ess, 5):.0f}), R-hat at most "
+              f"{'undefined' if chains < 2 else f'{max(rhat):.4f}'}, seeds diverged {diverged}, largest error "
+              f"{worst:.2f}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=100)
     ap.add_argument("--draws", type=int, default=1000)
     ap.add_argument("--targets", type=float, nargs="+", default=[0.8, 0.9])
+    ap.add_argument("--one-draws", type=int, default=500, help="draws per chain of the one-unknown problem")
     args = ap.parse_args(argv)
     print(f"posterior_paths.py --seeds {args.seeds} --draws {args.draws} --targets "
-          f"{' '.join(map(str, args.targets))}: {jax.devices()[0].device_kind}, "
+          f"{' '.join(map(str, args.targets))} --one-draws {args.one_draws}: {jax.devices()[0].device_kind}, "
           f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC", flush=True)
     for restitution in (0.0, 0.3):
         for target in args.targets:
             paths(restitution, target, args.seeds, args.draws)
             sys.stdout.flush()
+    one_unknown_paths(args.seeds, args.one_draws)
 
 
 if __name__ == "__main__":
