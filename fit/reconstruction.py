@@ -22,7 +22,7 @@ import numpy as np
 from ks_jax.backend import plan_for
 from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
-from ks_jax.limits import check_memory, is_count
+from ks_jax.limits import check_memory, is_count, is_fraction
 from ks_jax.model.types import OK, status_text
 
 from .arrays import batch_arrays
@@ -334,9 +334,9 @@ def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, **count
     for name, value in counts.items():
         if value is not None and not is_count(value, least.get(name, 0)):
             raise ValueError(f"{name} = {value!r}: must be a whole number >= {least.get(name, 0)}")
-    if rtol is not None and not (isinstance(rtol, (int, float, np.floating)) and 0 < rtol < 1):
+    if rtol is not None and not is_fraction(rtol):
         raise ValueError(f"rtol = {rtol!r}: the relative singular-value threshold must be in (0, 1)")
-    if not (isinstance(target_acceptance, (int, float, np.floating)) and 0 < target_acceptance < 1):
+    if not is_fraction(target_acceptance):
         raise ValueError(f"target_acceptance = {target_acceptance!r}: the posterior's mean acceptance must be in "
                          "(0, 1) (Stan's default 0.8; 0.9 or 0.95 where transitions diverge)")
     if counts["posterior"]:
@@ -491,7 +491,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
             r.posterior = sample_posterior(problem, arrays_of(i), z, draws=int(posterior), chains=int(chains),
                                            seed=seed, smoothing=smoothing, dtype=dtype, devices=devices,
                                            offset=arrays.x_offset[i], progress=progress,
-                                           target_acceptance=float(target_acceptance))
+                                           target_acceptance=target_acceptance)
         if monte_carlo:
             everywhere = several_minima(found.table.cost[i], found.table.converged[i])
             r.monte_carlo = refit_perturbed(problem, solver, max_iter, arrays_of(i), u, z, starts, monte_carlo, rng,

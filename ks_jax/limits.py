@@ -17,6 +17,11 @@ def is_count(value, least: int) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= least
 
 
+def is_fraction(value) -> bool:
+    """``value`` is one real number strictly between 0 and 1 (not a bool, a string or an array)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and 0 < value < 1
+
+
 def memory_bytes():
     """This machine's physical memory in bytes (None where the system does not say)."""
     try:
