@@ -42,7 +42,8 @@ import jax.numpy as jnp
 
 from . import units
 
-# per-program XLA options (a program compiled with them is cached apart from one without)
+# per-program XLA options (a program compiled with them is cached apart from one without); an option the installed
+# XLA does not know is left out (``known_options``)
 QUICK_CPU = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
 # when programs are kept, the folder is trimmed to this many bytes (least recently used programs first)
 CACHE_LIMIT = 512 * 2**20
@@ -69,7 +70,33 @@ def quick_jit(fun, **jit_kwargs):
 
 def compiler_options(quick: bool):
     """The per-program options of a program that is ``quick`` (``QUICK_CPU`` on a CPU) or not (None)."""
-    return QUICK_CPU if quick and jax.default_backend() == "cpu" else None
+    return known_options(QUICK_CPU) if quick and jax.default_backend() == "cpu" else None
+
+
+def known_options(options):
+    """``options`` less those that the installed XLA's CPU compiler does not know. XLA's options come and go
+    between jaxlib versions (``xla_cpu_use_fusion_emitters`` is gone from later ones), and a compile that names
+    an unknown option fails: such an option only changes how fast a program compiles, so it is dropped."""
+    if not options:
+        return options
+    return {name: value for name, value in options.items() if _known_option(name, value)}
+
+
+@functools.lru_cache(maxsize=None)
+def _known_option(name, value) -> bool:
+    """Whether XLA's CPU compiler takes the option ``name`` (a scalar program compiled with it, once a process)."""
+    try:
+        cpu = jax.devices("cpu")[0]
+    except RuntimeError:  # no CPU backend in this process (JAX_PLATFORMS without it): nothing compiled there
+        return True
+    scalar = jax.ShapeDtypeStruct((), jnp.float32, sharding=jax.sharding.SingleDeviceSharding(cpu))
+    try:
+        jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(scalar).compile()
+    except jax.errors.JaxRuntimeError as error:
+        if "No such compile option" in str(error):
+            return False
+        raise
+    return True
 
 
 @functools.lru_cache(maxsize=32)
@@ -147,8 +174,8 @@ class _Stored:
     those of ``jax.jit``'s."""
 
     def __init__(self, fun, options, jit_kwargs):
-        self.jitted = jax.jit(fun, compiler_options=options, **jit_kwargs)
-        self.fun, self.options, self.jit_kwargs = fun, options, jit_kwargs
+        self.fun, self.given, self.jit_kwargs = fun, options, jit_kwargs
+        self._jitted = None
         self.programs = {}  # (folder, key) -> (jitted call of the exported program, output tree)
         self.seen = {}  # (folder, statics, tree, kinds of the leaves) -> the same: no key to compute again
         self.refused = set()  # keys of programs that could not be exported
@@ -164,8 +191,20 @@ class _Stored:
         self.static_names = set(jit_kwargs.get("static_argnames", ())) | {params[i].name for i in nums if params}
         functools.update_wrapper(self, fun)
 
+    @property
+    def options(self):
+        """The options its programs are compiled with: those given that XLA knows (``known_options``), found at
+        the first use, not when a module defines the function."""
+        return known_options(self.given)
+
+    @property
+    def jitted(self):
+        if self._jitted is None:
+            self._jitted = jax.jit(self.fun, compiler_options=self.options, **self.jit_kwargs)
+        return self._jitted
+
     def __getattr__(self, name):  # lower, trace, eval_shape, _cache_size, ...
-        if name == "jitted":  # not set yet (a copy being made)
+        if name in ("jitted", "_jitted", "fun", "given", "jit_kwargs"):  # not set yet (a copy being made)
             raise AttributeError(name)
         return getattr(self.jitted, name)
 

@@ -208,6 +208,27 @@ def test_compile_cache_is_used_and_kept_apart(tmp_path):
     assert not off_home.exists()
 
 
+def test_an_option_xla_does_not_know_is_left_out(monkeypatch):
+    """XLA's options come and go between jaxlib versions (``xla_cpu_use_fusion_emitters`` is gone from later ones)
+    and a compile that names one it does not know fails. ``known_options`` leaves such an option out and keeps the
+    others; a quick program and a quick chunk's options made with one compile, and compute jax.jit's values."""
+    unknown = "xla_cpu_an_option_no_xla_has"
+    with pytest.raises(jax.errors.JaxRuntimeError, match="No such compile option"):
+        jax.jit(jnp.sin, compiler_options={unknown: False}).lower(1.0).compile()
+    known = {"xla_backend_optimization_level": 0}
+    assert compilation.known_options({**known, unknown: True}) == known
+    assert compilation.known_options({}) == {} and compilation.known_options(None) is None
+
+    monkeypatch.setattr(compilation, "QUICK_CPU", {**compilation.QUICK_CPU, unknown: True})
+    fun = compilation.quick_jit(lambda x, power: jnp.sin(x) ** power, static_argnames=("power",))
+    x = np.linspace(0.0, 2.0, 7)
+    want = jax.jit(lambda x: jnp.sin(x) ** 3)(x)
+    np.testing.assert_allclose(np.asarray(fun.quick(x, power=3)), np.asarray(want), rtol=1e-15)
+    assert unknown not in fun.quick.options and unknown not in (compilation.compiler_options(True) or {})
+    if jax.default_backend() == "cpu":
+        assert compilation.compiler_options(True) == compilation.known_options(compilation.QUICK_CPU)
+
+
 def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):
     names = [f"jit_solve_fn-{k:064x}-cache" for k in range(5)]
     names[1] = f"ks_jax__solve_rows-{1:064x}-export"  # a traced program kept by ks_jax.compilation: counted alike
