@@ -3,7 +3,8 @@
 - ``quick_jit``: ``jax.jit`` for programs whose compile time is most of their time. A file's few cases
   (``ks_jax.solve``), a fit's few hundred rows per call and a sweep of one short chunk run in
   milliseconds once compiled; on a CPU they are compiled with ``QUICK_CPU`` (LLVM's optimisation level 0
-  and XLA's classic CPU emitters), which compiles about twice as fast for the same IEEE arithmetic.
+  and XLA's classic CPU emitters, where the installed XLA has them), which compiles about twice as fast for the
+  same IEEE arithmetic.
   Larger work keeps XLA's defaults, where the run time counts.
 - ``keep_programs``: JAX's persistent compilation cache in one folder (the command line calls it), so
   that a later process loads compiled programs instead of compiling them again; pint's parsed unit
