@@ -64,7 +64,7 @@ import ks_jax
 from ks_jax.backend import plan_for
 from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.model import collision
-from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 
 CASE = Path(ks_jax.__file__).resolve().parent / "cases" / "seed_000_saturn_pontiac.json"
 
@@ -130,7 +130,7 @@ def _motion_program(device):
     """The jitted forward of two-vehicle motions to rest on ``device``, computed the way its plan says (blocks of
     ``BLOCK_ROWS`` vehicles on the CPU's path, as a case's pipeline runs them; all rows at once elsewhere)."""
     def one(mass, izz, h, chassis, wheels, mu, start):
-        return M.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=MOTION_SECONDS).rest_position
+        return ML.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=MOTION_SECONDS).rest_position
 
     rows = jax.vmap(one)
     if plan_for(None, [device]).cpu:

@@ -13,7 +13,7 @@ a stage on a CPU), each block's loop stopping once its cases are at rest or at t
 
 - watched: ``interact``: both vehicles move on, their pair is watched at every step and exchanges again where it
   overlaps and approaches;
-- alone: ``motion.to_rest`` of each vehicle alone (watching turned off).
+- alone: ``motion_loop.to_rest`` of each vehicle alone (watching turned off).
 
 Reported: each variant's compile (XLA's default settings, as users get them; the first exchange's program, not
 measured, with the quick ones), the median of ``repeats`` rounds after it (each variant once per round), the cases
@@ -41,6 +41,7 @@ import numpy as np
 from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.compilation import compiler_options
 from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 from ks_jax.model.contact import advance, automatic_exchange
 from ks_jax.model.interaction import APPROACH_TOLERANCE, Bodies, Watch, interact
 from ks_jax.model.types import Contact, State, Vehicle
@@ -103,7 +104,7 @@ def programs(seconds, slots):
                 jnp.stack([r.time_to_rest for r in out.rest]))
 
     def alone(c, start, first):
-        rest = jax.vmap(lambda m, izz, s: M.to_rest(m, izz, HEIGHT / 2, CHASSIS, _wheels(c), c["road"], s,
+        rest = jax.vmap(lambda m, izz, s: ML.to_rest(m, izz, HEIGHT / 2, CHASSIS, _wheels(c), c["road"], s,
                                                     time_limit=seconds))(c["mass"], c["izz"], start)
         return rest.rest_position, rest.time_to_rest
 

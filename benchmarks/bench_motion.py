@@ -42,6 +42,7 @@ import numpy as np
 
 from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 
 
 def vehicles(n, seed=0):
@@ -60,14 +61,14 @@ def vehicles(n, seed=0):
 def programs(seconds):
     def rows(reverse):
         def one(mass, izz, h, chassis, wheels, mu, start):
-            return M.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=seconds, reverse=reverse)
+            return ML.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=seconds, reverse=reverse)
         batched = jax.vmap(one)
         return in_blocks(batched, BLOCK_ROWS, (0,) * 7) if jax.default_backend() == "cpu" else batched
 
     def own_adjoint(mass, izz, h, chassis, wheels, mu, start):
         """The rest position through ``to_rest(reverse=True)``'s checkpointed chunks, of steps that JAX
         differentiates by its own rules."""
-        n = M.steps_for(seconds, M.TIME_STEP)
+        n = ML.steps_for(seconds, M.TIME_STEP)
         chunk = max(1, round(math.sqrt(n)))
         b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
         carry = M.start_carry(start)
@@ -98,7 +99,7 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
     n = 2 * args.pairs
-    steps = M.steps_for(args.seconds, M.TIME_STEP)
+    steps = ML.steps_for(args.seconds, M.TIME_STEP)
     data = vehicles(n)
     forward, early, grad, own = programs(args.seconds)
     ones = jnp.ones(n)

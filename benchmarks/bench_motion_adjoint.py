@@ -45,6 +45,7 @@ from bench_motion import vehicles
 
 from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 
 COSTLY = ("motion.sincos", "motion.inv_locked", "motion.inv_rolling", "motion.inv_slip", "motion.tanh",
           "motion.speed", "motion.mean_speed")
@@ -55,7 +56,7 @@ AS_HAND = COSTLY + ("motion.wheel_velocities", "motion.loads", "motion.tyre_forc
 def chunks(step, seconds):
     """The rest position through ``to_rest(reverse=True)``'s scan in checkpointed chunks of ``step``."""
     def one(mass, izz, h, chassis, wheels, mu, start):
-        n = M.steps_for(seconds, M.TIME_STEP)
+        n = ML.steps_for(seconds, M.TIME_STEP)
         chunk = max(1, round(math.sqrt(n)))
         b = M.body(mass, izz, h, chassis, wheels, mu, M.TIME_STEP)
         carry = M.start_carry(start)
@@ -74,7 +75,7 @@ def programs(seconds):
         return in_blocks(batched, BLOCK_ROWS, (0,) * 7) if jax.default_backend() == "cpu" else batched
 
     def library(mass, izz, h, chassis, wheels, mu, start):
-        return M.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=seconds, reverse=True).rest_position
+        return ML.to_rest(mass, izz, h, chassis, wheels, mu, start, time_limit=seconds, reverse=True).rest_position
 
     def total(motion):
         def f(speed_scale, yaw_rate, mu, args):
@@ -107,7 +108,7 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
     n = 2 * args.pairs
-    steps = M.steps_for(args.seconds, M.TIME_STEP)
+    steps = ML.steps_for(args.seconds, M.TIME_STEP)
     data = vehicles(n)
     inputs = (jnp.ones(n), data[-1].yaw_rate, data[5], data)
     compiled, compile_s, memory = {}, {}, {}

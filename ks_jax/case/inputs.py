@@ -135,7 +135,7 @@ class Motion:
     """How a case's motion to rest is integrated (static: each setting compiles a program of its own):
     ``time_step`` and ``time_limit``, s; ``path``: keep each vehicle's state after every step (for a picture:
     ``ks_jax.solve.motion_paths``); ``reverse``: ready for reverse-mode differentiation (``jax.grad``, first order),
-    which runs every step to the time limit (``model.motion.to_rest``); forward mode (``jax.jacfwd``, as fits use)
+    which runs every step to the time limit (``model.motion_loop.to_rest``); forward mode (``jax.jacfwd``, as fits use)
     needs it False. The watched motion's settings (docs/model.md, "Contact interactions";
     ``model.interaction.interact``): ``max_exchanges`` per case, the first included; ``approach_tolerance`` m/s;
     ``poles``: the bodies that automatic contact meets as a pole's disc; ``pairs``: the pairs of bodies (i, j),

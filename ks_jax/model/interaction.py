@@ -37,7 +37,7 @@ vehicle is at rest and no pair is engaged, or at the time limit.
 
 Everything here is pure and unbatched, of static shapes (V, F, the pairs and the slots), and works under
 ``jax.jit``, ``jax.vmap`` and forward-mode differentiation (``jax.jvp``, ``jax.jacfwd``), which is exact where the
-sequence of exchanges does not change; reverse mode with ``reverse=True`` (every step runs, ``motion.drive``).
+sequence of exchanges does not change; reverse mode with ``reverse=True`` (every step runs, ``motion_loop.drive``).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ import jax.numpy as jnp
 from . import joint
 from .approach import state_at
 from . import linalg as la
-from . import motion
+from . import motion, motion_loop
 from .collision import Prepared, exchange, impulse
 from .results import mask_invalid, pdof_degrees
 from .pairs import any_row, gaps, material_velocity, pairs_of, watch_gaps, watch_pairs
@@ -377,7 +377,7 @@ def _busy(loop: _Loop):
 
 
 def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse):
-    """The loop over the steps (``n`` at most, ``motion.drive``): (the final loop, the samples of ``sample`` after
+    """The loop over the steps (``n`` at most, ``motion_loop.drive``): (the final loop, the samples of ``sample`` after
     every step, or None). Each step watches, then makes the exchanges due: ``pairs`` turns of ``fire``, as many as
     may be due at once, as a loop of its own (unrolled, the program would hold a copy of the exchange per pair, and
     its compile time would grow with the number of pairs)."""
@@ -388,7 +388,7 @@ def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse):
             return fire(lp)
         return jax.lax.fori_loop(0, pairs, lambda _, turn: fire(turn), lp)
 
-    return motion.drive(step, loop, n, _busy, sample=sample, reverse=reverse)
+    return motion_loop.drive(step, loop, n, _busy, sample=sample, reverse=reverse)
 
 
 def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smoothing) -> ExchangeResult:
@@ -414,7 +414,7 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     ``watch``: the later exchanges' settings per pair (``pairs_of`` order). Static: ``max_exchanges`` (slots, the
     first exchange's included), ``dt``, ``time_limit`` s, ``poles`` (indices of the bodies that are poles),
     ``smoothing`` (of the exchanges), ``path`` (each vehicle's rest result keeps its path) and ``reverse``
-    (``motion.drive``). ``hitches`` (a ``joint.Hitch`` of (H, ...) leaves) and ``links`` (static: each hitch's
+    (``motion_loop.drive``). ``hitches`` (a ``joint.Hitch`` of (H, ...) leaves) and ``links`` (static: each hitch's
     (towed, tow) vehicles): the joints (``model.joint``), whose impulse right after the first exchange is given to
     ``start``; a hitched pair is not watched. ``at``: None, or times (V, T) s from the first exchange at which the
     result's ``at`` gives each vehicle's state (NaN where a vehicle has fewer)."""
@@ -476,9 +476,9 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                                         advance=advance, hitches=hitches, links=links)
     fire = lambda lp: _fire(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
                             smoothing=smoothing, hitches=hitches, links=links)
-    sample = (lambda lp: jax.vmap(motion.path_sample)(lp.carry)) if path else None
-    final, samples = _run(watch_step, fire, loop, motion.steps_for(time_limit, dt), len(pairs), sample, reverse)
-    rest = tuple(motion.rest_result(_pick(start, v), _pick(final.carry, v),
+    sample = (lambda lp: jax.vmap(motion_loop.path_sample)(lp.carry)) if path else None
+    final, samples = _run(watch_step, fire, loop, motion_loop.steps_for(time_limit, dt), len(pairs), sample, reverse)
+    rest = tuple(motion_loop.rest_result(_pick(start, v), _pick(final.carry, v),
                                     None if samples is None else samples[:, v]) for v in range(vehicles))
     used = jnp.arange(k) < final.count
     exchanges = _slot_results(bodies, first, final, used, smoothing)

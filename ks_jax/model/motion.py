@@ -1,4 +1,5 @@
-"""Post-impact motion to rest: one vehicle on a flat road, planar, four wheels (docs/model.md, "Motion to rest").
+"""Post-impact motion to rest, one step: one vehicle on a flat road, planar, four wheels (docs/model.md, "Motion to
+rest"). The loops that run the steps are ``motion_loop``'s.
 
 State: the CG's position (x, y), yaw, the CG's velocity (vx, vy) and yaw rate, global. Each wheel
 carries a vertical load (the static split by axle, plus longitudinal and lateral load transfer from the
@@ -11,7 +12,7 @@ CG's height and the vehicle's acceleration) and a tyre force inside its friction
 - braked by a fraction b: (1 - b) of the free force plus b of the locked one, inside the circle
   because both are.
 
-Integration: a fixed step ``dt`` (``lax.scan``; ``TIME_STEP`` by default). Velocities take the step's
+Integration: a fixed step ``dt`` (``TIME_STEP`` by default). Velocities take the step's
 change from the forces at the start of the step; positions and yaw the trapezoid of the velocities.
 Two rules make rest exact and smooth:
 
@@ -31,7 +32,7 @@ lateral stiffness would overshoot in one step (k g dt), which makes the explicit
 
 Derivatives: forward mode (``jax.jvp``, ``jax.jacfwd``, as the fit and the posterior take them) goes through
 the steps by JAX's own rules, in the while loop that stops at rest. Reverse mode needs the scan that runs every
-step (``to_rest(reverse=True)``); its steps carry a hand-written adjoint (``_step_bwd``) that reads back the
+step (``motion_loop.to_rest(reverse=True)``); its steps carry a hand-written adjoint (``_step_bwd``) that reads back the
 step's costly values. ``_advance`` names those values (``checkpoint_name``), so that JAX's adjoint of the step
 under ``jax.checkpoint`` with ``save_only_these_names`` can be set beside it: that costs two to three times the
 hand adjoint's time, whichever values it saves (``_step_reverse``).
@@ -42,7 +43,6 @@ Everything here is pure and unbatched: jit, vmap and differentiate at the edge.
 from __future__ import annotations
 
 import functools
-import math
 from typing import NamedTuple
 
 import jax
@@ -95,7 +95,7 @@ class RestResult(NamedTuple):
     turned from the exchange to rest (signed, left +, not wrapped: 540 is one and a half turns);
     time_to_rest () s; distance_to_rest () m, the length of the CG's path; at_rest () bool, False where the
     vehicle still moves at the time limit (its "rest" is where it is then); path: None, or where asked for
-    (``to_rest(path=True)``) the state at the start and after every step, (steps + 1, 4): time s, x m, y m,
+    (``motion_loop.to_rest(path=True)``) the state at the start and after every step, (steps + 1, 4): time s, x m, y m,
     yaw rad."""
 
     rest_position: jnp.ndarray
@@ -363,8 +363,8 @@ def _step(b: Body, carry: Carry, dt):
 def _step_reverse(b: Body, carry: Carry, dt):
     """``_step``, whose reverse-mode derivative is the hand-written adjoint ``_step_bwd``, which reads back the
     step's ``_Saved`` values. First-order reverse mode only (``jax.grad``, ``jax.vjp``, ``jax.jacrev``): forward
-    mode cannot pass a custom VJP (it goes through ``_step``, in ``to_rest(reverse=False)``), and the adjoint's
-    stored values (``la.materialize``) have no derivative.
+    mode cannot pass a custom VJP (it goes through ``_step``, in ``motion_loop.to_rest(reverse=False)``), and the
+    adjoint's stored values (``la.materialize``) have no derivative.
 
     Why by hand, though a change to the tyre law must then be made in ``_advance`` and in ``_step_bwd``: JAX's own
     adjoint of the step, with its many stored or recomputed intermediates, costs several forward steps more, and
@@ -543,14 +543,6 @@ def step(mass, izz, cg_height, chassis, wheels, friction, carry: Carry, dt):
     return _step(body(mass, izz, cg_height, chassis, wheels, friction, dt), carry, dt)
 
 
-def steps_for(time_limit: float, dt: float) -> int:
-    """The number of steps that reach ``time_limit`` at step ``dt`` (static)."""
-    return max(1, math.ceil(time_limit / dt - 1e-9))
-
-
-WHILE_CHUNK = 25  # steps between two tests of "all at rest" in the forward-only loop
-
-
 def step_function(reverse: bool = False):
     """The step (b, carry, dt) -> carry that a loop over steps runs: ``_step``, or where the loop is to be
     differentiated in reverse mode, ``_step_reverse`` (its hand-written adjoint)."""
@@ -561,73 +553,3 @@ def start_carry(start: Planar) -> Carry:
     """The integration's carry at ``start``: no acceleration yet, time and distance 0, moving."""
     zero = jnp.zeros_like(start.yaw)
     return Carry(start, jnp.zeros_like(start.velocity), zero, zero, jnp.ones_like(zero))
-
-
-def drive(advance, carry, n: int, moving, *, sample=None, reverse: bool = False):
-    """Run ``advance`` (carry -> carry, one step) up to ``n`` times (static) from ``carry``: (the final carry, the
-    stacked ``sample(carry)`` after every step, or None).
-
-    With ``sample``, every step runs (``lax.scan``). Otherwise, with ``reverse`` False, the steps run in a
-    ``lax.while_loop`` that stops once ``moving(carry)`` is False (under ``jax.vmap``: for every row), tested every
-    ``WHILE_CHUNK`` steps, and then runs the steps left to ``n``: ``advance`` must leave a carry that is no longer
-    moving unchanged. ``reverse`` True runs every step in a ``lax.scan`` cut into about sqrt(n) chunks, each
-    recomputed in the backward pass (``jax.checkpoint``)."""
-
-    def one(c, _):
-        c = advance(c)
-        return c, (None if sample is None else sample(c))
-
-    def steps(c, count):
-        return jax.lax.scan(one, c, None, length=count)[0]
-
-    if sample is not None:
-        return jax.lax.scan(one, carry, None, length=n)
-    if not reverse:
-        count, rest = divmod(n, WHILE_CHUNK)
-        _, final = jax.lax.while_loop(lambda kc: (kc[0] < count) & moving(kc[1]),
-                                      lambda kc: (kc[0] + 1, steps(kc[1], WHILE_CHUNK)), (0, carry))
-    else:
-        chunk = max(1, round(math.sqrt(n)))
-        count, rest = divmod(n, chunk)
-        final, _ = jax.lax.scan(jax.checkpoint(lambda c, _: (steps(c, chunk), None)), carry, None, length=count)
-    if rest:  # the steps left to the limit (a vehicle at rest stays so)
-        final = steps(final, rest)
-    return final, None
-
-
-def path_sample(c: Carry):
-    """(4,) what a path keeps of a step: time s, x m, y m, yaw rad."""
-    return jnp.stack([c.time, c.state.position[0], c.state.position[1], c.state.yaw])
-
-
-def rest_result(start: Planar, final: Carry, samples=None) -> RestResult:
-    """The ``RestResult`` of a motion from ``start`` that ended with ``final``; ``samples`` (n, 4): the path after
-    every step (``path_sample``), to which the start is prepended, or None."""
-    if samples is not None:
-        first = jnp.stack([jnp.zeros_like(start.yaw), start.position[0], start.position[1], start.yaw])
-        samples = jnp.concatenate([first[None], samples], axis=0)
-    end = final.state
-    return RestResult(end.position, la.degrees_0_360(la.safe_atan2(*la.sincos(end.yaw))),
-                      jnp.degrees(end.yaw - start.yaw), final.time, final.distance, final.moving < 1.0, samples)
-
-
-def to_rest(mass, izz, cg_height, chassis: Chassis, wheels: Wheels, friction, start: Planar, *,
-            dt: float = TIME_STEP, time_limit: float = TIME_LIMIT, path: bool = False,
-            reverse: bool = False) -> RestResult:
-    """A vehicle's motion from ``start`` to rest (``RestResult``).
-
-    ``dt``, ``time_limit`` (s), ``path`` and ``reverse`` are static. ``path``: keep the state after every step
-    (the result's ``path``; for a picture: a sweep or a fit keeps none).
-
-    Without a path, and ``reverse`` False, the steps run in a ``lax.while_loop`` that ends when the vehicle
-    (under ``jax.vmap``: every vehicle of the batch) is at rest, or at the time limit: values and forward-mode
-    derivatives (``jax.jvp``, ``jax.jacfwd``, as the fit uses) of a motion that stops early cost only its
-    steps. Reverse-mode differentiation (``jax.grad``, ``jax.vjp``) cannot pass a while loop: ``reverse`` True
-    runs every step to the limit in a ``lax.scan`` cut into chunks, each recomputed in the backward pass
-    (``jax.checkpoint``), so that a gradient stores about 2 sqrt(n) states instead of n; its steps carry a
-    hand-written adjoint (``_step_reverse``): first-order reverse mode only (``drive``)."""
-    b = body(mass, izz, cg_height, chassis, wheels, friction, dt)
-    advance = step_function(reverse and not path)
-    final, samples = drive(lambda c: advance(b, c, dt), start_carry(start), steps_for(time_limit, dt),
-                           lambda c: c.moving >= 1.0, sample=path_sample if path else None, reverse=reverse)
-    return rest_result(start, final, samples)

@@ -20,7 +20,7 @@ from ..batch.stages import run, run_row
 from ..case import Case, as_arrays
 from ..compilation import quick_jit
 from ..model.checks import check_smoothing
-from ..model.motion import steps_for
+from ..model.motion_loop import steps_for
 from .origin import about_midpoint, moved_back
 from .pipeline import stages
 from .rules import status_words

@@ -2,14 +2,14 @@
 exchanges that follow) against independent references: the closed form of sequential 1-D impacts of three cars in
 line; the conservation of linear and angular momentum on a frictionless road; kinetic energy that never grows on a
 road with friction; the free motion's first contact with a pole (a closed form, and ``contact.first_contact``);
-``motion.to_rest`` of each vehicle alone where the bodies part after one exchange; central finite differences of the
-forward-mode derivatives; and the exchange slots running out.
+``motion_loop.to_rest`` of each vehicle alone where the bodies part after one exchange; central finite differences of
+the forward-mode derivatives; and the exchange slots running out.
 
 Every case is three cars and a pole on a flat road (a car or the pole not in a case parked far away), the first
 exchange the automatic contact of cars 0 and 1 (``contact.automatic_exchange``): one program (``jax.jacfwd`` of the
 whole case with respect to car 0's speed, its values the auxiliary output), compiled once with the quick settings
 (``samples.reference_jit``) and run on every case at once, gives what every check reads; the references that
-need JAX (``motion.to_rest``, ``contact.first_contact``, the separations at the end) are small programs of their
+need JAX (``motion_loop.to_rest``, ``contact.first_contact``, the separations at the end) are small programs of their
 own."""
 
 import functools
@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 from ks_jax.model.contact import advance, automatic_exchange, disc_gap, first_contact, separation
 from ks_jax.model.interaction import APPROACH_TOLERANCE, Bodies, Interactions, Watch, interact
 from ks_jax.model.pairs import pairs_of
@@ -32,7 +33,7 @@ from samples import reference_jit
 pytestmark = pytest.mark.slow
 
 DT, LIMIT, SLOTS = M.TIME_STEP, 4.0, 8  # the step, the time limit (s) and the exchange slots of every case
-STEPS = M.steps_for(LIMIT, DT)
+STEPS = ML.steps_for(LIMIT, DT)
 LENGTH, WIDTH, HEIGHT = 4.5, 1.8, 1.4  # m, every car; the CG in the middle of its box, at half its height
 POLE = 0.3  # m, the pole's diameter
 VEHICLES = 3  # three cars, then the pole (body 3)
@@ -420,14 +421,14 @@ def test_a_car_sliding_or_spinning_into_a_pole_meets_it_when_and_where_its_free_
 def _to_rest():
     def one(mass, izz, road, brake, start):
         wheels = M.Wheels(jnp.full(4, brake), jnp.zeros(()), jnp.zeros(()))
-        return M.to_rest(mass, izz, HEIGHT / 2, CHASSIS, wheels, road, start, dt=DT, time_limit=LIMIT)
+        return ML.to_rest(mass, izz, HEIGHT / 2, CHASSIS, wheels, road, start, dt=DT, time_limit=LIMIT)
 
     return reference_jit(jax.vmap(one))
 
 
 def test_an_exchange_that_parts_the_cars_for_good_leaves_each_to_move_to_rest_alone(results):
     """One exchange after which the cars part and never meet again (count 1): each car's rest position, rest yaw,
-    time and distance to rest are those of ``motion.to_rest`` of that car alone from the same start, to 1e-12
+    time and distance to rest are those of ``motion_loop.to_rest`` of that car alone from the same start, to 1e-12
     (the parked third car's too)."""
     cases = [results("separating", k) for k in range(len(SEPARATING))]
     for _, case, _ in cases:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from ks_jax.model import motion as M
+from ks_jax.model import motion_loop as ML
 from ks_jax.units import G0
 from samples import reference_jit
 
@@ -55,7 +56,7 @@ _PROGRAMS = {}
 def _compiled(dt, limit, reverse):
     key = (dt, limit, reverse)
     if key not in _PROGRAMS:
-        _PROGRAMS[key] = reference_jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, CG_HEIGHT, c, w, mu, s, dt=dt,
+        _PROGRAMS[key] = reference_jit(jax.vmap(lambda c, w, mu, s: ML.to_rest(MASS, IZZ, CG_HEIGHT, c, w, mu, s, dt=dt,
                                                                           time_limit=limit, reverse=reverse)))
     return _PROGRAMS[key]
 
@@ -177,7 +178,7 @@ def test_a_spinning_locked_vehicle_slides_between_its_straight_skid_and_its_ener
 def _flat_many(chassis, wheels, friction, starts):
     """``_rest_many`` with the CG at the ground: no load transfer, so that the loads' centre stays at the CG."""
     args = _batch(chassis), _batch(wheels), jnp.asarray(friction, float), _batch(starts)
-    return reference_jit(jax.vmap(lambda c, w, mu, s: M.to_rest(MASS, IZZ, 0.0, c, w, mu, s, time_limit=8.0)))(*args)
+    return reference_jit(jax.vmap(lambda c, w, mu, s: ML.to_rest(MASS, IZZ, 0.0, c, w, mu, s, time_limit=8.0)))(*args)
 
 
 def _rest_xy(params, reverse=False):
@@ -185,7 +186,7 @@ def _rest_xy(params, reverse=False):
     vx, vy, yaw_rate, mu, brake, steer = params
     wheels = M.Wheels(jnp.stack([brake, brake, 0.0 * brake, 0.0 * brake]), steer, jnp.asarray(0.015))
     start = M.Planar(jnp.zeros(2), jnp.asarray(0.3), jnp.stack([vx, vy]), yaw_rate)
-    return M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=4.0, reverse=reverse).rest_position
+    return ML.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, wheels, mu, start, time_limit=4.0, reverse=reverse).rest_position
 
 
 @pytest.mark.slow
@@ -284,8 +285,8 @@ def test_jit_vmap_and_one_row_agree_and_every_result_is_finite_at_rest():
 
     def checks(w, mu, s, v):
         """One program (one compile): a row alone, and the gradient of a motion at rest from the start."""
-        return (M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, w, mu, s, time_limit=6.0),
-                jax.grad(lambda v: jnp.sum(M.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(LOCKED), 0.7, _start(v),
+        return (ML.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, w, mu, s, time_limit=6.0),
+                jax.grad(lambda v: jnp.sum(ML.to_rest(MASS, IZZ, CG_HEIGHT, FORWARD, _wheels(LOCKED), 0.7, _start(v),
                                                      time_limit=2.0, reverse=True).rest_position))(v))
 
     one = reference_jit(checks)
