@@ -1,4 +1,4 @@
-"""Seconds of each ``ks-jax fit`` run of tests/test_matrix.py on one case file, each run twice in one process:
+"""Seconds of each ``ks-jax fit`` run of tests/command_matrix.py on one case file, each run twice in one process:
 the first run traces and compiles its programs, the second runs them compiled (what is left is execution).
 
     .venv/bin/python benchmarks/fit_commands.py ks_jax/cases/fit_rest_positions.json

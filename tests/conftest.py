@@ -68,7 +68,7 @@ except (OSError, AttributeError):
 
 
 # Within a file, its programs are freed after a test once the worker holds more than this: a file that solves many
-# kinds of case (tests/test_matrix.py: every shipped case through every command) would otherwise hold all their
+# kinds of case (tests/command_matrix.py: every shipped case through every command) would otherwise hold all their
 # programs at once.
 FREE_PROGRAMS_ABOVE = 1536 * 2**20
 

@@ -66,7 +66,7 @@ def run_cli(capsys, *argv):
 
 
 def mass_sweep(case):
-    """The ``--over`` of ``ks-jax sweep`` that tests/test_matrix.py runs on every case: the first vehicle's mass
+    """The ``--over`` of ``ks-jax sweep`` that tests/command_matrix.py runs on every case: the first vehicle's mass
     at 0.9, 1 and 1.1 times the case's, typed in kg (which reads the same in both unit systems; the middle point
     is the case itself)."""
     mass = float(np.asarray(ks_jax.get_input(case.inputs, "vehicles[0].mass")))

@@ -246,7 +246,7 @@ def test_pictures_of_a_fit_and_a_sweep_draw_names_as_their_escapes(tmp_path, cap
     path = written(tmp_path, "named.json", d)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
-        # the commands and values of tests/test_matrix.py on the same case: the programs it compiled are loaded
+        # the commands and values of tests/command_matrix.py on the same case: the programs it compiled are loaded
         code, _, err = run_cli(capsys, "fit", str(path), "--posterior", "6", "--chains", "2", "--json",
                                "--plot", str(tmp_path / "fit.png"))
         assert code in (0, 1) and "Traceback" not in err

@@ -63,7 +63,7 @@ def test_one_case_solved_alone_equals_it_solved_in_a_batch(name):
     is 0 up to rounding (the tangential impulse of the inline seed crashes) is where a double-where's stand-in
     could leak: alone, the seed chapter's crash gave 1.1 N s of tangential impulse, in a batch 0. Every result of
     the exchange is swept in the cases without a road; a case with a road is swept by the matrix
-    (tests/test_matrix.py, ``check_sweep``: the sweep's results at the case's own values against ``solve``), as
+    (tests/command_matrix.py, ``check_sweep``: the sweep's results at the case's own values against ``solve``), as
     its sweep compiles the watched motion once more."""
     case = load_case(Path(ks_jax.__file__).parent / "cases" / name)
     swept = case.motion is None
