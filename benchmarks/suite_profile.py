@@ -10,11 +10,13 @@ compile cache had it); and, run as a script, a summary of a profiled run.
 The last writes each test file's wall seconds in the profiled run to ``tests/durations.json``, from which
 tests/conftest.py hands the longest files to the test workers first.
 
-Each process (each pytest-xdist worker) writes PROF_DIR/TAG_<worker>.json. The summary lists per file and per
-test the CPU seconds, the CPU seconds of compiles the cache did not have, their count, and the programs compiled
-most; then the programs that cost most over the whole run. The hook wraps ``jax._src.compiler``'s
-``compile_or_get_cached`` (JAX's own entry to XLA's compile and its persistent cache): a private name, for
-measuring only."""
+Each process (each pytest-xdist worker) writes PROF_DIR/TAG_<worker>.json after every test, so that a run stopped
+by a time limit still tells what it did. The summary lists per file and per test the wall and CPU seconds, the
+wall and CPU seconds of compiles the cache did not have, their count, and the programs compiled most; then the
+programs that cost most over the whole run. On a CPU a test's CPU seconds are its work; on a GPU its wall seconds
+less its compiles' are the device's share (and the time it waited for other processes' kernels). The hook
+wraps ``jax._src.compiler``'s ``compile_or_get_cached`` (JAX's own entry to XLA's compile and its persistent
+cache): a private name, for measuring only."""
 
 from __future__ import annotations
 
@@ -43,7 +45,10 @@ def _install():
     original = compiler.compile_or_get_cached
 
     def wrapped(backend, computation, *args, **kwargs):
-        name = str(computation.operation.attributes["sym_name"]).strip('"')
+        try:
+            name = str(computation.operation.attributes["sym_name"]).strip('"')
+        except (AttributeError, KeyError):
+            name = "<unnamed>"
         hits, wall, cpu = _HITS[0], time.perf_counter(), time.process_time()
         out = original(backend, computation, *args, **kwargs)
         _ROWS.append((_CURRENT[0], name, time.perf_counter() - wall, time.process_time() - cpu, _HITS[0] - hits))
@@ -63,9 +68,14 @@ def pytest_runtest_protocol(item, nextitem):
     yield
     _TESTS.append((item.nodeid, time.perf_counter() - wall, time.process_time() - cpu,
                    resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+    _write()
 
 
 def pytest_sessionfinish(session):
+    _write()
+
+
+def _write():
     folder = os.environ.get("PROF_DIR", "/tmp/prof")
     os.makedirs(folder, exist_ok=True)
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
@@ -80,32 +90,38 @@ def summary(folder, tag, top=40):
             data = json.load(f)
         compiles += data["compiles"]
         tests += data["tests"]
-    cost, count = collections.defaultdict(float), collections.Counter()
-    names, programs = collections.defaultdict(collections.Counter), collections.defaultdict(lambda: [0, 0.0])
-    for test, name, _, cpu, hit in compiles:
+    cost = collections.defaultdict(lambda: [0.0, 0.0, 0])  # per test: compile wall s, compile CPU s, compiles
+    names, programs = collections.defaultdict(collections.Counter), collections.defaultdict(lambda: [0, 0.0, 0.0])
+    for test, name, wall, cpu, hit in compiles:
         if not hit:
-            cost[test] += cpu
-            count[test] += 1
+            cost[test][0] += wall
+            cost[test][1] += cpu
+            cost[test][2] += 1
             names[test][name] += 1
             programs[name][0] += 1
-            programs[name][1] += cpu
-    files = collections.defaultdict(lambda: [0.0, 0.0, 0])
-    for test, _, cpu, _ in tests:
+            programs[name][1] += wall
+            programs[name][2] += cpu
+    files = collections.defaultdict(lambda: [0.0, 0.0, 0.0, 0.0, 0])
+    for test, wall, cpu, _ in tests:
         f = files[test.split("::")[0]]
-        f[0] += cpu
-        f[1] += cost[test]
-        f[2] += count[test]
-    print(f"{len(tests)} tests; {sum(count.values())} compiles not in the cache ({sum(cost.values()):.0f} CPU s), "
-          f"{sum(1 for c in compiles if c[4])} loaded from it\n\nper file: CPU s, compile CPU s, compiles")
-    for name, (cpu, co, n) in sorted(files.items(), key=lambda x: -x[1][0]):
-        print(f"{cpu:7.1f} {co:7.1f} {n:5d}  {name}")
-    print("\nper test (the costliest): CPU s, compile CPU s, compiles, programs compiled most")
-    for test, _, cpu, _ in sorted(tests, key=lambda x: -x[2])[:top]:
+        for i, v in enumerate((wall, cpu, *cost[test])):
+            f[i] += v
+    walls = sum(t[1] for t in tests)
+    compile_wall = sum(c[0] for c in cost.values())
+    print(f"{len(tests)} tests, {walls:.0f} wall s; {sum(c[2] for c in cost.values())} compiles not in the cache "
+          f"({compile_wall:.0f} wall s, {sum(c[1] for c in cost.values()):.0f} CPU s), "
+          f"{sum(1 for c in compiles if c[4])} loaded from it\n\n"
+          "per file: wall s, CPU s, compile wall s, compile CPU s, compiles")
+    for name, (wall, cpu, cw, cc, n) in sorted(files.items(), key=lambda x: -x[1][0]):
+        print(f"{wall:7.1f} {cpu:7.1f} {cw:7.1f} {cc:7.1f} {n:5d}  {name}")
+    print("\nper test (the longest): wall s, CPU s, compile wall s, compile CPU s, compiles, programs compiled most")
+    for test, wall, cpu, _ in sorted(tests, key=lambda x: -x[1])[:top]:
         most = ", ".join(f"{k} x{v}" for k, v in names[test].most_common(3))
-        print(f"{cpu:7.1f} {cost[test]:7.1f} {count[test]:5d}  {test}  [{most}]")
-    print("\nper program: compile CPU s, compiles")
-    for name, (n, cpu) in sorted(programs.items(), key=lambda x: -x[1][1])[:top]:
-        print(f"{cpu:7.1f} {n:5d}  {name}")
+        cw, cc, n = cost[test]
+        print(f"{wall:7.1f} {cpu:7.1f} {cw:7.1f} {cc:7.1f} {n:5d}  {test}  [{most}]")
+    print("\nper program: compile wall s, compile CPU s, compiles")
+    for name, (n, wall, cpu) in sorted(programs.items(), key=lambda x: -x[1][1])[:top]:
+        print(f"{wall:7.1f} {cpu:7.1f} {n:5d}  {name}")
 
 
 def write_durations(folder, tag, path):
