@@ -1,5 +1,6 @@
-"""Compile time and run time of the programs ``quick_jit`` compiles, with ``ks_jax.compilation.QUICK_CPU``
-against XLA's defaults, on this machine's CPU. Not a test.
+"""Compile time and run time of the programs ``quick_jit`` compiles, with the quick options of JAX's default
+backend (``ks_jax.compilation.quick_options``: ``QUICK_CPU`` on a CPU, ``QUICK_GPU`` on a GPU) against XLA's
+defaults. Not a test.
 
     .venv/bin/python benchmarks/bench_compile.py [--rounds 5]
 
@@ -29,6 +30,7 @@ jax.config.update("jax_enable_x64", True)
 import fit
 import fit.rows
 import ks_jax
+from ks_jax.compilation import quick_options
 
 CASES = Path(ks_jax.__file__).parent / "cases"
 
@@ -77,6 +79,8 @@ def main() -> None:
     print(f"bench_compile.py --rounds {a.rounds}")
     print(f"  date     {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC")
     print(f"  machine  {platform.processor() or platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}")
+    print(f"  backend  {jax.default_backend()} ({jax.devices()[0].device_kind}); quick options "
+          f"{quick_options()}")
     for name, (fun, args) in captured_calls().items():
         ways = {"quick": fun.quick.jitted, "defaults": fun.plain.jitted}
         ratios, runs, compiles = [], [], {w: [] for w in ways}

@@ -227,17 +227,16 @@ ROWS_PER_CALL = 500
 ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 
 
-# On a CPU, calls of at most this many rows compile with XLA's quicker settings (``compilation.quick_jit``): their
-# compile is most of their time. Larger calls keep XLA's defaults, which run faster once compiled.
+# Calls of at most this many rows compile with XLA's quicker settings (``compilation.quick_jit``): their compile is
+# most of their time. Larger calls keep XLA's defaults, which run faster once compiled.
 QUICK_ROWS = 500
 
 
 def solver_for(block: int, devices):
-    """The compiled solver for calls of ``block`` rows on ``devices``: quick to compile up to ``QUICK_ROWS`` rows
-    where they are CPUs. (That is the platform the program is compiled for, whose compile options these are;
-    the plan's path is an argument of the program.)"""
-    quick = all(d.platform == "cpu" for d in devices) and block <= QUICK_ROWS
-    return fit_rows.quick if quick else fit_rows.plain
+    """The compiled solver for calls of ``block`` rows on ``devices``: up to ``QUICK_ROWS`` rows, quick to compile
+    with the options of the devices' platform (the platform the program is compiled for; the plan's path is an
+    argument of the program); more, with XLA's defaults."""
+    return fit_rows.on(devices[0].platform) if block <= QUICK_ROWS else fit_rows.plain
 
 
 def rows_per_call(rows: int, plan: Plan) -> int:

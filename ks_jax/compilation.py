@@ -4,8 +4,8 @@
   (``ks_jax.solve``), a fit's few hundred rows per call and a sweep of one short chunk run in
   milliseconds once compiled; on a CPU they are compiled with ``QUICK_CPU`` (LLVM's optimisation level 0
   and XLA's classic CPU emitters, where the installed XLA has them), which compiles about twice as fast for the
-  same IEEE arithmetic.
-  Larger work keeps XLA's defaults, where the run time counts.
+  same IEEE arithmetic; on a GPU with ``QUICK_GPU`` (``quick_options``). Larger work keeps XLA's defaults,
+  where the run time counts.
 - ``keep_programs``: JAX's persistent compilation cache in one folder (the command line calls it), so
   that a later process loads compiled programs instead of compiling them again; pint's parsed unit
   definitions are kept there too.
@@ -46,6 +46,11 @@ from . import units
 # per-program XLA options (a program compiled with them is cached apart from one without); an option the installed
 # XLA does not know is left out (``known_options``)
 QUICK_CPU = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
+# On a GPU, where compiling is most of a small program's time (several times its compile for a CPU): LLVM's costly
+# passes off (NVIDIA's assembler optimises the PTX it is given again) and XLA's autotuning off (it times candidate
+# kernels and algorithms on the device, for products of 3-vectors and 3x3 matrices that any of them computes at once)
+QUICK_GPU = {"xla_llvm_disable_expensive_passes": True, "xla_gpu_autotune_level": 0}
+GPU_PLATFORMS = ("gpu", "cuda", "rocm")  # JAX's names of a GPU's platform
 # when programs are kept, the folder is trimmed to this many bytes (least recently used programs first)
 CACHE_LIMIT = 512 * 2**20
 _SUFFIX = "-export"  # a traced program's file name: <function>-<64 hex digits of its key>-export
@@ -54,30 +59,63 @@ _FOLDER = None  # where programs are kept (``keep_programs``); None: every call 
 
 
 def quick_jit(fun, **jit_kwargs):
-    """``jax.jit(fun, **jit_kwargs)``, compiled with ``QUICK_CPU`` where JAX's default backend is a CPU, its
-    traced program kept where ``keep_programs`` was called. The returned function has both jitted forms as
-    attributes, ``quick`` (with ``QUICK_CPU``) and ``plain`` (XLA's defaults), for a caller that picks one
-    by the size of its work. Elsewhere than a CPU both are compiled with XLA's defaults."""
-    quick = _Stored(fun, QUICK_CPU, jit_kwargs)
-    plain = _Stored(fun, None, jit_kwargs)
-
-    @functools.wraps(fun)
-    def call(*args, **kwargs):
-        return (quick if jax.default_backend() == "cpu" else plain)(*args, **kwargs)
-
-    call.quick, call.plain = quick, plain
-    return call
+    """``jax.jit(fun, **jit_kwargs)`` compiled with the quick options of the platform it compiles for
+    (``quick_options``: JAX's default backend's), its traced program kept where ``keep_programs`` was called.
+    The returned function has the jitted forms as attributes, ``quick`` (the default backend's quick options),
+    ``plain`` (XLA's defaults) and ``on(platform)`` (a platform's quick options), for a caller that picks one by
+    the size of its work and the devices it runs on."""
+    return _Quick(fun, jit_kwargs)
 
 
-def compiler_options(quick: bool):
-    """The per-program options of a program that is ``quick`` (``QUICK_CPU`` on a CPU) or not (None)."""
-    return known_options(QUICK_CPU) if quick and jax.default_backend() == "cpu" else None
+class _Quick:
+    """``quick_jit``'s function: a ``_Stored`` form per platform's quick options, made at its first use, and one
+    with XLA's defaults."""
+
+    def __init__(self, fun, jit_kwargs):
+        self.fun, self.jit_kwargs, self.forms = fun, jit_kwargs, {}
+        self.plain = _Stored(fun, None, jit_kwargs)
+        functools.update_wrapper(self, fun)
+
+    def on(self, platform=None):
+        """The form compiled with ``platform``'s quick options (default: JAX's default backend)."""
+        name = _platform_name(platform)
+        if name not in self.forms:
+            self.forms[name] = _Stored(self.fun, quick_options(name, known=False), self.jit_kwargs)
+        return self.forms[name]
+
+    @property
+    def quick(self):
+        return self.on()
+
+    def __call__(self, *args, **kwargs):
+        return self.on()(*args, **kwargs)
+
+
+def _platform_name(platform=None) -> str:
+    platform = platform or jax.default_backend()
+    return "gpu" if platform in GPU_PLATFORMS else platform
+
+
+def quick_options(platform=None, known=True):
+    """The per-program options of a quick program compiled for ``platform`` ("cpu", "gpu", ...; default: JAX's
+    default backend): ``QUICK_CPU`` on a CPU, ``QUICK_GPU`` on a GPU, None (XLA's defaults) elsewhere; ``known``:
+    less those the installed XLA does not know (``known_options``)."""
+    name = _platform_name(platform)
+    options = QUICK_CPU if name == "cpu" else QUICK_GPU if name == "gpu" else None
+    return known_options(options) if known else options
+
+
+def compiler_options(quick: bool, platform=None):
+    """The per-program options of a program that is ``quick`` (``quick_options`` of ``platform``, default JAX's
+    default backend) or not (None: XLA's defaults)."""
+    return quick_options(platform) if quick else None
 
 
 def known_options(options):
-    """``options`` less those that the installed XLA's CPU compiler does not know. XLA's options come and go
-    between jaxlib versions (``xla_cpu_use_fusion_emitters`` is gone from later ones), and a compile that names
-    an unknown option fails: such an option only changes how fast a program compiles, so it is dropped."""
+    """``options`` less those that the installed XLA does not know. XLA's options come and go between jaxlib
+    versions (``xla_cpu_use_fusion_emitters`` is gone from later ones), and a compile that names an unknown option
+    fails: such an option only changes how fast a program compiles, so it is dropped. (XLA's options are one set
+    for every platform: each is tried on the CPU, which every JAX has.)"""
     if not options:
         return options
     return {name: value for name, value in options.items() if _known_option(name, value)}

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import fit.rows as rows
 import ks_jax
 from ks_jax import compilation
 from ks_jax.compilation import _CACHE_ENTRY, prune_cache
@@ -227,6 +228,38 @@ def test_an_option_xla_does_not_know_is_left_out(monkeypatch):
     assert unknown not in fun.quick.options and unknown not in (compilation.compiler_options(True) or {})
     if jax.default_backend() == "cpu":
         assert compilation.compiler_options(True) == compilation.known_options(compilation.QUICK_CPU)
+
+
+class _Device:
+    """A device of a platform this machine may not have: what the fit's solver reads of one."""
+
+    def __init__(self, platform):
+        self.platform = platform
+
+
+def test_quick_programs_take_the_quick_options_of_the_platform_they_compile_for():
+    """A quick program (a file's few cases, a fit's few hundred rows, a short sweep) compiles with ``QUICK_CPU`` for
+    a CPU and ``QUICK_GPU`` for a GPU (JAX names its platform "gpu", "cuda" or "rocm"), with XLA's defaults
+    elsewhere. The installed XLA knows every option of ``QUICK_GPU`` (none is left out), and a program compiled with
+    them (here for the CPU: XLA's options are one set) computes jax.jit's values. The fit's solver takes the quick
+    options of the devices its rows go to up to ``QUICK_ROWS`` rows, and XLA's defaults above."""
+    assert compilation.quick_options("cpu") == compilation.known_options(compilation.QUICK_CPU)
+    for name in ("gpu", "cuda", "rocm"):
+        assert compilation.quick_options(name) == compilation.QUICK_GPU
+    assert compilation.quick_options("tpu") is None and compilation.compiler_options(False, "gpu") is None
+    assert compilation.compiler_options(True, "cuda") == compilation.QUICK_GPU
+
+    fun = compilation.quick_jit(lambda x, power: jnp.sin(x) ** power, static_argnames=("power",))
+    x = np.linspace(0.0, 2.0, 7)
+    want = jax.jit(lambda x: jnp.sin(x) ** 3)(x)
+    np.testing.assert_allclose(np.asarray(fun.on("cuda")(x, power=3)), np.asarray(want), rtol=1e-15)
+    assert fun.on("cuda") is fun.on("gpu") and fun.on("gpu").options == compilation.QUICK_GPU
+    assert fun.quick is fun.on(jax.default_backend()) and fun.plain.options is None
+
+    gpu, cpu = [_Device("gpu")], [_Device("cpu")]
+    assert rows.solver_for(rows.QUICK_ROWS, gpu) is rows.fit_rows.on("gpu")
+    assert rows.solver_for(8, cpu) is rows.fit_rows.on("cpu")
+    assert rows.solver_for(rows.QUICK_ROWS + 1, gpu) is rows.fit_rows.plain
 
 
 def test_prune_cache_drops_least_recently_used_entries_only(tmp_path):

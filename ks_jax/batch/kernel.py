@@ -115,7 +115,7 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
     results while the next is computed, so that no batch-sized array of intermediate values is ever held
     by XLA. On an accelerator, rows given as NumPy arrays go to the device chunk by chunk, and each
     chunk's results start their copy to the host as soon as they are computed. A batch of at most 16384
-    rows is compiled quickly on a CPU (``compilation.quick_jit``), a larger one with XLA's defaults. For
+    rows is compiled quickly (``compilation.quick_options``), a larger one with XLA's defaults. For
     values only: to differentiate, vmap ``exchange``.
 
     out: an ExchangeResult of writeable NumPy arrays of the result's shapes and dtypes (say an earlier

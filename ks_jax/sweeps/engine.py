@@ -165,7 +165,7 @@ def _program(key: ChunkProgram):
         return out, counts
 
     return jax.jit(chunk, in_shardings=(replicated,) * 6, out_shardings=(rows, replicated),
-                   compiler_options=compiler_options(key.quick))
+                   compiler_options=compiler_options(key.quick, key.devices[0].platform))
 
 
 def _selected(result, outputs, out_dtype):
@@ -411,7 +411,7 @@ def layout(request: Request, chunk_size=None, devices=None, output_dtype=None, p
     program = ChunkProgram(paths, input_ties(case, paths), request.outputs, request.mode, n_rows,
                            None if one_chunk else sizes, case.auto_point, case.auto_normal, request.smoothing,
                            np.dtype(output_dtype or dtype), devices,
-                           n_points <= QUICK_POINTS and all(d.platform == "cpu" for d in devices), plan,
+                           n_points <= QUICK_POINTS, plan,
                            case.pole, with_times(case.motion, request.outputs), case.between)
     axes = tuple(_padded(a, dtype) if one_chunk else jnp.asarray(a, dtype=dtype) for a in swept.values())
     return Layout(request, program, as_arrays(inputs), axes, jnp.asarray(sizes, dtype=index_dtype), moved, index_dtype)
