@@ -33,6 +33,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import ks_jax
+from ks_jax.backend import Plan
 from ks_jax.case import as_arrays, to_pytrees
 from ks_jax.solve import solve_inputs, stages
 
@@ -80,7 +81,7 @@ def check_no_library_routines():
                  "its gradient": jax.jit(jax.value_and_grad(loss)).lower(args).as_text()}
     finally:
         CHUNKS.CHUNK_ROWS = 1 << 14
-    program = importlib.import_module("ks_jax.batch.kernel")._chunk_program(64, 0.0, True)
+    program = importlib.import_module("ks_jax.batch.kernel")._chunk_program(64, 0.0, True, Plan("cpu"))
     texts["exchange_batch's chunk"] = program.lower(args, 0).as_text()
     summed = ks_jax.sum_over_rows(lambda *r: ks_jax.exchange(*r).vehicles[0].delta_v_magnitude, chunk=64)
     texts["sum_over_rows' gradient"] = jax.jit(jax.grad(lambda a: summed(*a))).lower(args).as_text()

@@ -79,21 +79,22 @@ exchange.__doc__ = (collision.exchange.__doc__ or "") + """
 
 
 @functools.lru_cache(maxsize=32)
-def _chunk_program(size, smoothing, quick, plan: Plan):
+def _chunk_program(size, smoothing, quick, plan: Plan, platform=None):
     """The program of one chunk of ``size`` rows starting at ``start``: the pipeline's stages fenced apart on
     the CPU's path (``plan``, part of the key: a program traced for one path is not run on the other).
-    ``quick``: compiled quickly (a batch of one chunk runs in milliseconds; compiling is most of its time)."""
+    ``quick``: compiled quickly for ``platform``, the rows' (a batch of one chunk runs in milliseconds; compiling
+    is most of its time)."""
     stages = exchange_stages(smoothing)
     return jax.jit(lambda args, start: run(stages, cut(args, start, size), plan=plan),
-                   compiler_options=compiler_options(quick))
+                   compiler_options=compiler_options(quick, platform))
 
 
 @functools.lru_cache(maxsize=32)
-def _rows_program(smoothing, quick, plan: Plan):
-    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk); ``quick`` and
-    ``plan`` as in ``_chunk_program``."""
+def _rows_program(smoothing, quick, plan: Plan, platform=None):
+    """The program of a chunk given as its own arrays (rows copied to the device chunk by chunk); ``quick``,
+    ``plan`` and ``platform`` as in ``_chunk_program``."""
     stages = exchange_stages(smoothing)
-    return jax.jit(lambda args: run(stages, args, plan=plan), compiler_options=compiler_options(quick))
+    return jax.jit(lambda args: run(stages, args, plan=plan), compiler_options=compiler_options(quick, platform))
 
 
 def row_bytes(tree) -> int:
@@ -159,11 +160,12 @@ def exchange_batch(vehicle1: Vehicle, state1: State, vehicle2: Vehicle, state2: 
         _checked_out(target, empty, 0, given)
         return target
     size = min(int(chunk), n)
+    platform = next(iter(on)).platform if on else jax.default_backend()  # where the rows are computed
     if on_host:
-        rows = _rows_program(float(smoothing), n <= CHUNK_ROWS, plan)
+        rows = _rows_program(float(smoothing), n <= CHUNK_ROWS, plan, platform)
         program = lambda a, start: rows(jax.tree_util.tree_map(lambda x: x[start:start + size], a))  # noqa: E731
     else:
-        program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, plan)
+        program = _chunk_program(size, float(smoothing), n <= CHUNK_ROWS, plan, platform)
     leaves, treedef, pending, kept = None, None, None, []
 
     def store(lo, start, result):  # rows lo.. of the batch from a chunk that starts at ``start``
