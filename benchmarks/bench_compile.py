@@ -5,7 +5,8 @@ defaults. Not a test.
     .venv/bin/python benchmarks/bench_compile.py [--rounds 5]
 
 The programs are the ones the command line compiles: ``ks_jax.solve`` of the seed case (given contact) and
-of ``auto_seed_000.json`` (automatic contact), and the solver of ``fit.reconstruct`` of ``fit_seed_001.json``
+of ``auto_seed_000.json`` (automatic contact) and of ``rest_seed_000.json`` (with the motion to rest), and the
+solver of ``fit.reconstruct`` of ``fit_seed_001.json``
 (its cases x starts in one call). Every round traces, lowers and compiles each program both ways, the
 order alternating, and times the compile only; then one call of each compiled program is timed (median
 of 20).
@@ -47,7 +48,8 @@ def captured_calls():
             return fun(*args)
         return call
 
-    for name, case in (("solve", "seed_000_saturn_pontiac.json"), ("solve (automatic)", "auto_seed_000.json")):
+    for name, case in (("solve", "seed_000_saturn_pontiac.json"), ("solve (automatic)", "auto_seed_000.json"),
+                       ("solve (to rest)", "rest_seed_000.json")):
         solve_module._solve = recording(name, original)
         ks_jax.solve(ks_jax.load_case(CASES / case))
     solve_module._solve = original
