@@ -33,7 +33,7 @@ from .posterior import TARGET_ACCEPTANCE, sampler
 from .problem import Problem, predict, to_z
 from .spec import PathChecks, check_batch, make_problem, output_units, parse_evidence, parse_unknowns
 from .rounds import MORE_STARTS, Starts, more_block, other_side, settled
-from .rows import EDGE, Row, count_at_best, edge_jacobians, refit_block, run_rows, several_minima, stick_thresholds
+from .rows import EDGE, Row, count_at_best, edge_jacobians, fit_block, run_rows, several_minima, stick_thresholds
 from .solvers import SOLVERS
 from .starts import first_starts
 from .report import improbable_note, misfit_note, not_fitted_status, stalled_statement, status_note, unmoved_note
@@ -420,9 +420,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     def per_case(a):  # what the solver's rows take of each case, after its inputs
         return a.values, a.sigmas, a.lo, a.hi, a.pm, a.pw
 
-    # with refits, the fit, its further rounds of starts and the refits run in calls of one row count
-    # (``rows.refit_block``): one compiled program
-    block = refit_block(len(cases) * starts, int(monte_carlo), problem.plan) if monte_carlo else None
+    # with refits, and on an accelerator's path, the fit, its further rounds of starts and the refits run in calls of
+    # one row count (``rows.fit_block``): one compiled program
+    block = fit_block(len(cases) * starts, int(monte_carlo), problem.plan)
     first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
                      to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)
@@ -445,7 +445,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         z_more = to_z(x_more, arrays.lo[todo, None], arrays.hi[todo, None])
         some = arrays.take(todo)
         found.add(todo, run_rows(problem, solver, max_iter, some.inputs, *per_case(some), z_more, smoothing, dtype,
-                                 starts, block or more_block(len(cases), todo.size, starts, problem.plan), devices))
+                                 starts, block or more_block(len(cases), todo.size, starts), devices))
     everyone = np.arange(len(cases))
     rows = found.best(everyone)
     at_best = count_at_best(found.table.cost)

@@ -8,7 +8,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ks_jax.backend import Plan
 from ks_jax.model.types import OK
 
 from .rows import RowFits, best_start, count_at_best
@@ -74,17 +73,13 @@ def other_side(best: RowFits, problem, lo, hi, pw, count: int):
 MORE_BLOCKS = (8, 64)  # cases per call of a further round of starts on a CPU: a few row counts, a program each
 
 
-def more_block(cases: int, todo: int, starts: int, plan: Plan) -> int:
-    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases. On the CPU's path of ``plan``:
-    the least of ``MORE_BLOCKS`` cases (at most ``cases``) that holds them all, else the largest. A CPU runs a
-    call's rows one after another and a vmapped solver runs every row until its slowest converges, so a round of
-    a few cases of a large batch is not padded to hundreds of rows, and calls of 64 cases cost what one call of
-    them all does; the fixed counts keep the compiled programs to a few. On an accelerator's: the first round's
-    rows (every case), its program: an accelerator runs a call's rows side by side, so a padded call costs about
-    what a call of the round's own rows would, and a fresh process compiles the solver once rather than once per
-    round of another size."""
-    if not plan.cpu:
-        return cases * starts
+def more_block(cases: int, todo: int, starts: int) -> int:
+    """Rows per call of a further round of starts for ``todo`` of ``cases`` cases on the CPU's path (an
+    accelerator's runs every round in the fit's own block: ``rows.fit_block``): the least of ``MORE_BLOCKS`` cases
+    (at most ``cases``) that holds them all, else the largest. A CPU runs a call's rows one after another and a
+    vmapped solver runs every row until its slowest converges, so a round of a few cases of a large batch is not
+    padded to hundreds of rows, and calls of 64 cases cost what one call of them all does; the fixed counts keep
+    the compiled programs to a few."""
     sizes = sorted({min(c, cases) for c in MORE_BLOCKS})
     return next((c for c in sizes if c >= todo), sizes[-1]) * starts
 

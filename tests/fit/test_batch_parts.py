@@ -12,6 +12,7 @@ import pytest
 import fit
 from fit.spec import PathChecks, check_batch, make_problem, parse_evidence, parse_unknowns
 from fit.rounds import MORE_BLOCKS, more_block
+from fit.rows import ROWS_PER_CALL_ELSEWHERE, fit_block
 from fit.starts import START_SPREAD, starts
 from fit.uncertainty import analyse_batch
 from ks_jax import backend
@@ -133,15 +134,15 @@ def test_the_batch_analysis_says_which_fits_sit_on_a_bound_or_are_poorly_determi
     assert info.at_bound[1] == [] and info.statements[1] == []
 
 
-def test_a_further_round_is_one_call_on_an_accelerator_and_calls_of_64_cases_on_a_cpu():
+def test_a_further_round_on_a_cpu_runs_in_calls_of_8_or_64_cases_and_on_an_accelerator_in_the_fits_block():
     """A round of 228 of 1000 cases x 8 starts: on a CPU, calls of 64 cases (a call's rows run one after
-    another there, and few row counts compile few programs); on an accelerator, any round is one call of all
-    1000 cases, the first round's program (its rows run side by side)."""
+    another there, and few row counts compile few programs); on an accelerator, every round in the fit's own block
+    (``fit_block``: the first round's rows up to ``ROWS_PER_CALL_ELSEWHERE``), the first round's program."""
     cpu, accelerator = backend.Plan("cpu"), backend.Plan("accelerator")
-    assert more_block(1000, 228, 8, cpu) == MORE_BLOCKS[-1] * 8 == 64 * 8
-    assert more_block(1000, 5, 8, cpu) == 8 * 8 and more_block(4, 3, 8, cpu) == 4 * 8
-    assert more_block(1000, 228, 8, accelerator) == more_block(1000, 5, 8, accelerator) == 1000 * 8
-    assert more_block(10**6, 3 * 10**5, 8, accelerator) == 10**6 * 8
+    assert more_block(1000, 228, 8) == MORE_BLOCKS[-1] * 8 == 64 * 8
+    assert more_block(1000, 5, 8) == 8 * 8 and more_block(4, 3, 8) == 4 * 8
+    assert fit_block(1000 * 8, 0, cpu) is None and fit_block(1000 * 8, 0, accelerator) == 1000 * 8
+    assert fit_block(10**6 * 8, 0, accelerator) == ROWS_PER_CALL_ELSEWHERE == 8000
 
 
 def test_a_batchs_checks_accept_and_refuse_each_case_as_its_own_checks_do():

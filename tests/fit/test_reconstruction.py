@@ -336,6 +336,36 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
 
 
 @pytest.mark.slow
+def test_on_an_accelerators_path_a_fit_and_its_further_rounds_run_in_calls_of_one_block(monkeypatch):
+    """On an accelerator's path every call of the solver in a fit holds at most ``ROWS_PER_CALL_ELSEWHERE`` rows,
+    its further rounds of starts too, each round's last call padded, in one compiled program (``fit_block``), not a
+    further round padded to the first round's rows. 3 cases x 1 start take a second round (one start cannot be
+    reached by two); calls of 2 rows split each round between two calls: each result equals that of calls of 3
+    rows (each round in one call), and the solver was compiled once."""
+    case = load_case(FIT_SEED)
+    accelerator, devices = Plan("accelerator"), jax.local_devices()
+    assert rc.fit_block(3, 0, Plan("cpu")) is None and rc.fit_block(3, 0, accelerator) == 3
+    assert rc.fit_block(10**4 * 8, 0, accelerator) == rc.ROWS_PER_CALL_ELSEWHERE == rc.fit_block(8, 10**4, accelerator)
+    blocks, kept = [], rc.solver_for
+
+    def counting(block, on):  # run_rows asks for the solver of its block once per round
+        blocks.append(block)
+        return kept(block, on)
+
+    monkeypatch.setattr(rc, "solver_for", counting)
+    kw = dict(starts=1, max_starts=2, seed=3, plan="accelerator")
+    whole = fit.reconstruct_batch([case] * 3, **kw)
+    assert blocks == [3, 3]
+    monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 2)
+    programs, blocks[:] = kept(2, devices)._cache_size(), []
+    split = fit.reconstruct_batch([case] * 3, **kw)
+    assert blocks == [2, 2]  # the first round and the second, each in calls of 2 rows
+    assert kept(2, devices)._cache_size() == programs + 1
+    for a, b in zip(split, whole):
+        assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std and a.starts == b.starts
+
+
+@pytest.mark.slow
 def test_monte_carlo_cut_off_by_a_bound_is_noted(blocks_of_8):
     """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
