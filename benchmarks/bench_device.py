@@ -19,7 +19,8 @@ Prints the device, the date and the command, then, each the median of --repeats 
   ``ks_jax.sum_over_rows``;
 - ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases), and the
   host's work of that call (its solver's calls replayed from a recording: ``bench_fit.host_seconds``); then a batch
-  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second;
+  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second; of each,
+  the solver's work in a further call (``bench_fit.solver_work``: its rows x loop iterations against the rows' own);
 - motion to rest: --motions two-vehicle motions (``bench_motion.py``'s random pairs, 3 s of motion at the default
   step, stopping once every vehicle rests) on the default device, the way its plan computes them (``backend.Plan``:
   blocks of 256 vehicles on the CPU's path, all at once on an accelerator's), in motions per second, and
@@ -309,9 +310,12 @@ def main(argv=None):
             second = time.perf_counter() - t
         s = bench_fit.score(results, truths, chi2)
         host = bench_fit.host_seconds(calls, second_call)
+        with bench_fit.solver_work() as work:
+            second_call()
         row(f"reconstruct_batch, {args.fits} x 8 starts", f"{second:.3f} s",
             f"first call {first:.1f} s; global {100 * s['global']:.1f}%, coverage {100 * s['coverage']:.1f}%; "
-            f"host work {host:.3f} s ({1e3 * host / args.fits:.3f} ms per fit, solver's calls replayed)")
+            f"host work {host:.3f} s ({1e3 * host / args.fits:.3f} ms per fit, solver's calls replayed); "
+            f"{bench_fit.work_note(work)}")
         if args.profile:
             kernel_table(lambda: fit.reconstruct_batch(cases, unknowns, evidence, starts=8, seed=2,
                                                        smoothing=bench_fit.SMOOTHING), f"fits {args.fits} x 8",
@@ -329,8 +333,11 @@ def main(argv=None):
                 many_call()
                 wall = time.perf_counter() - t
             host = bench_fit.host_seconds(calls, many_call, repeats=1)
+            with bench_fit.solver_work() as work:
+                many_call()
             row(f"reconstruct_batch, {args.many} x 8 starts (the {args.fits} repeated)", f"{args.many / wall:.3g} /s",
-                f"{wall:.2f} s; host work {host:.2f} s ({1e3 * host / args.many:.3f} ms per fit)")
+                f"{wall:.2f} s; host work {host:.2f} s ({1e3 * host / args.many:.3f} ms per fit); "
+                f"{bench_fit.work_note(work)}")
     if "motion" in only:
         motions_to_rest(args, row)
     print(f"\n{dev.device_kind}, {date}\n| what | figure | note |\n|---|---|---|")

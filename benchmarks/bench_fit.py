@@ -4,6 +4,8 @@
     .venv/bin/python benchmarks/bench_fit.py --compare --n 200   # lm vs optax L-BFGS vs optax Adam
     .venv/bin/python benchmarks/bench_fit.py --noise-free        # evidence exactly the truth's: chi^2 0 is global
     .venv/bin/python benchmarks/bench_fit.py --max-starts 8      # one round of starts, as before the rounds
+    .venv/bin/python benchmarks/bench_fit.py --plan accelerator --work  # the accelerator's calls, their work counted
+    .venv/bin/python benchmarks/bench_fit.py --many 10000 --plan accelerator  # one call of 10^4 fits, its work
 
 Cases: random oblique side impacts that slide at the centroid (vehicle 2's front into vehicle
 1's right side, 60-120 deg apart, friction 0.1-0.35, restitution 0.05-0.3, initial yaw rates
@@ -20,8 +22,8 @@ cases with all six within (about 0.954^6 = 75% if calibrated, higher where error
 "converged": the solver's convergence test; "median starts": the starts a fit took (rounds of ``--starts`` until
 the best fit repeats, ``fit.reconstruct``'s ``max_starts``); "host work": the call after compile again, its solver's
 calls answered from a recording of that call (``replayed``), so that only the host's work around the device's is
-timed (median of 3, per reconstruction). With ``--noise-free`` the global minimum is chi^2 0
-(within 1e-6), and the cases it missed are listed.
+timed (median of 3, per reconstruction); with ``--work``, the solver's work (``solver_work``). With
+``--noise-free`` the global minimum is chi^2 0 (within 1e-6), and the cases it missed are listed.
 """
 
 from __future__ import annotations
@@ -132,6 +134,46 @@ def replayed(calls):
             setattr(fit.reconstruction, name, fn)
 
 
+@contextlib.contextmanager
+def solver_work():
+    """Within the block, what the compiled solver computes for ``fit.reconstruct_batch``'s rounds of starts (a fit
+    without Monte Carlo refits): the dict it yields gets each call's rows (padding included) and its loop's
+    iterations, and the sum of the real rows' own iterations. The solver is vmapped: each of a call's rows is
+    computed at every iteration of its loop, which runs until its slowest row converges, so ``rows x loop
+    iterations`` is the work a device does, and the rows' own iterations the work the fits need. The count does not
+    depend on the device: it is the same on a CPU with ``plan="accelerator"``."""
+    work = {"calls": [], "own": 0}
+    kept_solver, kept_rows = fit.rows.solver_for, fit.reconstruction.run_rows
+
+    def counting(block, devices):
+        solver = kept_solver(block, devices)
+
+        def call(*a, **k):
+            out = solver(*a, **k)
+            work["calls"].append((block, int(np.max(np.asarray(out.iterations)))))
+            return out
+        return call
+
+    def rounds(*a, **k):
+        out = kept_rows(*a, **k)
+        work["own"] += int(np.sum(out.iterations))
+        return out
+
+    fit.rows.solver_for, fit.reconstruction.run_rows = counting, rounds
+    try:
+        yield work
+    finally:
+        fit.rows.solver_for, fit.reconstruction.run_rows = kept_solver, kept_rows
+
+
+def work_note(work) -> str:
+    """``solver_work``'s dict in words: calls, rows x loop iterations computed, and its ratio to the rows' own."""
+    calls = work["calls"]
+    computed = sum(r * it for r, it in calls)
+    return (f"{len(calls)} solver calls of {'/'.join(str(r) for r in sorted({r for r, _ in calls}))} rows, "
+            f"{computed:.3g} row-iterations computed, {computed / max(work['own'], 1):.2f} x the rows' own")
+
+
 def host_seconds(calls, fit_call, repeats=3):
     """Median seconds of ``fit_call()`` (the recorded call) with its solver's calls ``replayed``."""
     times = []
@@ -143,22 +185,41 @@ def host_seconds(calls, fit_call, repeats=3):
     return float(np.median(times))
 
 
-def run(solver, n, starts, seed, noise=True, max_starts=None):
+def run(solver, n, starts, seed, noise=True, max_starts=None, plan=None, work=False):
     cases, truths, evidence, unknowns, chi2_truth = sliding_cases(n, seed, noise)
+    kw = dict(starts=starts, solver=solver, smoothing=SMOOTHING, max_starts=max_starts, plan=plan)
     t0 = time.perf_counter()
-    fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed, solver=solver, smoothing=SMOOTHING,
-                          max_starts=max_starts)
+    fit.reconstruct_batch(cases, unknowns, evidence, seed=seed, **kw)
     first = time.perf_counter() - t0
 
     def second_call():
-        return fit.reconstruct_batch(cases, unknowns, evidence, starts=starts, seed=seed + 1, solver=solver,
-                                     smoothing=SMOOTHING, max_starts=max_starts)
+        return fit.reconstruct_batch(cases, unknowns, evidence, seed=seed + 1, **kw)
 
     with recording([]) as calls:
         t0 = time.perf_counter()
         results = second_call()
         second = time.perf_counter() - t0
-    return first, second, score(results, truths, chi2_truth) | {"host": host_seconds(calls, second_call)}
+    s = score(results, truths, chi2_truth) | {"host": host_seconds(calls, second_call)}
+    if work:
+        with solver_work() as counted:
+            second_call()
+        s["work"] = work_note(counted)
+    return first, second, s
+
+
+def many_fits(args) -> str:
+    """One call of ``args.many`` fits, ``args.n`` cases repeated (as ``bench_device.py --many``), in a fresh
+    process: its time, compile included, and its solver's work."""
+    cases, _, evidence, unknowns, _ = sliding_cases(args.n, args.seed, not args.noise_free)
+    k = -(-args.many // args.n)
+    many = [(c * k)[:args.many] for c in (cases, unknowns, evidence)]
+    with solver_work() as work:
+        t0 = time.perf_counter()
+        fit.reconstruct_batch(*many, starts=args.starts, seed=args.seed, solver=args.solver, smoothing=SMOOTHING,
+                              max_starts=args.max_starts, plan=args.plan)
+        wall = time.perf_counter() - t0
+    return (f"{args.many} x {args.starts} starts ({args.n} cases repeated), plan {args.plan or 'default'}: one call "
+            f"{wall:.1f} s, compile included; {work_note(work)}")
 
 
 def main(argv=None):
@@ -171,6 +232,14 @@ def main(argv=None):
     ap.add_argument("--noise-free", action="store_true", help="evidence without noise: the global minimum is chi^2 0")
     ap.add_argument("--max-starts", type=int, default=None,
                     help="fit.reconstruct's max_starts (default: its own; --max-starts 8: one round of 8 starts)")
+    ap.add_argument("--plan", choices=("cpu", "accelerator"), default=None,
+                    help="the fits' plan (default: that of this machine's devices)")
+    ap.add_argument("--many", type=int, default=0,
+                    help="instead: one call of this many fits (the --n cases repeated, each its own rows), timed with "
+                         "its compile, and its solver's work (solver_work)")
+    ap.add_argument("--work", action="store_true",
+                    help="also count the solver's work (solver_work): its rows x loop iterations against the rows' "
+                         "own, the same on every device")
     args = ap.parse_args(argv)
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {jax.devices()[0].device_kind}"
     cpu = ""
@@ -183,14 +252,20 @@ def main(argv=None):
     print(f"machine: {cpu or machine} ({os.cpu_count()} cores, jax {jax.__version__}, {jax.default_backend()}, "
           "float64)")
     print(f"command: {command}\ndate: {date}")
+    if args.many:
+        print(many_fits(args))
+        return
     rows = []
     for solver in (["lm", "lbfgs", "adam"] if args.compare else [args.solver]):
-        first, second, s = run(solver, args.n, args.starts, args.seed, not args.noise_free, args.max_starts)
+        first, second, s = run(solver, args.n, args.starts, args.seed, not args.noise_free, args.max_starts,
+                               args.plan, args.work)
         row = (f"| {solver} | {args.n} x {args.starts} | {second:.2f} s | {first:.2f} s | {100 * s['global']:.1f}% | "
                f"{100 * s['coverage']:.1f}% | {100 * s['all2']:.1f}% | {100 * s['converged']:.1f}% | "
                f"{s['iterations']:.0f} | {s['starts']:.0f} | {1e3 * s['host'] / args.n:.3f} ms |")
         rows.append(row)
         print(row, flush=True)
+        if "work" in s:
+            print(f"  solver's work: {s['work']}")
         if len(s["missed"]):
             print(f"  not the global minimum: cases {[int(k) for k in s['missed'][:20]]}, chi^2 "
                   f"{[float(f'{c:.3g}') for c in s['chi2_missed'][:20]]}")
