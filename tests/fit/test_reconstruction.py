@@ -336,36 +336,6 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
 
 
 @pytest.mark.slow
-def test_on_an_accelerators_path_a_fit_and_its_further_rounds_run_in_calls_of_one_block(monkeypatch):
-    """On an accelerator's path every call of the solver in a fit holds at most ``ROWS_PER_CALL_ELSEWHERE`` rows,
-    its further rounds of starts too, each round's last call padded, in one compiled program (``fit_block``), not a
-    further round padded to the first round's rows. 3 cases x 1 start take a second round (one start cannot be
-    reached by two); calls of 2 rows split each round between two calls: each result equals that of calls of 3
-    rows (each round in one call), and the solver was compiled once."""
-    case = load_case(FIT_SEED)
-    accelerator, devices = Plan("accelerator"), jax.local_devices()
-    assert rc.fit_block(3, 0, Plan("cpu")) is None and rc.fit_block(3, 0, accelerator) == 3
-    assert rc.fit_block(10**4 * 8, 0, accelerator) == rc.ROWS_PER_CALL_ELSEWHERE == rc.fit_block(8, 10**4, accelerator)
-    blocks, kept = [], rc.solver_for
-
-    def counting(block, on):  # run_rows asks for the solver of its block once per round
-        blocks.append(block)
-        return kept(block, on)
-
-    monkeypatch.setattr(rc, "solver_for", counting)
-    kw = dict(starts=1, max_starts=2, seed=3, plan="accelerator")
-    whole = fit.reconstruct_batch([case] * 3, **kw)
-    assert blocks == [3, 3]
-    monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 2)
-    programs, blocks[:] = kept(2, devices)._cache_size(), []
-    split = fit.reconstruct_batch([case] * 3, **kw)
-    assert blocks == [2, 2]  # the first round and the second, each in calls of 2 rows
-    assert kept(2, devices)._cache_size() == programs + 1
-    for a, b in zip(split, whole):
-        assert a.cost == b.cost and a.estimate == b.estimate and a.std == b.std and a.starts == b.starts
-
-
-@pytest.mark.slow
 def test_monte_carlo_cut_off_by_a_bound_is_noted(blocks_of_8):
     """The Kia's speed (20.00 +/- 0.38 mph) bounded at 20.02 mph, not at the bound itself: about half of
     the refits stop at the bound, so their 95th percentile is the bound and the 5-95% spread is about
@@ -882,20 +852,30 @@ def test_float32_fit_far_from_the_origin_equals_the_fit_at_the_origin(oblique):
 
 
 @pytest.mark.slow
-def test_on_the_accelerators_path_every_round_of_starts_runs_in_the_first_rounds_program():
+def test_on_the_accelerators_path_every_round_of_starts_runs_in_the_calls_of_the_first_round(monkeypatch):
     """Ten copies of the stick-or-slide fit with two starts each take further rounds of starts (4 to 16 starts
     in all). On the CPU's path a round of a few cases runs in calls of 8 cases, a second program; on an
-    accelerator's (forced here) every round runs padded in the first round's program: one program, as a fresh
-    process on a GPU then compiles once. Each case's fit is the same on both paths."""
+    accelerator's (forced here) every call of every round holds the fit's block (``fit_block``: at most
+    ``ROWS_PER_CALL_ELSEWHERE`` rows, 8 here: the 20 rows of the first round in three calls, the last padded, and a
+    further round in as many as hold it), in one program, as a fresh process on a GPU then compiles once. Each
+    case's fit is the same on both paths."""
     case = load_case(CASES / "fit_stick_or_slide.json")
     devices = jax.local_devices()
-    solver = rc.solver_for(20, devices)
+    blocks, kept = [], rc.solver_for
+
+    def counting(block, on):  # run_rows asks for the solver of its block once per round
+        blocks.append(block)
+        return kept(block, on)
+
+    monkeypatch.setattr(rc, "solver_for", counting)
+    monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 8)
     got = {}
-    for plan in ("cpu", "accelerator"):
-        before = solver._cache_size()
+    for plan, solver in (("cpu", kept(20, devices)), ("accelerator", kept(8, devices))):
+        before, blocks[:] = solver._cache_size(), []
         got[plan] = fit.reconstruct_batch([case] * 10, starts=2, seed=3, plan=plan)
-        got[plan + " programs"] = solver._cache_size() - before
+        got[plan + " programs"], got[plan + " blocks"] = solver._cache_size() - before, set(blocks)
     assert (got["cpu programs"], got["accelerator programs"]) == (2, 1)
+    assert got["cpu blocks"] == {20, 16} and got["accelerator blocks"] == {8}
     assert max(r.starts for r in got["cpu"]) > 2  # further rounds ran
     for a, b in zip(got["cpu"], got["accelerator"]):
         assert a.starts == b.starts and a.cost == pytest.approx(b.cost, rel=1e-12)
