@@ -183,8 +183,13 @@ def test_an_interaction_without_a_road_or_an_unknown_field_is_ignored_with_a_war
     with pytest.warns(CaseWarning, match="interaction.colour: unknown field"):
         case_from_dict(raw)
     del raw["road"]
-    with pytest.warns(CaseWarning, match="interaction: later exchanges happen while the bodies move on"):
+    with pytest.warns(CaseWarning) as said:
         assert case_from_dict(raw).inputs.interaction is None
+    words = [str(w.message) for w in said]
+    assert [w for w in words if "interaction: later exchanges happen while the bodies move on" in w]
+    assert [w for w in words if "interaction.colour: unknown field" in w]
+    for k in (0, 1):  # without a road, what describes each vehicle's motion to rest is said to be ignored too
+        assert [w for w in words if f"vehicles[{k}]: wheelbase" in w and "a case without \"road\"" in w], words
     case = case_from_dict(frictionless(TBONE))
     assert float(case.inputs.road.friction) == 0.0
     assert all(float(a.rolling_resistance) == 0.0 for a in case.inputs.road.vehicles)
