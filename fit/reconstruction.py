@@ -412,7 +412,8 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     if not fitting:
         return out
     cases, prepared = [cases[i] for i in fitting], [prepared[i] for i in fitting]  # from here on, those fitted
-    problem = dataclasses.replace(problem, plan=plan_for(plan, jax.local_devices() if devices is None else devices))
+    fit_devices = jax.local_devices() if devices is None else devices
+    problem = dataclasses.replace(problem, plan=plan_for(plan, fit_devices))
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
     x0 = first_starts(problem.unknowns, arrays, starts, rng)
@@ -422,7 +423,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
 
     # with refits, and on an accelerator's path, the fit, its further rounds of starts and the refits run in calls of
     # one row count (``rows.fit_block``): one compiled program
-    block = fit_block(len(cases) * starts, int(monte_carlo), problem.plan)
+    block = fit_block(len(cases) * starts, int(monte_carlo), problem.plan, len(fit_devices))
     first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
                      to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)

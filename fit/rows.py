@@ -217,12 +217,12 @@ def stack(trees):
 
 
 # Rows (cases x starts) per call of the compiled solver in a fit with Monte Carlo refits, and on an accelerator's
-# path in any fit, at most. The fit and its refits then run in calls of one row count (the last call of each
-# padded with copies of its last row), so that they share one compiled program instead of compiling one for each
-# row count: compiling takes much longer than the calls themselves (``fit_block``). On the CPU's path a fit
-# without refits is one call of exactly its rows. On a CPU a call's rows run one after another and calls of a few
-# hundred rows lose little to one call of them all (docs/performance.md); on other devices a call's rows run side
-# by side and its latency counts more, hence a larger block.
+# path in any fit, at most (there, for each device of the call). The fit and its refits then run in calls of one
+# row count (the last call of each padded with copies of its last row), so that they share one compiled program
+# instead of compiling one for each row count: compiling takes much longer than the calls themselves
+# (``fit_block``). On the CPU's path a fit without refits is one call of exactly its rows. On a CPU a call's rows
+# run one after another and calls of a few hundred rows lose little to one call of them all (docs/performance.md);
+# on other devices a call's rows run side by side and its latency counts more, hence a larger block.
 ROWS_PER_CALL = 500
 ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 
@@ -239,31 +239,33 @@ def solver_for(block: int, devices):
     return fit_rows.on(devices[0].platform) if block <= QUICK_ROWS else fit_rows.plain
 
 
-def rows_per_call(rows: int, plan: Plan) -> int:
+def rows_per_call(rows: int, plan: Plan, devices: int = 1) -> int:
     """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
-    ``ROWS_PER_CALL`` on the CPU's path (``plan``), ``ROWS_PER_CALL_ELSEWHERE`` on an accelerator's."""
-    return min(rows, ROWS_PER_CALL if plan.cpu else ROWS_PER_CALL_ELSEWHERE)
+    ``ROWS_PER_CALL`` on the CPU's path (``plan``), ``ROWS_PER_CALL_ELSEWHERE`` for each of the call's ``devices``
+    on an accelerator's (each device then holds the rows one alone would)."""
+    return min(rows, ROWS_PER_CALL if plan.cpu else ROWS_PER_CALL_ELSEWHERE * devices)
 
 
-def refit_block(fit_rows: int, refits: int, plan: Plan) -> int:
+def refit_block(fit_rows: int, refits: int, plan: Plan, devices: int = 1) -> int:
     """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts) with ``refits`` Monte Carlo
-    refits. On the CPU's path, the fit's own row count: a CPU runs a call's rows one after another, so that refits
-    in calls of a few rows cost what one call of them all does, and the fit, the same fit with refits and its
-    further rounds of starts then share the program that a fit without refits compiles. On an accelerator's, the
-    larger of the two, as a call's rows run side by side there (``rows_per_call`` caps both)."""
-    return rows_per_call(fit_rows if plan.cpu else max(fit_rows, refits), plan)
+    refits, over ``devices`` devices. On the CPU's path, the fit's own row count: a CPU runs a call's rows one after
+    another, so that refits in calls of a few rows cost what one call of them all does, and the fit, the same fit
+    with refits and its further rounds of starts then share the program that a fit without refits compiles. On an
+    accelerator's, the larger of the two, as a call's rows run side by side there (``rows_per_call`` caps both)."""
+    return rows_per_call(fit_rows if plan.cpu else max(fit_rows, refits), plan, devices)
 
 
-def fit_block(fit_rows: int, refits: int, plan: Plan) -> int | None:
+def fit_block(fit_rows: int, refits: int, plan: Plan, devices: int = 1) -> int | None:
     """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts), its further rounds of starts
-    and its ``refits`` Monte Carlo refits; None: each round in one call of its own rows, a further round in
-    ``rounds.more_block``'s calls (the CPU's path without refits). With refits, ``refit_block``. On an accelerator's
-    path, always ``refit_block``: calls of at most ``ROWS_PER_CALL_ELSEWHERE`` rows, a further round's last padded to
-    them, all in one program. The solver is vmapped: each row of a call is computed at every iteration of its loop,
-    which runs until the call's slowest row converges. A further round of a few cases padded to every case's rows
-    (a first round of 10^4 cases in one call) would then cost a whole first round; in calls of the block it costs
-    the calls that hold it (docs/devices.md, "What each batched call does there")."""
-    return None if plan.cpu and not refits else refit_block(fit_rows, refits, plan)
+    and its ``refits`` Monte Carlo refits, over ``devices`` devices; None: each round in one call of its own rows, a
+    further round in ``rounds.more_block``'s calls (the CPU's path without refits). With refits, ``refit_block``.
+    On an accelerator's path, always ``refit_block``: calls of at most ``ROWS_PER_CALL_ELSEWHERE`` rows a device, a
+    further round's last padded to them, all in one program. The solver is vmapped: each row of a call is computed
+    at every iteration of its loop, which runs until the call's slowest row converges. A further round of a few
+    cases padded to every case's rows (a first round of 10^4 cases in one call) would then cost a whole first
+    round; in calls of the block it costs the calls that hold it (docs/devices.md, "What each batched call does
+    there")."""
+    return None if plan.cpu and not refits else refit_block(fit_rows, refits, plan, devices)
 
 
 def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts,

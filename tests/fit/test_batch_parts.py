@@ -137,12 +137,15 @@ def test_the_batch_analysis_says_which_fits_sit_on_a_bound_or_are_poorly_determi
 def test_a_further_round_on_a_cpu_runs_in_calls_of_8_or_64_cases_and_on_an_accelerator_in_the_fits_block():
     """A round of 228 of 1000 cases x 8 starts: on a CPU, calls of 64 cases (a call's rows run one after
     another there, and few row counts compile few programs); on an accelerator, every round in the fit's own block
-    (``fit_block``: the first round's rows up to ``ROWS_PER_CALL_ELSEWHERE``), the first round's program."""
+    (``fit_block``: the first round's rows up to ``ROWS_PER_CALL_ELSEWHERE`` a device), the first round's program."""
     cpu, accelerator = backend.Plan("cpu"), backend.Plan("accelerator")
     assert more_block(1000, 228, 8) == MORE_BLOCKS[-1] * 8 == 64 * 8
     assert more_block(1000, 5, 8) == 8 * 8 and more_block(4, 3, 8) == 4 * 8
     assert fit_block(1000 * 8, 0, cpu) is None and fit_block(1000 * 8, 0, accelerator) == 1000 * 8
     assert fit_block(10**6 * 8, 0, accelerator) == ROWS_PER_CALL_ELSEWHERE == 8000
+    # over several devices each holds the rows one alone would; a CPU's calls are as on one
+    assert fit_block(10**6 * 8, 0, accelerator, devices=4) == 4 * 8000
+    assert fit_block(10**6 * 8, 0, cpu, devices=4) is None and fit_block(10**6 * 8, 5, cpu, devices=4) == 500
 
 
 def test_a_batchs_checks_accept_and_refuse_each_case_as_its_own_checks_do():
