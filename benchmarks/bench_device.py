@@ -321,8 +321,7 @@ def main(argv=None):
                                                        smoothing=bench_fit.SMOOTHING), f"fits {args.fits} x 8",
                          args.profile)
         if args.many:
-            k = -(-args.many // args.fits)
-            many = [(c * k)[:args.many] for c in (cases, unknowns, evidence)]
+            many = bench_fit.repeated(args.many, cases, unknowns, evidence)
             fit.reconstruct_batch(*many, starts=8, smoothing=bench_fit.SMOOTHING)
 
             def many_call():

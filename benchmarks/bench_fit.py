@@ -207,12 +207,18 @@ def run(solver, n, starts, seed, noise=True, max_starts=None, plan=None, work=Fa
     return first, second, s
 
 
+def repeated(many: int, *lists):
+    """Each of ``lists`` (a batch's cases, unknowns, evidence) repeated to ``many`` entries: a batch of ``many``
+    fits from fewer drawn cases, each fit its own rows."""
+    k = -(-many // len(lists[0]))
+    return [(c * k)[:many] for c in lists]
+
+
 def many_fits(args) -> str:
     """One call of ``args.many`` fits, ``args.n`` cases repeated (as ``bench_device.py --many``), in a fresh
     process: its time, compile included, and its solver's work."""
     cases, _, evidence, unknowns, _ = sliding_cases(args.n, args.seed, not args.noise_free)
-    k = -(-args.many // args.n)
-    many = [(c * k)[:args.many] for c in (cases, unknowns, evidence)]
+    many = repeated(args.many, cases, unknowns, evidence)
     with solver_work() as work:
         t0 = time.perf_counter()
         fit.reconstruct_batch(*many, starts=args.starts, seed=args.seed, solver=args.solver, smoothing=SMOOTHING,
