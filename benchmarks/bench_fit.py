@@ -167,10 +167,12 @@ def solver_work():
 
 
 def work_note(work) -> str:
-    """``solver_work``'s dict in words: calls, rows x loop iterations computed, and its ratio to the rows' own."""
+    """``solver_work``'s dict in words: calls, their loop iterations, rows x loop iterations computed, and its ratio
+    to the rows' own."""
     calls = work["calls"]
     computed = sum(r * it for r, it in calls)
     return (f"{len(calls)} solver calls of {'/'.join(str(r) for r in sorted({r for r, _ in calls}))} rows, "
+            f"{sum(it for _, it in calls)} loop iterations (at most {max(it for _, it in calls)} a call), "
             f"{computed:.3g} row-iterations computed, {computed / max(work['own'], 1):.2f} x the rows' own")
 
 
