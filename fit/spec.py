@@ -22,6 +22,7 @@ from ks_jax import units as U
 from ks_jax.case import (
     CIRCULAR_OUTPUTS,
     Case,
+    add_times,
     CaseError,
     PathError,
     automatic_part,
@@ -35,6 +36,7 @@ from ks_jax.case import (
     parse_output_value,
     parse_path,
     path_key,
+    times_asked,
     with_times,
     without_approach,
     without_road,
@@ -516,19 +518,22 @@ def check_batch(cases, unknowns_specs, evidence_specs, checks: PathChecks) -> li
     for _, broken in _evidence_faults(e[..., 0], e[..., 1]):
         bad |= broken.any(axis=1)
     ties_matter = any(_field(p) in ("yaw", "cg_height") for p in paths)
+    asked = times_asked(evidence_paths)
     problems = {}
-    for k, i in enumerate(ok):
-        if bad[k]:
-            continue
+    lows, highs = np.stack([lo for lo, _ in limited], 1), np.stack([hi for _, hi in limited], 1)
+    given = (lows == u[..., 0]) & (highs == u[..., 1])  # (K, n): False where a missing bound was given its limit
+    limit_given = set(np.flatnonzero(~given.all(axis=1)).tolist())
+    for k in np.flatnonzero(~bad).tolist():
+        i = ok[k]
         case = cases[i]
         unknowns = list(unknowns_specs[i])
-        for j, (lo, hi) in enumerate(limited):
-            if lo[k] != u[k, j, 0] or hi[k] != u[k, j, 1]:
+        if k in limit_given:
+            for j in np.flatnonzero(~given[k]).tolist():
                 x = unknowns[j]
-                unknowns[j] = Unknown(x.path, float(lo[k]), float(hi[k]), x.start, x.prior)
+                unknowns[j] = Unknown(x.path, float(lows[k, j]), float(highs[k, j]), x.start, x.prior)
         ties = input_ties(case, list(paths)) if ties_matter else ()
         key = (keys[i], ties, bool(case.auto_point), bool(case.auto_normal), bool(case.pole),
-               with_times(case.motion, evidence_paths), case.between)
+               add_times(case.motion, asked), case.between)
         if key not in problems:
             evidence = tuple((p, *kind) for p, kind in zip(evidence_paths, kinds[key[0]]))
             problems[key] = Problem(paths, ties, evidence, *key[2:])

@@ -30,10 +30,11 @@ from .paths import CUMULATIVE_OUTPUTS, PathError, automatic_part, canonical_path
 from .paths import check_inputs, check_result, get_input
 from .paths import get_output
 from .paths import input_kind, input_leaf, input_ties, on_fixed_object, output_kind, parse_path, path_key
-from .paths import AT_OUTPUTS, at_time, set_input, with_times, without_approach, without_road, without_time
+from .paths import AT_OUTPUTS, add_times, at_time, set_input, times_asked, with_times, without_approach, without_road
+from .paths import without_time
 
 __all__ = [
-    "AT_OUTPUTS", "CUMULATIVE_OUTPUTS", "at_time", "with_times", "without_time",
+    "AT_OUTPUTS", "CUMULATIVE_OUTPUTS", "add_times", "at_time", "times_asked", "with_times", "without_time",
     "AfterInputs", "ApproachInputs", "CIRCULAR_OUTPUTS", "Motion", "RoadInputs", "UNDEFINED_REASONS", "Case",
     "CaseError", "CaseInputs",
     "CaseWarning", "ContactInputs", "HitchInputs", "InteractionInputs", "PairInputs", "PathError", "VehicleInputs",

@@ -440,10 +440,20 @@ def at_time(path: str):
     return (vi, idx[0]) if name.startswith("at.") else None
 
 
+def times_asked(paths) -> tuple:
+    """The (vehicle's index, time in s) of each of ``paths`` that names a vehicle's state at a time."""
+    return tuple(w for w in (at_time(p) for p in paths) if w is not None)
+
+
 def with_times(motion, paths):
     """``motion`` (a ``Motion``) with the times that ``paths`` ask states at (``Motion.times``) added to its own: the
     result's ``at`` then holds them. None stays None (``without_time`` refuses such paths)."""
-    wanted = [w for w in (at_time(p) for p in paths) if w is not None]
+    return add_times(motion, times_asked(paths))
+
+
+def add_times(motion, wanted):
+    """``motion`` with the times of ``wanted`` (``times_asked``'s pairs) added to its own, as ``with_times``: a batch
+    whose cases share their evidence paths reads the paths once."""
     if motion is None or not wanted:
         return motion
     count = max([len(motion.times)] + [vi + 1 for vi, _ in wanted])
