@@ -291,11 +291,13 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
     args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
     place = row_placement(devices)
     smoothing = jax.device_put(jnp.asarray(smoothing, dtype), place.replicated)
-    parts, fit_rows = [], solver_for(block, devices)
+    # every call is dispatched before any result is read: the host puts the next call's rows on the devices while
+    # they compute, and the results come back together (``jax.device_get``)
+    calls, fit_rows = [], solver_for(block, devices)
     for start in range(0, total, block):
         part = jax.tree_util.tree_map(lambda a: jax.device_put(np.asarray(a[start:start + block], dtype), place.rows),
                                       args)
-        out = fit_rows(problem, solver, max_iter, *part, smoothing)
-        parts.append(RowFits(*map(np.asarray, out)))
+        calls.append(fit_rows(problem, solver, max_iter, *part, smoothing))
+    parts = [RowFits(*out) for out in jax.device_get(calls)]
     return RowFits(*(np.concatenate(part)[:rows].reshape(B, starts, *part[0].shape[1:]) for part in zip(*parts)))
 
