@@ -19,7 +19,8 @@ Prints the device, the date and the command, then, each the median of --repeats 
   ``ks_jax.sum_over_rows``;
 - ``fit.reconstruct_batch`` of --fits random sliding side impacts x 8 starts (``bench_fit.py``'s cases), and the
   host's work of that call (its solver's calls replayed from a recording: ``bench_fit.host_seconds``); then a batch
-  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second; of each,
+  of --many reconstructions (the --fits cases repeated, each its own rows): reconstructions per second (with
+  ``--blocks``, for each of those most rows a call of the solver holds on an accelerator, side by side); of each,
   the solver's work in a further call (``bench_fit.solver_work``: its rows x loop iterations against the rows' own);
 - motion to rest: --motions two-vehicle motions (``bench_motion.py``'s random pairs, 3 s of motion at the default
   step, stopping once every vehicle rests) on the default device, the way its plan computes them (``backend.Plan``:
@@ -182,6 +183,40 @@ def motions_to_rest(args, row):
         f"first call {first:.1f} s; the CPU ({cpu_points} points): {there:.3g} /s, ratio {here / there:.2f}")
 
 
+def many_fits(args, many, row):
+    """``fit.reconstruct_batch`` of the batch ``many`` after a compiling call, for each of ``--blocks`` (the most rows a
+    call of the solver holds on an accelerator, ``fit.rows.ROWS_PER_CALL_ELSEWHERE``; default the library's), side by
+    side: fits per second, the host's work, the solver's work."""
+    kept = fit.rows.ROWS_PER_CALL_ELSEWHERE
+    cpu = plan_for(None).cpu  # the blocks are the accelerator's path's only
+    try:
+        for block in [int(b) for b in args.blocks.split(",")] if args.blocks and not cpu else [kept]:
+            fit.rows.ROWS_PER_CALL_ELSEWHERE = block
+            fit.reconstruct_batch(*many, starts=8, smoothing=bench_fit.SMOOTHING)
+
+            def many_call():
+                return fit.reconstruct_batch(*many, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
+
+            walls = []
+            with bench_fit.recording([]) as calls:
+                for _ in range(args.repeats):
+                    calls.clear()
+                    t = time.perf_counter()
+                    many_call()
+                    walls.append(time.perf_counter() - t)
+            wall = float(np.median(walls))
+            host = bench_fit.host_seconds(calls, many_call, repeats=1)
+            with bench_fit.solver_work() as work:
+                many_call()
+            where = "the CPU's path" if cpu else f"calls of at most {block} rows"
+            row(f"reconstruct_batch, {len(many[0])} x 8 starts (the {args.fits} repeated), {where}",
+                f"{len(many[0]) / wall:.3g} /s",
+                f"{wall:.2f} s (median of {args.repeats}); host work {host:.2f} s ({1e3 * host / len(many[0]):.3f} ms "
+                f"per fit); {bench_fit.work_note(work)}")
+    finally:
+        fit.rows.ROWS_PER_CALL_ELSEWHERE = kept
+
+
 def main(argv=None):
     accel = jax.default_backend() != "cpu"
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -190,6 +225,9 @@ def main(argv=None):
     ap.add_argument("--fits", type=int, default=1000 if accel else 100, help="reconstructions (x 8 starts)")
     ap.add_argument("--many", type=int, default=10 ** 5 if accel else 0,
                     help="a batch of this many reconstructions, the --fits cases repeated (0: none)")
+    ap.add_argument("--blocks", default="",
+                    help="the batch of --many fits with calls of at most these many rows, comma-separated (e.g. "
+                         "8000,16000,32000; default: the library's)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--profile", metavar="DIR", help="write compiled programs and kernel tables to DIR")
     ap.add_argument("--motions", type=int, default=10 ** 6 if accel else 10 ** 4,
@@ -321,22 +359,7 @@ def main(argv=None):
                                                        smoothing=bench_fit.SMOOTHING), f"fits {args.fits} x 8",
                          args.profile)
         if args.many:
-            many = bench_fit.repeated(args.many, cases, unknowns, evidence)
-            fit.reconstruct_batch(*many, starts=8, smoothing=bench_fit.SMOOTHING)
-
-            def many_call():
-                return fit.reconstruct_batch(*many, starts=8, seed=1, smoothing=bench_fit.SMOOTHING)
-
-            with bench_fit.recording([]) as calls:
-                t = time.perf_counter()
-                many_call()
-                wall = time.perf_counter() - t
-            host = bench_fit.host_seconds(calls, many_call, repeats=1)
-            with bench_fit.solver_work() as work:
-                many_call()
-            row(f"reconstruct_batch, {args.many} x 8 starts (the {args.fits} repeated)", f"{args.many / wall:.3g} /s",
-                f"{wall:.2f} s; host work {host:.2f} s ({1e3 * host / args.many:.3f} ms per fit); "
-                f"{bench_fit.work_note(work)}")
+            many_fits(args, bench_fit.repeated(args.many, cases, unknowns, evidence), row)
     if "motion" in only:
         motions_to_rest(args, row)
     print(f"\n{dev.device_kind}, {date}\n| what | figure | note |\n|---|---|---|")
