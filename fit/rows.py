@@ -239,33 +239,25 @@ def solver_for(block: int, devices):
     return fit_rows.on(devices[0].platform) if block <= QUICK_ROWS else fit_rows.plain
 
 
-def rows_per_call(rows: int, plan: Plan, devices: int = 1) -> int:
-    """Rows per call of the solver for a fit and refits of up to ``rows`` rows each: ``rows``, at most
-    ``ROWS_PER_CALL`` on the CPU's path (``plan``), ``ROWS_PER_CALL_ELSEWHERE`` for each of the call's ``devices``
-    on an accelerator's (each device then holds the rows one alone would)."""
-    return min(rows, ROWS_PER_CALL if plan.cpu else ROWS_PER_CALL_ELSEWHERE * devices)
-
-
-def refit_block(fit_rows: int, refits: int, plan: Plan, devices: int = 1) -> int:
-    """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts) with ``refits`` Monte Carlo
-    refits, over ``devices`` devices. On the CPU's path, the fit's own row count: a CPU runs a call's rows one after
-    another, so that refits in calls of a few rows cost what one call of them all does, and the fit, the same fit
-    with refits and its further rounds of starts then share the program that a fit without refits compiles. On an
-    accelerator's, the larger of the two, as a call's rows run side by side there (``rows_per_call`` caps both)."""
-    return rows_per_call(fit_rows if plan.cpu else max(fit_rows, refits), plan, devices)
-
-
 def fit_block(fit_rows: int, refits: int, plan: Plan, devices: int = 1) -> int | None:
     """Rows per call of the solver for a fit of ``fit_rows`` rows (cases x starts), its further rounds of starts
-    and its ``refits`` Monte Carlo refits, over ``devices`` devices; None: each round in one call of its own rows, a
-    further round in ``rounds.more_block``'s calls (the CPU's path without refits). With refits, ``refit_block``.
-    On an accelerator's path, always ``refit_block``: calls of at most ``ROWS_PER_CALL_ELSEWHERE`` rows a device, a
-    further round's last padded to them, all in one program. The solver is vmapped: each row of a call is computed
-    at every iteration of its loop, which runs until the call's slowest row converges. A further round of a few
-    cases padded to every case's rows (a first round of 10^4 cases in one call) would then cost a whole first
-    round; in calls of the block it costs the calls that hold it (docs/devices.md, "What each batched call does
-    there")."""
-    return None if plan.cpu and not refits else refit_block(fit_rows, refits, plan, devices)
+    and its ``refits`` Monte Carlo refits, over ``devices`` devices.
+
+    - The CPU's path without refits: None, each round in one call of its own rows, a further round in
+      ``rounds.more_block``'s calls.
+    - The CPU's path with refits: the fit's own row count, at most ``ROWS_PER_CALL``. A CPU runs a call's rows one
+      after another, so refits in calls of a few rows cost what one call of them all does; the fit, the same fit
+      with refits and its further rounds of starts then share the program that a fit without refits compiles.
+    - An accelerator's path: the larger of the fit's rows and the refits, at most ``ROWS_PER_CALL_ELSEWHERE`` for
+      each device (each then holds the rows one alone would), a call's rows running side by side there. Every call
+      of the fit, its rounds and its refits holds that many rows, a round's last padded, all in one program. The
+      solver is vmapped: each row of a call is computed at every iteration of its loop, which runs until the call's
+      slowest row converges. A further round of a few cases padded to every case's rows (a first round of 10^4
+      cases in one call) would then cost a whole first round; in calls of the block it costs the calls that hold
+      it (docs/devices.md, "What each batched call does there")."""
+    if plan.cpu:
+        return min(fit_rows, ROWS_PER_CALL) if refits else None
+    return min(max(fit_rows, refits), ROWS_PER_CALL_ELSEWHERE * devices)
 
 
 def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, z0, smoothing, dtype, starts,

@@ -305,7 +305,7 @@ def test_refits_from_the_estimate_alone_are_the_refits_from_every_start_where_th
 @pytest.mark.slow
 def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_nothing(monkeypatch):
     """With Monte Carlo refits, a fit's rows (cases x starts) and its refits' rows go to the compiled solver in
-    calls of one row count (``refit_block``: on a CPU the fit's own row count), the last call padded, so that a
+    calls of one row count (``fit_block``: on a CPU the fit's own row count), the last call padded, so that a
     fit, the same fit with refits and the refits use one compiled program. Calls of 5 rows split cases between
     calls and pad the last: each result equals that of calls of 6 rows, one holding every row of the fit (3 cases
     x 2 starts) and one the refits (4, each from the estimate, padded to 6), and the solver was compiled once for
@@ -316,8 +316,8 @@ def test_a_fit_and_its_refits_share_one_compiled_solver_and_its_blocks_change_no
     # on the CPU's path the refits run in calls of the fit's own rows; on an accelerator's in calls of as many as
     # they are
     cpu, accelerator = Plan("cpu"), Plan("accelerator")
-    assert rc.refit_block(3 * 2, 4, cpu) == 6 and rc.refit_block(2, 20, cpu) == 2
-    assert rc.refit_block(3 * 2, 4, accelerator) == 6 and rc.refit_block(2, 20, accelerator) == 20
+    assert rc.fit_block(3 * 2, 4, cpu) == 6 and rc.fit_block(2, 20, cpu) == 2 and rc.fit_block(6, 0, cpu) is None
+    assert rc.fit_block(3 * 2, 4, accelerator) == 6 and rc.fit_block(2, 20, accelerator) == 20
     devices = jax.local_devices()
     fit.reconstruct_batch([case] * 3, starts=2, seed=3)  # no refits: one call of its 6 rows
     programs = rc.solver_for(6, devices)._cache_size()
