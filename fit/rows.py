@@ -3,6 +3,7 @@ vmapped call, or in calls of one row count where a fit and its Monte Carlo refit
 
 from __future__ import annotations
 
+import collections
 from functools import partial
 from typing import NamedTuple
 
@@ -227,6 +228,10 @@ ROWS_PER_CALL = 500
 ROWS_PER_CALL_ELSEWHERE = 8000  # on an accelerator's path
 
 
+# Calls of a round dispatched ahead of the one whose results are read (``run_rows``)
+IN_FLIGHT = 2
+
+
 # Calls of at most this many rows compile with XLA's quicker settings (``compilation.quick_jit``): their compile is
 # most of their time. Larger calls keep XLA's defaults, which run faster once compiled.
 QUICK_ROWS = 500
@@ -283,13 +288,15 @@ def run_rows(problem, solver, max_iter, inputs, values, sigmas, lo, hi, pm, pw, 
     args.append(padded(np.asarray(z0).reshape(rows, -1), per_case=False))
     place = row_placement(devices)
     smoothing = jax.device_put(jnp.asarray(smoothing, dtype), place.replicated)
-    # every call is dispatched before any result is read: the host puts the next call's rows on the devices while
-    # they compute, and the results come back together (``jax.device_get``)
-    calls, fit_rows = [], solver_for(block, devices)
+    # up to ``IN_FLIGHT`` calls are dispatched ahead of the one whose results are read: the host puts the next
+    # call's rows on the devices while they compute, and the devices hold a few calls' rows, not a whole round's
+    pending, parts, fit_rows = collections.deque(), [], solver_for(block, devices)
     for start in range(0, total, block):
         part = jax.tree_util.tree_map(lambda a: jax.device_put(np.asarray(a[start:start + block], dtype), place.rows),
                                       args)
-        calls.append(fit_rows(problem, solver, max_iter, *part, smoothing))
-    parts = [RowFits(*out) for out in jax.device_get(calls)]
+        pending.append(fit_rows(problem, solver, max_iter, *part, smoothing))
+        if len(pending) > IN_FLIGHT:
+            parts.append(RowFits(*jax.device_get(pending.popleft())))
+    parts += [RowFits(*out) for out in jax.device_get(list(pending))]
     return RowFits(*(np.concatenate(part)[:rows].reshape(B, starts, *part[0].shape[1:]) for part in zip(*parts)))
 

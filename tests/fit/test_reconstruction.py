@@ -857,23 +857,39 @@ def test_on_the_accelerators_path_every_round_of_starts_runs_in_the_calls_of_the
     in all). On the CPU's path a round of a few cases runs in calls of 8 cases, a second program; on an
     accelerator's (forced here) every call of every round holds the fit's block (``fit_block``: at most
     ``ROWS_PER_CALL_ELSEWHERE`` rows, 8 here: the 20 rows of the first round in three calls, the last padded, and a
-    further round in as many as hold it), in one program, as a fresh process on a GPU then compiles once. Each
+    further round in as many as hold it), in one program, as a fresh process on a GPU then compiles once. A call's
+    results are read once ``IN_FLIGHT`` later calls are dispatched (1 here): at most two calls are out at once. Each
     case's fit is the same on both paths."""
     case = load_case(CASES / "fit_stick_or_slide.json")
     devices = jax.local_devices()
-    blocks, kept = [], rc.solver_for
+    blocks, kept, read = [], rc.solver_for, jax.device_get
+    out = {"now": 0, "most": 0}  # calls dispatched and not yet read
 
     def counting(block, on):  # run_rows asks for the solver of its block once per round
         blocks.append(block)
-        return kept(block, on)
+        solver = kept(block, on)
+
+        def dispatched(*a, **k):
+            out["now"] += 1
+            out["most"] = max(out["most"], out["now"])
+            return solver(*a, **k)
+        return dispatched
+
+    def reading(x):  # one call's results, or a list of them
+        out["now"] -= len(x) if isinstance(x, list) else 1
+        return read(x)
 
     monkeypatch.setattr(rc, "solver_for", counting)
+    monkeypatch.setattr(rc.jax, "device_get", reading)
     monkeypatch.setattr(rc, "ROWS_PER_CALL_ELSEWHERE", 8)
+    monkeypatch.setattr(rc, "IN_FLIGHT", 1)
     got = {}
     for plan, solver in (("cpu", kept(20, devices)), ("accelerator", kept(8, devices))):
-        before, blocks[:] = solver._cache_size(), []
+        before, blocks[:], out["most"] = solver._cache_size(), [], 0
         got[plan] = fit.reconstruct_batch([case] * 10, starts=2, seed=3, plan=plan)
         got[plan + " programs"], got[plan + " blocks"] = solver._cache_size() - before, set(blocks)
+        assert out["now"] == 0 and out["most"] <= 2  # every call read; at most two out at once
+    assert out["most"] == 2  # the accelerator's first round, three calls: the first read once the second was out
     assert (got["cpu programs"], got["accelerator programs"]) == (2, 1)
     assert got["cpu blocks"] == {20, 16} and got["accelerator blocks"] == {8}
     assert max(r.starts for r in got["cpu"]) > 2  # further rounds ran
