@@ -11,6 +11,7 @@ import numpy as np
 from ks_jax.case import get_input
 from ks_jax.case.scale import move_scene, origin_offset, scene_origin
 
+from .host import collector_paused
 from .rows import stack
 
 
@@ -50,6 +51,7 @@ class FitArrays(NamedTuple):
         return FitArrays(*(a[i] for a in self[:-1]), inputs)
 
 
+@collector_paused()
 def batch_arrays(cases, prepared, dtype) -> tuple[FitArrays, list]:
     """The ``FitArrays`` of a batch of cases (``prepared``: each case's unknowns and evidence, the same paths in
     each) fitted in ``dtype``, and the list of the cases' inputs, each moved about its CGs' midpoint where its

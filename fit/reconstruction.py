@@ -8,10 +8,8 @@ evidence the same way, through the same compiled program (``monte_carlo``).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
-import gc
 import math
 from dataclasses import dataclass, field
 
@@ -26,6 +24,7 @@ from ks_jax.limits import check_memory, is_count, is_fraction
 from ks_jax.model.types import OK, status_text
 
 from .arrays import batch_arrays
+from .host import collector_paused
 from .monte_carlo import linearisation_notes, refit_perturbed
 from .posterior import Posterior
 from .posterior import sample as sample_posterior
@@ -176,6 +175,7 @@ def _labels(problem: Problem):
         tuple(not is_out for _, is_out, _ in problem.evidence)
 
 
+@collector_paused()
 def _results(cases, prepared, problem, rows, at_best, stick_threshold, found, info, fitted,
              arrays) -> list[FitResult]:
     """The FitResults of the ``fitted`` cases of a batch (indices; the rows of ``info``, their analysis by
@@ -267,21 +267,7 @@ def _not_fitted(case, unknowns, evidence, problem, arrays, x, smoothing, dtype, 
     )
 
 
-@contextlib.contextmanager
-def _collector_paused():
-    """Python's cyclic garbage collector paused within the block (as it was, after). Building a large batch's
-    results (dicts and lists of numbers and words, none in a cycle) sets off its full collections, each of which
-    walks every object alive, the caller's cases among them: a third of a 10^4-case batch's host work
-    (docs/performance.md). Nothing made within the block is garbage the collector would find."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
-
-
+@collector_paused()
 def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors):
     """Each case's (unknowns, evidence, Problem), checked, or the CaseError of a case that breaks a rule; and the
     batch's one Problem, that of its first case that breaks none: every case must have the same, and one that
@@ -479,10 +465,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
         return arrays.row(i, case_inputs[i])
 
     results = [None] * len(cases)
-    with _collector_paused():
-        for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, at_best, stick_threshold, found,
-                                                          info, fitted, arrays)):
-            results[i] = r
+    for i, r in zip(fitted.tolist(), _results(cases, prepared, problem, rows, at_best, stick_threshold, found, info,
+                                              fitted, arrays)):
+        results[i] = r
     for i, (case, (u, e, _)) in enumerate(zip(cases, prepared)):
         if results[i] is None:  # no start could even be evaluated
             results[i] = _not_fitted(case, u, e, problem, arrays_of(i), x0[i, 0], smoothing, dtype, int(found.count[i]))

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .host import collector_paused
 from .report import FRICTION_STATEMENT, NO_DERIVATIVES, at_bound_statement, direction_statement, edge_statement
 from .report import friction_statement, poorly_statement
 
@@ -108,6 +109,7 @@ class Analysis:
                         self.poorly[i], self.statements[i], self.at_bound[i], self.directions[i])
 
 
+@collector_paused()
 def analyse_batch(paths, x, J, m: int, lo, hi, prior_sigma, prior_weight, rtol: float) -> Analysis:
     """Covariance and identifiability at the optimum of B fits of the same unknowns, in NumPy's batched
     linear algebra (one decomposition call for all rows, not one per fit).
