@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.backend import row_placement
+from ks_jax.backend import checked_devices, row_placement
 from ks_jax.compilation import quick_jit
 from ks_jax.progress import PROGRESS_DELAY, Progress
 
@@ -267,7 +267,7 @@ def sample(problem: Problem, row: FitArrays, z_best, *, draws: int, chains: int 
         raise ValueError(f"posterior: draws = {draws}, chains = {chains}: need at least one of each")
     warmup = draws if warmup is None else int(warmup)
     dtype = dtype or jnp.result_type(float)
-    devices = tuple(jax.local_devices() if devices is None else devices)
+    devices = checked_devices(devices, "posterior")
     rng = np.random.default_rng(seed)
     n = len(problem.unknowns)
     z0 = np.asarray(z_best, np.float64)[None] + START_JITTER * rng.standard_normal((chains, n))

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ks_jax.backend import plan_for
+from ks_jax.backend import checked_devices, plan_for
 from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
 from ks_jax.limits import check_memory, is_count, is_fraction
@@ -386,6 +386,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     """
     _check_arguments(errors, solver, smoothing, rtol, target_acceptance, starts=starts, monte_carlo=monte_carlo,
                      posterior=posterior, chains=chains, max_starts=max_starts, max_iter=max_iter, chunk=chunk)
+    fit_devices = checked_devices(devices, "reconstruct_batch")
     cases = list(cases)
     if not cases:
         return []
@@ -398,7 +399,6 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     if not fitting:
         return out
     cases, prepared = [cases[i] for i in fitting], [prepared[i] for i in fitting]  # from here on, those fitted
-    fit_devices = jax.local_devices() if devices is None else devices
     problem = dataclasses.replace(problem, plan=plan_for(plan, fit_devices))
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)

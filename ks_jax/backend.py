@@ -88,6 +88,34 @@ def plan_for(plan=None, devices=None) -> Plan:
     return Plan("cpu" if all(d.platform == "cpu" for d in devices) else "accelerator")
 
 
+def checked_devices(devices, where: str) -> tuple:
+    """``devices`` as given to ``where`` (an entry point's name), as a tuple; default (None), this process's devices
+    (``jax.local_devices()``). The rows are split over them along one axis, so they must be JAX devices, at least
+    one, each once, all of one platform: a TypeError or ValueError naming ``where``, the value and the rule
+    otherwise (a device's name, such as "cpu", is a plan's path: ``plan=``)."""
+    if devices is None:
+        return tuple(jax.local_devices())
+    try:
+        if isinstance(devices, (str, bytes)):
+            raise TypeError
+        devices = tuple(devices)
+    except TypeError:
+        raise TypeError(f"{where}: devices = {devices!r}: give a list of JAX devices (jax.devices() or part of it); "
+                        "for the path the rows take, give plan='cpu' or plan='accelerator'") from None
+    if not devices:
+        raise ValueError(f"{where}: devices = []: give at least one JAX device (jax.devices())")
+    for d in devices:
+        if not isinstance(d, jax.Device):
+            raise TypeError(f"{where}: devices holds {d!r}: each must be a JAX device (jax.devices())")
+    if len(set(devices)) < len(devices):
+        raise ValueError(f"{where}: devices = {list(devices)}: each device once (the rows are split among them)")
+    platforms = sorted({d.platform for d in devices})
+    if len(platforms) > 1:
+        raise ValueError(f"{where}: devices of {' and '.join(platforms)}: give devices of one platform (the rows "
+                         "are split among them in one program)")
+    return devices
+
+
 def path_from_environment() -> Plan | None:
     """The plan ``KS_JAX_PATH`` names (the command line's, read once there), None where it is unset or empty;
     ValueError for any other value."""

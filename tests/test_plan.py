@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from jax import export
 
+import fit
 import ks_jax
-from ks_jax.backend import Plan, plan_for
+from ks_jax.backend import Plan, checked_devices, plan_for
 from ks_jax.cli import main
 from ks_jax.model import linalg as la
 from ks_jax.solve import cases as solve_cases
@@ -47,6 +48,27 @@ def test_the_default_plan_is_the_devices_path():
     assert plan_for(None, cpus) == Plan("cpu")
     expected = "cpu" if all(d.platform == "cpu" for d in jax.devices()) else "accelerator"
     assert plan_for() == Plan(expected)
+
+
+def test_devices_that_are_not_a_list_of_jax_devices_are_refused_before_any_work():
+    """The devices a fit or a sweep splits its rows over are JAX devices, at least one, each once: anything else
+    is refused by the entry point with its name, the value and the rule, before a case is checked or a row
+    solved (not an error from inside the mesh); a list or a tuple of devices, or None (this process's), is
+    taken as it is."""
+    d = jax.devices()[0]
+    case = ks_jax.load_case(CASES / "fit_seed_001.json")
+    refused = [([], ValueError, r"devices = \[\]: give at least one JAX device"),
+               ("cpu", TypeError, r"devices = 'cpu': give a list of JAX devices .* plan='cpu'"),
+               (d, TypeError, r"devices = .*: give a list of JAX devices"),
+               ([1], TypeError, r"devices holds 1: each must be a JAX device"),
+               ([d, d], ValueError, r"devices = \[.*\]: each device once")]
+    for bad, kind, rule in refused:
+        with pytest.raises(kind, match="reconstruct_batch: " + rule):
+            fit.reconstruct_batch([case], devices=bad)
+        with pytest.raises(kind, match="sweep: " + rule):
+            ks_jax.sweep(case, {"vehicles[0].speed": [10.0, 20.0]}, devices=bad)
+    assert checked_devices([d], "x") == checked_devices((d,), "x") == (d,)
+    assert checked_devices(None, "x") == tuple(jax.local_devices())
 
 
 def _imported_modules(path: Path) -> set[str]:

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..backend import Plan, plan_for, row_placement
+from ..backend import Plan, checked_devices, plan_for, row_placement
 from ..batch import CHUNK_ROWS
 from ..batch.kernel import row_bytes
 from ..batch.stages import run
@@ -378,7 +378,7 @@ def layout(request: Request, chunk_size=None, devices=None, output_dtype=None, p
     and its program. ``plan``: a ``backend.Plan`` or its path; default, the path of ``devices``."""
     case, n_points = request.case, request.hi - request.lo
     _check_output_dtype(output_dtype)
-    devices = tuple(jax.local_devices() if devices is None else devices)
+    devices = checked_devices(devices, "sweep")
     plan = plan_for(plan, devices)
     if chunk_size is None:  # rows of the case's inputs and as many result bytes (``backend.Plan.rows``)
         one_row = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], as_arrays(case.inputs))
