@@ -307,7 +307,7 @@ def _prepared_batch(cases, unknowns, evidence, starts, monte_carlo, errors):
     return prepared, problem
 
 
-def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, **counts):
+def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, dtype, **counts):
     """``reconstruct_batch``'s arguments, each against its rule (ValueError naming it), before any work; with a
     posterior, the sampler's extra (ImportError naming it)."""
     least = {"starts": 1, "chains": 1, "max_starts": 1, "max_iter": 1, "chunk": 1}
@@ -325,8 +325,18 @@ def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, **count
     if not is_fraction(target_acceptance):
         raise ValueError(f"target_acceptance = {target_acceptance!r}: the posterior's mean acceptance must be in "
                          "(0, 1) (Stan's default 0.8; 0.9 or 0.95 where transitions diverge)")
+    if dtype is not None and _float_kind(dtype) not in ("float32", "float64"):
+        raise ValueError(f"dtype = {dtype!r}: a fit computes in float32 or float64 (or None: JAX's default float)")
     if counts["posterior"]:
         sampler()  # ImportError naming the extra, before any fit
+
+
+def _float_kind(dtype) -> str | None:
+    """The name of NumPy's dtype ``dtype`` names, None where it names none."""
+    try:
+        return np.dtype(dtype).name
+    except TypeError:
+        return None
 
 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,
@@ -384,9 +394,9 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     is not fitted and its result says why (``FitResult.refused``: status "invalid: ..."), and the others are
     fitted; "raise", its CaseError is raised before any fit. An argument that is not a Case is a TypeError.
     """
-    _check_arguments(errors, solver, smoothing, rtol, target_acceptance, starts=starts, monte_carlo=monte_carlo,
+    _check_arguments(errors, solver, smoothing, rtol, target_acceptance, dtype, starts=starts, monte_carlo=monte_carlo,
                      posterior=posterior, chains=chains, max_starts=max_starts, max_iter=max_iter, chunk=chunk)
-    fit_devices = checked_devices(devices, "reconstruct_batch")
+    devices = checked_devices(devices, "reconstruct_batch")
     cases = list(cases)
     if not cases:
         return []
@@ -399,7 +409,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
     if not fitting:
         return out
     cases, prepared = [cases[i] for i in fitting], [prepared[i] for i in fitting]  # from here on, those fitted
-    problem = dataclasses.replace(problem, plan=plan_for(plan, fit_devices))
+    problem = dataclasses.replace(problem, plan=plan_for(plan, devices))
     arrays, case_inputs = batch_arrays(cases, prepared, dtype)
     rng = np.random.default_rng(seed)
     x0 = first_starts(problem.unknowns, arrays, starts, rng)
@@ -409,7 +419,7 @@ def reconstruct_batch(cases, unknowns=None, evidence=None, *, starts: int = 8, s
 
     # with refits, and on an accelerator's path, the fit, its further rounds of starts and the refits run in calls of
     # one row count (``rows.fit_block``): one compiled program
-    block = fit_block(len(cases) * starts, int(monte_carlo), problem.plan, len(fit_devices))
+    block = fit_block(len(cases) * starts, int(monte_carlo), problem.plan, len(devices))
     first = run_rows(problem, solver, max_iter, arrays.inputs, *per_case(arrays),
                      to_z(x0, arrays.lo[:, None], arrays.hi[:, None]), smoothing, dtype, starts, block, devices)
     found = Starts(first)

@@ -537,7 +537,10 @@ def test_the_python_api_refuses_what_it_cannot_use_by_name(tmp_path):
                           ({"rtol": -1.0}, r"rtol = -1.0: the relative singular-value threshold must be in \(0, 1\)"),
                           ({"target_acceptance": 1.0}, r"target_acceptance = 1.0: the posterior's mean acceptance "
                                                        r"must be in \(0, 1\)"),
-                          ({"target_acceptance": math.nan}, r"target_acceptance = nan: .* must be in \(0, 1\)")):
+                          ({"target_acceptance": math.nan}, r"target_acceptance = nan: .* must be in \(0, 1\)"),
+                          ({"dtype": np.float16}, "dtype = .*float16.*: a fit computes in float32 or float64"),
+                          ({"dtype": "int32"}, "dtype = 'int32': a fit computes in float32 or float64"),
+                          ({"dtype": "single precision"}, "dtype = 'single precision': a fit computes in float32")):
         with pytest.raises(ValueError, match=words):
             fit.reconstruct(fitted, **kwargs)
     speed = "vehicles[1].speed"

@@ -53,8 +53,8 @@ def test_the_default_plan_is_the_devices_path():
 def test_devices_that_are_not_a_list_of_jax_devices_are_refused_before_any_work():
     """The devices a fit or a sweep splits its rows over are JAX devices, at least one, each once: anything else
     is refused by the entry point with its name, the value and the rule, before a case is checked or a row
-    solved (not an error from inside the mesh); a list or a tuple of devices, or None (this process's), is
-    taken as it is."""
+    solved (not an error from inside the mesh); a list, a tuple or an iterator of devices, or None (this
+    process's), is taken as it is."""
     d = jax.devices()[0]
     case = ks_jax.load_case(CASES / "fit_seed_001.json")
     refused = [([], ValueError, r"devices = \[\]: give at least one JAX device"),
@@ -67,8 +67,10 @@ def test_devices_that_are_not_a_list_of_jax_devices_are_refused_before_any_work(
             fit.reconstruct_batch([case], devices=bad)
         with pytest.raises(kind, match="sweep: " + rule):
             ks_jax.sweep(case, {"vehicles[0].speed": [10.0, 20.0]}, devices=bad)
-    assert checked_devices([d], "x") == checked_devices((d,), "x") == (d,)
+    assert checked_devices([d], "x") == checked_devices((d,), "x") == checked_devices(iter([d]), "x") == (d,)
     assert checked_devices(None, "x") == tuple(jax.local_devices())
+    once = fit.reconstruct_batch([case], devices=iter([d]))[0]  # an iterator is read once, and its devices used
+    assert once.status == "ok" and once.estimate == fit.reconstruct_batch([case])[0].estimate
 
 
 def _imported_modules(path: Path) -> set[str]:
