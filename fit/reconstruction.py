@@ -367,7 +367,8 @@ def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, se
     ``chunk`` samples) and for a posterior that runs more than 2 s. devices: where the starts and refits are solved
     (default: this process's devices, ``jax.local_devices()``; over several, the rows are split among them:
     docs/devices.md). plan: how the rows are computed, a ``ks_jax.backend.Plan`` or its path ("cpu",
-    "accelerator"); default, the path of ``devices``. Raises CaseError for a bad path, unit, bound or sigma.
+    "accelerator"); default, the path of ``devices``. dtype: float32 or float64, what the fit computes in (default
+    JAX's default float). Raises CaseError for a bad path, unit, bound or sigma.
     """
     return reconstruct_batch([case], None if unknowns is None else [unknowns],
                              None if evidence is None else [evidence], starts=starts, seed=seed,
