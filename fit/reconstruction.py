@@ -20,7 +20,7 @@ import numpy as np
 from ks_jax.backend import checked_devices, plan_for
 from ks_jax.case import Case, CaseError
 from ks_jax.compilation import quick_jit
-from ks_jax.limits import check_memory, is_count, is_fraction
+from ks_jax.limits import check_memory, is_count, is_float_dtype, is_fraction
 from ks_jax.model.types import OK, status_text
 
 from .arrays import batch_arrays
@@ -325,18 +325,10 @@ def _check_arguments(errors, solver, smoothing, rtol, target_acceptance, dtype, 
     if not is_fraction(target_acceptance):
         raise ValueError(f"target_acceptance = {target_acceptance!r}: the posterior's mean acceptance must be in "
                          "(0, 1) (Stan's default 0.8; 0.9 or 0.95 where transitions diverge)")
-    if dtype is not None and _float_kind(dtype) not in ("float32", "float64"):
+    if not (dtype is None or is_float_dtype(dtype)):
         raise ValueError(f"dtype = {dtype!r}: a fit computes in float32 or float64 (or None: JAX's default float)")
     if counts["posterior"]:
         sampler()  # ImportError naming the extra, before any fit
-
-
-def _float_kind(dtype) -> str | None:
-    """The name of NumPy's dtype ``dtype`` names, None where it names none."""
-    try:
-        return np.dtype(dtype).name
-    except TypeError:
-        return None
 
 
 def reconstruct(case: Case, unknowns=None, evidence=None, *, starts: int = 8, seed: int = 0, monte_carlo: int = 0,

@@ -22,6 +22,15 @@ def is_fraction(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and 0 < value < 1
 
 
+def is_float_dtype(value) -> bool:
+    """``value`` names float32 or float64, the dtypes ks-jax computes and stores in (not float16, an integer type
+    or a string that names no dtype)."""
+    try:
+        return np.dtype(value) in (np.float32, np.float64)
+    except TypeError:
+        return False
+
+
 def memory_bytes():
     """This machine's physical memory in bytes (None where the system does not say)."""
     try:

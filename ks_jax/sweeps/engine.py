@@ -24,7 +24,7 @@ from ..case import with_times, without_approach, without_time
 from ..case.errors import CaseError
 from ..case.scale import move_scene, origin_offset, scene_origin, warn_far_from_origin, xy_index
 from ..compilation import compiled, compiler_options
-from ..limits import check_memory
+from ..limits import check_memory, is_float_dtype
 from ..model.types import STATUS_TEXT, status_text
 from ..progress import PROGRESS_DELAY, Progress
 from ..solve import stages
@@ -363,11 +363,7 @@ class Layout:
 def _check_output_dtype(output_dtype):
     """Results are stored as float32 or float64: an integer or boolean type would turn an invalid row's NaN into a
     number that reads as a result, float16 would overflow a valid one to inf."""
-    try:
-        ok = output_dtype is None or np.dtype(output_dtype) in (np.float32, np.float64)
-    except TypeError:
-        ok = False
-    if not ok:
+    if not (output_dtype is None or is_float_dtype(output_dtype)):
         raise CaseError(f"sweep: output_dtype = {output_dtype!r}: must be float32 or float64 (or None, the compute "
                         "dtype)")
 
