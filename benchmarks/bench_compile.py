@@ -39,8 +39,9 @@ CASES = Path(ks_jax.__file__).parent / "cases"
 LARGE = "fit (8000 rows)"  # --large's program: its calls take seconds on a CPU, so 5 are timed, not 20
 
 
-def captured_calls(large: bool = False):
-    """{name: (quick_jit function, args)} of the programs, recorded from one solve or fit each."""
+def captured_calls(large: bool = False, plan=None):
+    """{name: (quick_jit function, args)} of the programs, recorded from one solve or fit each on ``plan`` (default:
+    the default devices' path)."""
     calls = {}
     solve_module = importlib.import_module("ks_jax.solve.cases")  # the module of ks_jax.solve, the function
     original = solve_module._solve
@@ -54,16 +55,17 @@ def captured_calls(large: bool = False):
     for name, case in (("solve", "seed_000_saturn_pontiac.json"), ("solve (automatic)", "auto_seed_000.json"),
                        ("solve (to rest)", "rest_seed_000.json")):
         solve_module._solve = recording(name, original)
-        ks_jax.solve(ks_jax.load_case(CASES / case))
+        ks_jax.solve(ks_jax.load_case(CASES / case), plan=plan)
     solve_module._solve = original
 
     pick = fit.rows.solver_for
     fit.rows.solver_for = lambda block, devices: recording("fit", fit.rows.fit_rows)
-    fit.reconstruct(ks_jax.load_cases(CASES / "fit_seed_001.json")[0])
+    fit.reconstruct(ks_jax.load_cases(CASES / "fit_seed_001.json")[0], plan=plan)
     if large:
         cases, _, evidence, unknowns, _ = bench_fit.sliding_cases(1000, 0)
         fit.rows.solver_for = lambda block, devices: recording(LARGE, fit.rows.fit_rows)
-        fit.reconstruct_batch(cases, unknowns, evidence, starts=8, max_starts=8, smoothing=bench_fit.SMOOTHING)
+        fit.reconstruct_batch(cases, unknowns, evidence, starts=8, max_starts=8, smoothing=bench_fit.SMOOTHING,
+                              plan=plan)
     fit.rows.solver_for = pick
     return calls
 
