@@ -3,7 +3,7 @@ the GPU, with its defaults and with ``QUICK_GPU``, and how many kernels each lau
 its loops. Not a test.
 
     .venv/bin/pip install "jax-cuda12-plugin[with-cuda]==V" "jax-cuda12-pjrt==V"   # V: the installed jax's version
-    .venv/bin/python benchmarks/gpu_programs.py [--rounds 1] [--only NAME] [--hlo DIR]
+    .venv/bin/python benchmarks/gpu_programs.py [--rounds 1] [--only NAME] [--hlo DIR] [--phases]
 
 JAX's CUDA plugin compiles for a GPU from a description of it (``TARGET``: an H200's) without the GPU itself
 (XLA's deviceless compile): the program XLA would run there, fused, scheduled, its kernels generated (LLVM to PTX)
