@@ -105,8 +105,7 @@ def launches(text: str) -> dict:
     once per iteration), a call or a conditional runs, largest first. A kernel's bytes are those of its operands
     and results, each read or written once (an update in place: its update, read and written): more than a kernel
     that reads part of an operand moves, the traffic of memory where the kernels are too small to keep their
-    operands in cache. Fused computations are inside the
-    kernels and not counted."""
+    operands in cache. Fused computations are inside the kernels and not counted."""
     computations, current, entry = {}, None, None
     for line in text.splitlines():
         head = re.match(r"^(ENTRY )?%(\S+) .*\{$", line)
@@ -116,14 +115,14 @@ def launches(text: str) -> dict:
             entry = current if head.group(1) else entry
         elif current and (instruction := INSTRUCTION.match(line)):
             name, shape, op, rest = instruction.groups()
-            computations[current][name] = (shape, op, rest, name)
+            computations[current][name] = (shape, op, rest)
     counts, todo = {}, [entry]
     while todo:
         name = todo.pop()
         if name in counts or name not in computations:
             continue
         kernels = moved = 0
-        for shape, op, rest, instruction_name in computations[name].values():
+        for instruction_name, (shape, op, rest) in computations[name].items():
             if op in ("while", "call", "conditional"):
                 todo += re.findall(r"(?:body|condition|to_apply)=%([\w.\-]+)", rest)
                 for group in re.findall(r"branch_computations=\{([^}]*)\}", rest):
