@@ -21,8 +21,9 @@ The programs, each traced on the accelerator's path (``plan="accelerator"``, as 
   fitted to its own delta-Vs.
 
 For each: the compile's seconds under XLA's defaults and under ``QUICK_GPU`` (medians of --rounds, the order
-alternating); the kernels its call launches outside loops, and in one iteration of each loop (XLA's while loops: a
-fit's solver, a motion to rest), counted in the compiled program (``launches``). --hlo DIR writes each compiled
+alternating); the kernels its call launches outside loops, in one iteration of each loop (XLA's while loops: a fit's
+solver, a motion to rest) and in each branch of each conditional (one branch runs each time), counted in the
+compiled program (``launches``). --hlo DIR writes each compiled
 program's text there. --phases also reads XLA's own timers from its log (its first compile with XLA's defaults):
 the seconds of its HLO passes (and of these, the fusion pass), of LLVM's PTX, and of ptxas, with the number of
 modules ptxas assembled.
@@ -101,8 +102,9 @@ def array_bytes(shape: str) -> int:
 
 def launches(text: str) -> dict:
     """Kernels of a compiled GPU program (its text) and the bytes they move: {"entry": (kernels, bytes), "loops":
-    [(kernels, bytes), ...]}, the entry's and those of one run of each computation that a while loop (its body:
-    once per iteration), a call or a conditional runs, largest first. A kernel's bytes are those of its operands
+    [(kernels, bytes), ...], "branches": [...]}, the entry's; those of one run of each computation that a while loop
+    (its body: once per iteration) or a call runs, largest first; and those of each branch of a conditional (one of
+    them runs each time), largest first. A kernel's bytes are those of its operands
     and results, each read or written once (an update in place: its update, read and written): more than a kernel
     that reads part of an operand moves, the traffic of memory where the kernels are too small to keep their
     operands in cache. Fused computations are inside the kernels and not counted."""
@@ -116,7 +118,7 @@ def launches(text: str) -> dict:
         elif current and (instruction := INSTRUCTION.match(line)):
             name, shape, op, rest = instruction.groups()
             computations[current][name] = (shape, op, rest)
-    counts, todo = {}, [entry]
+    counts, todo, branches = {}, [entry], set()
     while todo:
         name = todo.pop()
         if name in counts or name not in computations:
@@ -125,8 +127,12 @@ def launches(text: str) -> dict:
         for instruction_name, (shape, op, rest) in computations[name].items():
             if op in ("while", "call", "conditional"):
                 todo += re.findall(r"(?:body|condition|to_apply)=%([\w.\-]+)", rest)
+                # a conditional's branches: an index's list, or a predicate's two
+                arms = re.findall(r"(?:true|false)_computation=%([\w.\-]+)", rest)
                 for group in re.findall(r"branch_computations=\{([^}]*)\}", rest):
-                    todo += [b.strip().lstrip("%") for b in group.split(",")]
+                    arms += [b.strip().lstrip("%") for b in group.split(",")]
+                todo += arms
+                branches.update(arms)
             if op not in NOT_LAUNCHED:
                 operands = [computations[name].get(o, ("",))[0]
                             for o in re.findall(r"%([\w.\-]+)", rest.split(")", 1)[0])]
@@ -138,7 +144,9 @@ def launches(text: str) -> dict:
                 else:
                     moved += array_bytes(shape) + sum(array_bytes(o) for o in operands)
         counts[name] = (kernels, moved)
-    return {"entry": counts.pop(entry), "loops": sorted((c for c in counts.values() if c[0]), reverse=True)}
+    return {"entry": counts.pop(entry), "loops": sorted((c for n, c in counts.items() if c[0] and n not in branches),
+                                                        reverse=True),
+            "branches": sorted((c for n, c in counts.items() if n in branches), reverse=True)}
 
 
 TIMER = re.compile(r"(HLO pass: (\S+)|CompileToPtx for \S+|PtxToCubin for \S+) time: ([\d.]+) (us|ms|s) ")
@@ -239,6 +247,8 @@ def main() -> None:
     parser.add_argument("--hlo", default="", help="write each compiled program's text to this folder")
     parser.add_argument("--phases", action="store_true", help="the phases of each compile, from XLA's log")
     a = parser.parse_args()
+    if a.hlo:
+        Path(a.hlo).mkdir(parents=True, exist_ok=True)
     try:
         device = topologies.get_topology_desc(platform="cuda", target_config=TARGET, topology="1x1x1").devices[0]
     except (NotImplementedError, RuntimeError, ValueError) as e:  # no plugin, or one of another jax
@@ -249,7 +259,8 @@ def main() -> None:
     print(f"  machine  {platform.processor() or platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}")
     print(f"  target   {device.device_kind or 'NVIDIA H200'} (deviceless); QUICK_GPU {QUICK_GPU}")
     print("| program | compile, XLA's defaults | compile, QUICK_GPU | a call outside loops: kernels, bytes moved | "
-          "an iteration of its loops: kernels, bytes moved |\n|---|---|---|---|---|")
+          "an iteration of its loops: kernels, bytes moved | each branch of its conditionals |\n"
+          "|---|---|---|---|---|---|")
     timed = []
     for name, (jitted, args) in programs().items():
         if a.only not in name:
@@ -273,8 +284,9 @@ def main() -> None:
                     Path(a.hlo, f"{stem}_{way}.hlo.txt").write_text(program.as_text())
         counted = launches(program.as_text())
         loops = "; ".join(f"{n}, {size(b)}" for n, b in counted["loops"]) or "(no loop)"
+        arms = "; ".join(f"{n}, {size(b)}" for n, b in counted["branches"]) or "(none)"
         print(f"| {name} | {statistics.median(seconds['defaults']):.1f} s | {statistics.median(seconds['quick']):.1f} s"
-              f" | {counted['entry'][0]}, {size(counted['entry'][1])} | {loops} |", flush=True)
+              f" | {counted['entry'][0]}, {size(counted['entry'][1])} | {loops} | {arms} |", flush=True)
     if timed:
         print("\n| program (XLA's defaults) | compile | HLO passes (the fusion pass) | LLVM to PTX | ptxas (modules) "
               "|\n|---|---|---|---|---|")
