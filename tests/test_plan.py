@@ -19,6 +19,7 @@ import fit
 import ks_jax
 from ks_jax.backend import Plan, checked_devices, plan_for
 from ks_jax.cli import main
+from ks_jax.model import interaction
 from ks_jax.model import linalg as la
 from ks_jax.solve import cases as solve_cases
 from samples import assert_json_close
@@ -204,3 +205,62 @@ def test_a_solve_lowered_for_a_gpu_asks_every_product_for_full_precision():
         dots = [line for line in text.splitlines() if "stablehlo.dot_general" in line]
         assert dots, path.name
         assert all("precision = [HIGHEST, HIGHEST]" in line for line in dots), (path.name, dots[:3])
+
+
+def test_packing_the_watched_motions_state_gives_back_every_leaf_as_it_was():
+    """``interaction._Packing`` (the accelerator's path) puts a tree's leaves side by side, one flat array per dtype,
+    and takes them back: every leaf's values (inf and NaN among them), shape and dtype as they were, whatever the
+    order of the dtypes among the leaves; on the CPU's path the tree is carried as it is, the same object."""
+    tree = {"a": jnp.arange(6.0).reshape(2, 3), "b": jnp.array([1, -2], jnp.int32), "c": jnp.array(True),
+            "d": (jnp.array([jnp.inf, jnp.nan, -0.0]), None, jnp.zeros((0, 2))), "e": jnp.array(7, jnp.int32),
+            "f": jnp.array([[False, True]])}
+    packing = interaction._Packing(tree, True)
+    packed = packing.pack(tree)
+    assert [(x.dtype.name, x.shape) for x in packed] == [("bool", (3,)), ("float64", (9,)), ("int32", (3,))]
+    back = packing.unpack(packed)
+    assert jax.tree_util.tree_structure(back) == jax.tree_util.tree_structure(tree)
+    for x, y in zip(jax.tree_util.tree_leaves(tree), jax.tree_util.tree_leaves(back)):
+        assert x.dtype == y.dtype and x.shape == y.shape
+        np.testing.assert_array_equal(x, y)
+    assert np.signbit(back["d"][0][2])  # -0.0 kept
+    plain = interaction._Packing(tree, False)
+    assert plain.pack(tree) is tree and plain.unpack(tree) is tree and plain.fenced(tree) is tree
+
+
+def _largest_loop(jaxpr) -> int:
+    """The most values any while loop of ``jaxpr`` (nested ones included) carries."""
+    most = 0
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name == "while":
+            most = max(most, len(eqn.params["body_jaxpr"].jaxpr.outvars))
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (tuple, list)) else (value,):
+                sub = getattr(sub, "jaxpr", sub)  # a closed jaxpr's own
+                if hasattr(sub, "eqns"):
+                    most = max(most, _largest_loop(sub))
+    return most
+
+
+@pytest.mark.slow
+def test_a_watched_motion_on_the_accelerators_path_carries_its_state_packed_to_the_same_fit():
+    """``fit_rest_positions.json`` (two speeds from the rest positions, through the watched motion after the first
+    exchange) fitted on the CPU's path and on the accelerator's (forced on this device): the accelerator's watched
+    motion carries its state packed, a few flat arrays where the CPU's carries the loop's own dozens, and the
+    estimates, their standard deviations (from forward-mode derivatives through the loop) and the fitted rest
+    positions are the same to rounding (the two programs are fused differently)."""
+    case = ks_jax.load_case(CASES / "fit_rest_positions.json")
+    case = case[0] if isinstance(case, list) else case
+    on_cpu, on_accelerator = (fit.reconstruct(case, plan=p) for p in ("cpu", Plan("accelerator")))
+    assert on_cpu.status == on_accelerator.status == "ok"
+    for field in ("estimate", "std", "fitted"):
+        a, b = getattr(on_cpu, field), getattr(on_accelerator, field)
+        assert a.keys() == b.keys()
+        np.testing.assert_allclose([b[k] for k in a], list(a.values()), rtol=1e-7, err_msg=field)
+
+    def carried(plan):
+        solve = functools.partial(ks_jax.solve_inputs, auto_point=case.auto_point, auto_normal=case.auto_normal,
+                                  pole=case.pole, motion=case.motion, between=case.between, plan=plan)
+        return _largest_loop(jax.make_jaxpr(solve)(case.inputs).jaxpr)
+
+    cpu, accelerator = carried("cpu"), carried("accelerator")
+    assert cpu > 30 and accelerator < 8, (cpu, accelerator)

@@ -43,6 +43,7 @@ sequence of exchanges does not change; reverse mode with ``reverse=True`` (every
 from __future__ import annotations
 
 import functools
+import math
 import operator
 from typing import Any, NamedTuple
 
@@ -289,15 +290,55 @@ def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, 
                          normal=normal, current=jnp.where(overlap, loop.current, -1))
 
 
-def _fire(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, hitches=None,
-          links=()) -> _Loop:
+def _fire(bodies: Bodies, watch: Watch, state, packing, *, pairs, poles, dt, smoothing, hitches=None, links=()):
     """The exchange of the due pair engaged first, if any (the module's docstring, 3): recorded, its impulse given to
     the pair's vehicles, the pair no longer engaged. Computed, for a whole batch, only at a step where some row has a
-    pair due (``any_row``)."""
-    return jax.lax.cond(any_row(jnp.any(loop.due)),
-                        lambda lp: _exchange_due(bodies, watch, lp, pairs=pairs, poles=poles, dt=dt,
-                                                 smoothing=smoothing, hitches=hitches, links=links),
-                        lambda lp: lp, loop)
+    pair due (``any_row``). The loop's ``state`` comes and goes as ``packing`` (a ``_Packing``) carries it."""
+    due = packing.unpack(state).due
+    return jax.lax.cond(any_row(jnp.any(due)),
+                        lambda s: packing.pack(_exchange_due(bodies, watch, packing.unpack(s), pairs=pairs, poles=poles,
+                                                             dt=dt, smoothing=smoothing, hitches=hitches, links=links)),
+                        lambda s: s, packing.fenced(state))
+
+
+class _Packing:
+    """How the watched motion's loop carries its state: as the ``_Loop`` itself, or (``packed``) its leaves (those of
+    ``template``'s structure, shapes and dtypes) as one flat array per dtype.
+
+    A conditional's results are buffers of its own, written by whichever branch runs (the branch that passes the
+    state through copies it), and then copied into the loop's; and a loop's state is a buffer per leaf. With the
+    loop's dozens of leaves, that is dozens of copies a step, and the exchange writes each of its records into a
+    buffer of its own: on a GPU each is a transfer or a kernel of its own, and a step's launches are most of its
+    time. Packed, they are a few, and a step reads each leaf as a slice of the packed arrays. The values are the
+    same, to the rounding of a program fused otherwise: leaves of one dtype are put side by side and taken back,
+    nothing is converted. On a CPU a copy is a copy of memory, and the state is carried as it is."""
+
+    def __init__(self, template, packed: bool):
+        leaves, self.treedef = jax.tree_util.tree_flatten(template)
+        self.packed = packed
+        self.dtypes = sorted({x.dtype.name for x in leaves})
+        self.shapes = [(x.dtype.name, x.shape) for x in leaves]
+
+    def pack(self, tree):
+        if not self.packed:
+            return tree
+        leaves = jax.tree_util.tree_leaves(tree)
+        return tuple(jnp.concatenate([jnp.ravel(x) for x in leaves if x.dtype.name == d]) for d in self.dtypes)
+
+    def unpack(self, state):
+        if not self.packed:
+            return state
+        flat, taken, out = dict(zip(self.dtypes, state)), dict.fromkeys(self.dtypes, 0), []
+        for d, shape in self.shapes:
+            size = math.prod(shape)
+            out.append(flat[d][taken[d]:taken[d] + size].reshape(shape))
+            taken[d] += size
+        return jax.tree_util.tree_unflatten(self.treedef, out)
+
+    def fenced(self, state):
+        """``state``, packed, behind an optimization barrier: XLA would otherwise take the packed arrays apart again
+        before the conditional (its operands each a slice, a kernel each)."""
+        return jax.lax.optimization_barrier(state) if self.packed else state
 
 
 def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, hitches=None,
@@ -376,19 +417,24 @@ def _busy(loop: _Loop):
     return jnp.any(loop.carry.moving >= 1.0) | jnp.any(~jnp.isinf(loop.engaged))
 
 
-def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse):
+def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse, packed: bool):
     """The loop over the steps (``n`` at most, ``motion_loop.drive``): (the final loop, the samples of ``sample`` after
     every step, or None). Each step watches, then makes the exchanges due: ``pairs`` turns of ``fire``, as many as
     may be due at once, as a loop of its own (unrolled, the program would hold a copy of the exchange per pair, and
-    its compile time would grow with the number of pairs)."""
+    its compile time would grow with the number of pairs). ``packed``: the loop's state is carried packed
+    (``_Packing``); ``watch_step`` takes and returns a ``_Loop``, ``fire`` (state, packing) the state as carried."""
+    packing = _Packing(loop, packed)
 
-    def step(lp):
-        lp = watch_step(lp)
+    def step(state):
+        state = packing.pack(watch_step(packing.unpack(state)))
         if pairs == 1:
-            return fire(lp)
-        return jax.lax.fori_loop(0, pairs, lambda _, turn: fire(turn), lp)
+            return fire(state, packing)
+        return jax.lax.fori_loop(0, pairs, lambda _, turn: fire(turn, packing), state)
 
-    return motion_loop.drive(step, loop, n, _busy, sample=sample, reverse=reverse)
+    final, samples = motion_loop.drive(step, packing.pack(loop), n, lambda state: _busy(packing.unpack(state)),
+                                       sample=None if sample is None else lambda state: sample(packing.unpack(state)),
+                                       reverse=reverse)
+    return packing.unpack(final), samples
 
 
 def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smoothing) -> ExchangeResult:
@@ -405,7 +451,8 @@ def _slot_results(bodies: Bodies, first: ExchangeResult, final: _Loop, used, smo
 def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_pair, watch: Watch, *,
              max_exchanges: int = MAX_EXCHANGES, dt: float = motion.TIME_STEP,
              time_limit: float = motion.TIME_LIMIT, poles=(), smoothing=0.0, path: bool = False,
-             reverse: bool = False, hitches: joint.Hitch | None = None, links=(), at=None) -> Interactions:
+             reverse: bool = False, hitches: joint.Hitch | None = None, links=(), at=None,
+             packed: bool = False) -> Interactions:
     """The watched motion from the first exchange (``Interactions``).
 
     ``bodies``: the case's bodies (``Bodies``); ``start``: a ``motion.Planar`` of (V, ...) leaves, each vehicle at the
@@ -417,7 +464,9 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     (``motion_loop.drive``). ``hitches`` (a ``joint.Hitch`` of (H, ...) leaves) and ``links`` (static: each hitch's
     (towed, tow) vehicles): the joints (``model.joint``), whose impulse right after the first exchange is given to
     ``start``; a hitched pair is not watched. ``at``: None, or times (V, T) s from the first exchange at which the
-    result's ``at`` gives each vehicle's state (NaN where a vehicle has fewer)."""
+    result's ``at`` gives each vehicle's state (NaN where a vehicle has fewer). ``packed`` (static): the loop carries
+    its state packed, one flat array per dtype (``_Packing``): fewer copies and kernels a step, as an accelerator's
+    path asks (``backend.Plan``); the same values, to the rounding of a program fused otherwise."""
     vehicles = start.yaw.shape[0]
     fixed = bodies.fixed.yaw.shape[0]
     links = tuple(tuple(link) for link in links)
@@ -474,10 +523,11 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     advance = motion.step_function(reverse and not path)
     watch_step = lambda lp: _watch_step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
                                         advance=advance, hitches=hitches, links=links)
-    fire = lambda lp: _fire(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
-                            smoothing=smoothing, hitches=hitches, links=links)
+    fire = lambda state, packing: _fire(bodies, watch, state, packing, pairs=pairs,  # noqa: E731
+                                        poles=tuple(poles), dt=dt, smoothing=smoothing, hitches=hitches, links=links)
     sample = (lambda lp: jax.vmap(motion_loop.path_sample)(lp.carry)) if path else None
-    final, samples = _run(watch_step, fire, loop, motion_loop.steps_for(time_limit, dt), len(pairs), sample, reverse)
+    final, samples = _run(watch_step, fire, loop, motion_loop.steps_for(time_limit, dt), len(pairs), sample, reverse,
+                          packed)
     rest = tuple(motion_loop.rest_result(_pick(start, v), _pick(final.carry, v),
                                     None if samples is None else samples[:, v]) for v in range(vehicles))
     used = jnp.arange(k) < final.count

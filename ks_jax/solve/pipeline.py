@@ -38,22 +38,23 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     (``batch.stages.run_row``): every later loop reads the rules, and XLA would derive them again inside each
     loop that reads a stand-in input, in a program over twice the size to compile. The others are fused
     freely: a fit differentiates this function, and a fence costs tracing time under ``jax.jacfwd``. ``plan``
-    (static): a ``backend.Plan`` or its path ("cpu", "accelerator"), whose fence that is; default, the path of
-    JAX's default devices."""
+    (static): a ``backend.Plan`` or its path ("cpu", "accelerator"), whose fence that is, and whose path says how the
+    watched motion carries its state (``stages``); default, the path of JAX's default devices."""
     check_inputs(inputs, "solve_inputs")
-    auto = auto_point or auto_normal
-    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between), (inputs,),
-                   fenced=1 if auto else 0, plan=plan_for(plan) if auto else None)
+    auto, plan = auto_point or auto_normal, plan_for(plan)
+    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between, packed=not plan.cpu), (inputs,),
+                   fenced=1 if auto else 0, plan=plan if auto else None)
 
 
 def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = False, motion: Motion | None = None,
-           between=(0, 1)):
+           between=(0, 1), packed: bool = False):
     """The case's pipeline, functions of a row's ``CaseInputs`` and the outputs of the stages before
     (``ks_jax.batch.stages.run``): the exchange's own stages (``model.collision.stages``) at a given
     contact; for automatic contact, the input rules, the contact (``model.contact.automatic_stage``)
     and the exchange there (``exchange_at_contact``). ``smoothing``: a Python number or an array. With
     ``motion`` (a ``case.Motion``), the last stage moves the vehicles on from the exchange to rest
-    (``to_rest``): the result's ``rest``. ``between``: the first exchange's bodies (``Case.between``)."""
+    (``to_rest``): the result's ``rest``. ``between``: the first exchange's bodies (``Case.between``). ``packed``:
+    the watched motion carries its state packed (``model.interaction.interact``), as an accelerator's path asks."""
     between = tuple(between)
     *first, last = _exchange_stages(auto_point, auto_normal, smoothing, pole, between)
     auto = auto_point or auto_normal
@@ -72,7 +73,7 @@ def stages(auto_point: bool, auto_normal: bool, smoothing=0.0, pole: bool = Fals
             states = tuple(jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), moved, s)
                            for moved, s in zip(at_exchange, states))
         if motion is not None:
-            result = to_rest(inputs, result, states, motion, smoothing, between)
+            result = to_rest(inputs, result, states, motion, smoothing, between, packed)
         result = in_body_order(result, between, states)
         if motion is not None and motion.approach:
             result = result._replace(approach=approaches(inputs, body_states(inputs), motion))

@@ -19,11 +19,11 @@ from .rules import motion_rules
 
 
 def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, smoothing=0.0,
-            between=(0, 1)) -> ExchangeResult:
+            between=(0, 1), packed: bool = False) -> ExchangeResult:
     """``result`` (the first exchange's, between the bodies ``between``) with ``rest`` and ``interactions``: the
     vehicles' motion from their states at the exchange (``states``, a ``model.types.State`` per body of
     ``inputs.vehicles``), the pair's with their velocities and yaw rates after it, every pair of bodies watched for
-    later exchanges (``model.interaction.interact``) until every vehicle rests.
+    later exchanges (``model.interaction.interact``, its loop's state ``packed`` or not) until every vehicle rests.
 
     A row whose exchange is invalid, or whose motion's inputs break their rules (``motion_rules``: a swept or
     fitted value can, a case file cannot), has NaN in every result and, for the latter, status
@@ -91,7 +91,7 @@ def to_rest(inputs: CaseInputs, result: ExchangeResult, states, motion: Motion, 
     out = interact(everything, stack(starts), result, first, watch, max_exchanges=motion.max_exchanges,
                    dt=motion.time_step, time_limit=motion.time_limit, poles=tuple(order.index(k) for k in motion.poles),
                    smoothing=smoothing, path=motion.path, reverse=motion.reverse,
-                   hitches=stack(hitches) if hitches else None, links=links, at=at)
+                   hitches=stack(hitches) if hitches else None, links=links, at=at, packed=packed)
     rest = [None] * len(order)
     for m, k in enumerate(moving):
         rest[k] = mask_invalid(out.rest[m], ok)
