@@ -13,11 +13,14 @@ a stage on a CPU), each block's loop stopping once its cases are at rest or at t
 
 - watched: ``interact``: both vehicles move on, their pair is watched at every step and exchanges again where it
   overlaps and approaches;
+- watched, packed: the same with the loop's state carried packed (``interact(packed=True)``, as an accelerator's path
+  runs it: fewer copies and kernels a step on a GPU; on a CPU, more memory copied);
 - alone: ``motion_loop.to_rest`` of each vehicle alone (watching turned off).
 
 Reported: each variant's compile (XLA's default settings, as users get them; the first exchange's program, not
 measured, with the quick ones), the median of ``repeats`` rounds after it (each variant once per round), the cases
-per second, watched / alone as the median of the rounds' ratios, and how many exchanges the cases had.
+per second, watched / alone and packed / watched as the medians of the rounds' ratios, the largest difference
+between the packed and the plain rest positions, and how many exchanges the cases had.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import collections
 import datetime
+import functools
 import os
 import platform
 import statistics
@@ -89,17 +93,17 @@ def prepare(c):
 
 
 def programs(seconds, slots):
-    """(prepare, watched, alone), each jitted over a batch of cases (the first with the quick settings); the two
-    variants in blocks of ``BLOCK_ROWS``."""
+    """(prepare, watched, watched packed, alone), each jitted over a batch of cases (the first with the quick
+    settings); the three variants in blocks of ``BLOCK_ROWS``."""
 
-    def watched(c, start, first):
+    def watched(c, start, first, packed=False):
         cars = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(_vehicle(c["mass"][k], c["izz"][k]) for k in range(2)))
         moving = jax.vmap(lambda m, izz: M.body(m, izz, HEIGHT / 2, CHASSIS, _wheels(c), c["road"], M.TIME_STEP))
         none = M.Planar(jnp.zeros((0, 2)), jnp.zeros(0), jnp.zeros((0, 2)), jnp.zeros(0))  # no fixed object
         bodies = Bodies(cars, jnp.full(2, HEIGHT / 2), moving(c["mass"], c["izz"]), none)
         one = jnp.ones(1)
         watch = Watch(c["restitution"] * one, 0.5 * one, 0.0 * one, jnp.asarray(APPROACH_TOLERANCE))
-        out = interact(bodies, start, first, (0, 1), watch, max_exchanges=slots, time_limit=seconds)
+        out = interact(bodies, start, first, (0, 1), watch, max_exchanges=slots, time_limit=seconds, packed=packed)
         return (out.count, out.exhausted, jnp.stack([r.rest_position for r in out.rest]),
                 jnp.stack([r.time_to_rest for r in out.rest]))
 
@@ -109,7 +113,8 @@ def programs(seconds, slots):
         return rest.rest_position, rest.time_to_rest
 
     blocked = lambda f: jax.jit(in_blocks(jax.vmap(f), BLOCK_ROWS, (0, 0, 0)))  # noqa: E731
-    return jax.jit(jax.vmap(prepare), compiler_options=compiler_options(True)), blocked(watched), blocked(alone)
+    return (jax.jit(jax.vmap(prepare), compiler_options=compiler_options(True)), blocked(watched),
+            blocked(functools.partial(watched, packed=True)), blocked(alone))
 
 
 def main(argv=None):
@@ -119,13 +124,13 @@ def main(argv=None):
     parser.add_argument("--seconds", type=float, default=10.0, help="the time limit of the motion, s")
     parser.add_argument("--slots", type=int, default=8, help="the exchanges a case may have (the first included)")
     args = parser.parse_args(argv)
-    prep, watched, alone = programs(args.seconds, args.slots)
+    prep, watched, packed, alone = programs(args.seconds, args.slots)
     c = {k: jnp.asarray(v) for k, v in cases(args.cases).items()}
     t = time.perf_counter()
     start, first = jax.block_until_ready(prep(c))
     prepare_s = time.perf_counter() - t
     compile_s, calls, results = {}, {}, {}
-    for name, program in (("watched (interact)", watched), ("alone (to_rest)", alone)):
+    for name, program in (("watched (interact)", watched), ("watched, packed", packed), ("alone (to_rest)", alone)):
         t = time.perf_counter()
         calls[name] = program.lower(c, start, first).compile()
         compile_s[name] = time.perf_counter() - t
@@ -136,10 +141,12 @@ def main(argv=None):
             results[name] = jax.block_until_ready(call(c, start, first))
             times[name].append(time.perf_counter() - t)
     names = list(calls)
-    ratio = statistics.median(w / a for w, a in zip(times[names[0]], times[names[1]]))
+    ratio = statistics.median(w / a for w, a in zip(times[names[0]], times[names[2]]))
+    packed_ratio = statistics.median(p / w for w, p in zip(times[names[0]], times[names[1]]))
+    apart = float(np.nanmax(np.abs(np.asarray(results[names[1]][2]) - np.asarray(results[names[0]][2]))))
 
     count, exhausted, _, watched_time = (np.asarray(x) for x in results[names[0]])
-    alone_time = np.asarray(results[names[1]][1])
+    alone_time = np.asarray(results[names[2]][1])
     touched = np.asarray(first.contact.status) == 0
     print(f"bench_interaction: {args.cases} two-vehicle cases ({int(touched.sum())} with a first exchange), up to "
           f"{args.slots} exchanges, motion to rest within {args.seconds:g} s at {M.TIME_STEP * 1000:g} ms, float64, "
@@ -150,7 +157,8 @@ def main(argv=None):
     for name in names:
         med = statistics.median(times[name])
         print(f"  {name:20s} {med:8.3f} s  {args.cases / med:10.4g} cases/s   (compile {compile_s[name]:.2f} s)")
-    print(f"  watched / alone: {ratio:.2f} (median of {args.repeats} rounds' ratios)")
+    print(f"  watched / alone: {ratio:.2f}; packed / watched: {packed_ratio:.2f} (medians of {args.repeats} rounds' "
+          f"ratios); rest positions packed and plain {apart:.1e} m apart at most")
     histogram = collections.Counter(count.tolist())
     print("  exchanges per case: " + ", ".join(f"{k}: {histogram[k]}" for k in sorted(histogram))
           + f"; exhausted {int(exhausted.sum())}; 2 or more {int((count >= 2).sum())}")
