@@ -311,7 +311,8 @@ class _Packing:
     buffer of its own: on a GPU each is a transfer or a kernel of its own, and a step's launches are most of its
     time. Packed, they are a few, and a step reads each leaf as a slice of the packed arrays. The values are the
     same, to the rounding of a program fused otherwise: leaves of one dtype are put side by side and taken back,
-    nothing is converted. On a CPU a copy is a copy of memory, and the state is carried as it is."""
+    nothing is converted. The CPU's path carries the state as it is: there a copy costs what it copies, and the
+    packed loop copies more (``benchmarks/bench_interaction.py`` times both)."""
 
     def __init__(self, template, packed: bool):
         leaves, self.treedef = jax.tree_util.tree_flatten(template)
