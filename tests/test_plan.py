@@ -19,7 +19,7 @@ import fit
 import ks_jax
 from ks_jax.backend import Plan, checked_devices, plan_for
 from ks_jax.cli import main
-from ks_jax.model import interaction
+from ks_jax.model.packing import Packing
 from ks_jax.model import linalg as la
 from ks_jax.solve import cases as solve_cases
 from samples import assert_json_close
@@ -208,13 +208,13 @@ def test_a_solve_lowered_for_a_gpu_asks_every_product_for_full_precision():
 
 
 def test_packing_the_watched_motions_state_gives_back_every_leaf_as_it_was():
-    """``interaction._Packing`` (the accelerator's path) puts a tree's leaves side by side, one flat array per dtype,
+    """``model.packing.Packing`` (the accelerator's path) puts a tree's leaves side by side, one flat array per dtype,
     and takes them back: every leaf's values (inf and NaN among them), shape and dtype as they were, whatever the
     order of the dtypes among the leaves; on the CPU's path the tree is carried as it is, the same object."""
     tree = {"a": jnp.arange(6.0).reshape(2, 3), "b": jnp.array([1, -2], jnp.int32), "c": jnp.array(True),
             "d": (jnp.array([jnp.inf, jnp.nan, -0.0]), None, jnp.zeros((0, 2))), "e": jnp.array(7, jnp.int32),
             "f": jnp.array([[False, True]])}
-    packing = interaction._Packing(tree, True)
+    packing = Packing(tree, True)
     packed = packing.pack(tree)
     assert [(x.dtype.name, x.shape) for x in packed] == [("bool", (3,)), ("float64", (9,)), ("int32", (3,))]
     back = packing.unpack(packed)
@@ -223,7 +223,7 @@ def test_packing_the_watched_motions_state_gives_back_every_leaf_as_it_was():
         assert x.dtype == y.dtype and x.shape == y.shape
         np.testing.assert_array_equal(x, y)
     assert np.signbit(back["d"][0][2])  # -0.0 kept
-    plain = interaction._Packing(tree, False)
+    plain = Packing(tree, False)
     assert plain.pack(tree) is tree and plain.unpack(tree) is tree and plain.fenced(tree) is tree
 
 

@@ -43,7 +43,6 @@ sequence of exchanges does not change; reverse mode with ``reverse=True`` (every
 from __future__ import annotations
 
 import functools
-import math
 import operator
 from typing import Any, NamedTuple
 
@@ -56,6 +55,7 @@ from . import linalg as la
 from . import motion, motion_loop
 from .collision import Prepared, exchange, impulse
 from .results import mask_invalid, pdof_degrees
+from .packing import Packing
 from .pairs import any_row, gaps, material_velocity, pairs_of, watch_gaps, watch_pairs
 from .types import OK, Contact, ExchangeResult, State, Vehicle
 
@@ -270,15 +270,15 @@ def _catch(caught, before: motion.Carry, after: motion.Carry, t0, t1):
 
 
 def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, advance, hitches=None,
-                links=()) -> _Loop:
+                links=(), packed=False) -> _Loop:
     """One step of the motion, the hitches' joints (``_coupled``), and every pair watched after it (the module's
     docstring, 1-2): which pairs overlap, their centroids and normals, which are engaged and which are due for an
-    exchange."""
+    exchange. ``packed``: the pairs' values go to their close look packed (``pairs.watch_pairs``)."""
     time = loop.time + dt
     carry = jax.vmap(lambda b, c: advance(b, c, dt))(bodies.motion, loop.carry)
     carry = _coupled(bodies, carry, time, hitches, links, since=loop.carry)
     loop = loop._replace(caught=_catch(loop.caught, loop.carry, carry, loop.time, time))
-    gap, point, normal, un = watch_pairs(bodies, _states(bodies, carry), carry.moving >= 1.0, pairs, poles)
+    gap, point, normal, un = watch_pairs(bodies, _states(bodies, carry), carry.moving >= 1.0, pairs, poles, packed)
     overlap = gap < 0
     # engaged: at the first touch within the step where the footprints did not overlap before it, else now
     touch = time - dt * la.safe_div(-gap, loop.gap - gap, 0.0)
@@ -290,56 +290,17 @@ def _watch_step(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, 
                          normal=normal, current=jnp.where(overlap, loop.current, -1))
 
 
-def _fire(bodies: Bodies, watch: Watch, state, packing, *, pairs, poles, dt, smoothing, hitches=None, links=()):
+def _fire(bodies: Bodies, watch: Watch, state, packing: Packing, *, pairs, poles, dt, smoothing, hitches=None,
+          links=()):
     """The exchange of the due pair engaged first, if any (the module's docstring, 3): recorded, its impulse given to
     the pair's vehicles, the pair no longer engaged. Computed, for a whole batch, only at a step where some row has a
-    pair due (``any_row``). The loop's ``state`` comes and goes as ``packing`` (a ``_Packing``) carries it."""
+    pair due (``any_row``). The loop's ``state`` comes and goes as ``packing`` carries it: packed, the conditional
+    takes and returns a few arrays, not the loop's dozens, and the exchange writes its records into them."""
     due = packing.unpack(state).due
     return jax.lax.cond(any_row(jnp.any(due)),
                         lambda s: packing.pack(_exchange_due(bodies, watch, packing.unpack(s), pairs=pairs, poles=poles,
                                                              dt=dt, smoothing=smoothing, hitches=hitches, links=links)),
                         lambda s: s, packing.fenced(state))
-
-
-class _Packing:
-    """How the watched motion's loop carries its state: as the ``_Loop`` itself, or (``packed``) its leaves (those of
-    ``template``'s structure, shapes and dtypes) as one flat array per dtype.
-
-    A conditional's results are buffers of its own, written by whichever branch runs (the branch that passes the
-    state through copies it), and then copied into the loop's; and a loop's state is a buffer per leaf. With the
-    loop's dozens of leaves, that is dozens of copies a step, and the exchange writes each of its records into a
-    buffer of its own: on a GPU each is a transfer or a kernel of its own, and a step's launches are most of its
-    time. Packed, they are a few, and a step reads each leaf as a slice of the packed arrays. The values are the
-    same, to the rounding of a program fused otherwise: leaves of one dtype are put side by side and taken back,
-    nothing is converted. The CPU's path carries the state as it is: there a copy costs what it copies, and the
-    packed loop copies more (``benchmarks/bench_interaction.py`` times both)."""
-
-    def __init__(self, template, packed: bool):
-        leaves, self.treedef = jax.tree_util.tree_flatten(template)
-        self.packed = packed
-        self.dtypes = sorted({x.dtype.name for x in leaves})
-        self.shapes = [(x.dtype.name, x.shape) for x in leaves]
-
-    def pack(self, tree):
-        if not self.packed:
-            return tree
-        leaves = jax.tree_util.tree_leaves(tree)
-        return tuple(jnp.concatenate([jnp.ravel(x) for x in leaves if x.dtype.name == d]) for d in self.dtypes)
-
-    def unpack(self, state):
-        if not self.packed:
-            return state
-        flat, taken, out = dict(zip(self.dtypes, state)), dict.fromkeys(self.dtypes, 0), []
-        for d, shape in self.shapes:
-            size = math.prod(shape)
-            out.append(flat[d][taken[d]:taken[d] + size].reshape(shape))
-            taken[d] += size
-        return jax.tree_util.tree_unflatten(self.treedef, out)
-
-    def fenced(self, state):
-        """``state``, packed, behind an optimization barrier: XLA would otherwise take the packed arrays apart again
-        before the conditional (its operands each a slice, a kernel each)."""
-        return jax.lax.optimization_barrier(state) if self.packed else state
 
 
 def _exchange_due(bodies: Bodies, watch: Watch, loop: _Loop, *, pairs, poles, dt, smoothing, hitches=None,
@@ -423,8 +384,9 @@ def _run(watch_step, fire, loop: _Loop, n: int, pairs: int, sample, reverse, pac
     every step, or None). Each step watches, then makes the exchanges due: ``pairs`` turns of ``fire``, as many as
     may be due at once, as a loop of its own (unrolled, the program would hold a copy of the exchange per pair, and
     its compile time would grow with the number of pairs). ``packed``: the loop's state is carried packed
-    (``_Packing``); ``watch_step`` takes and returns a ``_Loop``, ``fire`` (state, packing) the state as carried."""
-    packing = _Packing(loop, packed)
+    (``packing.Packing``); ``watch_step`` takes and returns a ``_Loop``, ``fire`` (state, packing) the state as
+    carried."""
+    packing = Packing(loop, packed)
 
     def step(state):
         state = packing.pack(watch_step(packing.unpack(state)))
@@ -466,8 +428,9 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
     (towed, tow) vehicles): the joints (``model.joint``), whose impulse right after the first exchange is given to
     ``start``; a hitched pair is not watched. ``at``: None, or times (V, T) s from the first exchange at which the
     result's ``at`` gives each vehicle's state (NaN where a vehicle has fewer). ``packed`` (static): the loop carries
-    its state packed, one flat array per dtype (``_Packing``): fewer copies and kernels a step, as an accelerator's
-    path asks (``backend.Plan``); the same values, to the rounding of a program fused otherwise."""
+    its state, and passes the pairs' values to their close look, packed, one flat array per dtype
+    (``packing.Packing``): fewer copies and kernels a step, as an accelerator's path asks (``backend.Plan``); the same
+    values, to the rounding of a program fused otherwise."""
     vehicles = start.yaw.shape[0]
     fixed = bodies.fixed.yaw.shape[0]
     links = tuple(tuple(link) for link in links)
@@ -523,7 +486,7 @@ def interact(bodies: Bodies, start: motion.Planar, first: ExchangeResult, first_
                      vehicles)
     advance = motion.step_function(reverse and not path)
     watch_step = lambda lp: _watch_step(bodies, watch, lp, pairs=pairs, poles=tuple(poles), dt=dt,  # noqa: E731
-                                        advance=advance, hitches=hitches, links=links)
+                                        advance=advance, hitches=hitches, links=links, packed=packed)
     fire = lambda state, packing: _fire(bodies, watch, state, packing, pairs=pairs,  # noqa: E731
                                         poles=tuple(poles), dt=dt, smoothing=smoothing, hitches=hitches, links=links)
     sample = (lambda lp: jax.vmap(motion_loop.path_sample)(lp.carry)) if path else None

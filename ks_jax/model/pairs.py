@@ -24,6 +24,7 @@ from . import linalg as la
 from .contact import contact_geometry, disc_gap, footprint, separation
 from .contact.geometry import length_tolerance, reach, vertical_middle
 from .contact.pole import disc_contact
+from .packing import Packing
 
 
 def pairs_of(vehicles: int, fixed: int, links=()):
@@ -145,7 +146,7 @@ def _stand_in_gap(apart):
     return jnp.maximum(apart, 0.0) + jnp.where(apart < 0, 1.0, 0.0)
 
 
-def watch_pairs(bodies, states, moving, pairs, poles):
+def watch_pairs(bodies, states, moving, pairs, poles, packed: bool = False):
     """(gap, point, normal, u_n) of every pair, (P,) (P, 3) (P, 3) (P,) (the pairs against a box vmapped together,
     those against a pole together), for bodies in ``states`` of which the vehicles ``moving`` (V,) bool move.
 
@@ -153,7 +154,8 @@ def watch_pairs(bodies, states, moving, pairs, poles):
     vehicles moves: elsewhere it cannot overlap, or cannot approach, and its gap is the distance between the circles
     (> 0, a lower bound of the separation), its u_n 0. The close look (separation, and the overlap's centroid and
     normal by automatic contact's rules) runs for every pair, and for a whole batch, only at a step where some pair
-    of some row needs it (``any_row``)."""
+    of some row needs it (``any_row``). ``packed`` (static): the pairs' values go to the close look's conditional
+    packed, one flat array per dtype (``packing.Packing``), as an accelerator's path asks."""
     dtype = states.yaw.dtype
     gap, point, normal, un = (jnp.zeros(len(pairs), dtype), jnp.zeros((len(pairs), 3), dtype),
                               jnp.zeros((len(pairs), 3), dtype), jnp.zeros(len(pairs), dtype))
@@ -163,8 +165,10 @@ def watch_pairs(bodies, states, moving, pairs, poles):
         watched = (apart < 0) & moves
         far = _stand_in_gap(apart)
 
-        def look(args, pole=pole):
-            a, b, c, d = args
+        packing = Packing((v1, s1, v2, s2), packed)
+
+        def look(args, pole=pole, packing=packing):
+            a, b, c, d = packing.unpack(args)
             g, pt, n = jax.vmap(lambda w, x, y, z: _pair_contact(w, x, y, z, pole))(a, b, c, d)
             return g, pt, n, jax.vmap(_closing)(pt, n, b, d)
 
@@ -172,7 +176,8 @@ def watch_pairs(bodies, states, moving, pairs, poles):
             z = jnp.zeros((count, 3), dtype)
             return far, z, z, jnp.zeros(count, dtype)
 
-        g, pt, n, u = jax.lax.cond(any_row(jnp.any(watched)), look, glance, (v1, s1, v2, s2))
+        g, pt, n, u = jax.lax.cond(any_row(jnp.any(watched)), look, glance,
+                                   packing.fenced(packing.pack((v1, s1, v2, s2))))
         where = jnp.asarray(idx)
         gap, point, normal = gap.at[where].set(jnp.where(watched, g, far)), point.at[where].set(pt), \
             normal.at[where].set(n)
