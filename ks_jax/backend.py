@@ -63,6 +63,13 @@ class Plan:
         """Whether this is the CPU's path."""
         return self.path == "cpu"
 
+    @property
+    def packed(self) -> bool:
+        """Whether a watched motion carries its state packed (``model.interaction.interact(packed=...)``): on the
+        accelerator's path, where a step's copies and kernels are its cost; not on the CPU's, where a copy costs
+        what it copies and packing copies more."""
+        return not self.cpu
+
     def rows(self, bytes_per_row: int, device=None) -> int:
         """Rows per chunk for rows of ``bytes_per_row`` input and result bytes: ``chunk_rows`` where given;
         else ``CPU_CHUNK_ROWS`` on the CPU's path, and on an accelerator's the largest power of two whose

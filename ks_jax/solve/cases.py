@@ -31,7 +31,7 @@ def _solve_rows(inputs, auto_point, auto_normal, smoothing, pole=False, motion=N
                 plan=Plan("cpu")):
     """``solve_inputs`` of every row of ``inputs``, computed as ``plan`` says. One row is solved unbatched:
     XLA compiles a batch of one row to a program several times the size of one unbatched row's."""
-    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion, between, packed=not plan.cpu)
+    pipeline = stages(auto_point, auto_normal, smoothing, pole, motion, between, packed=plan.packed)
     if jax.tree_util.tree_leaves(inputs)[0].shape[0] == 1:
         row = run_row(pipeline, (jax.tree_util.tree_map(lambda x: x[0], inputs),), fenced=len(pipeline), plan=plan)
         return jax.tree_util.tree_map(lambda x: x[None], row)

@@ -42,7 +42,7 @@ def solve_inputs(inputs: CaseInputs, auto_point: bool = False, auto_normal: bool
     watched motion carries its state (``stages``); default, the path of JAX's default devices."""
     check_inputs(inputs, "solve_inputs")
     auto, plan = auto_point or auto_normal, plan_for(plan)
-    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between, packed=not plan.cpu), (inputs,),
+    return run_row(stages(auto_point, auto_normal, smoothing, pole, motion, between, packed=plan.packed), (inputs,),
                    fenced=1 if auto else 0, plan=plan if auto else None)
 
 

@@ -140,7 +140,7 @@ def _program(key: ChunkProgram):
     ``undefined``: a sweep that keeps nothing then copies none of its rows to the host."""
     rows, replicated = row_placement(key.devices)
     pipeline = stages(key.auto_point, key.auto_normal, key.smoothing, key.pole, key.motion, key.between,
-                      packed=not key.plan.cpu)
+                      packed=key.plan.packed)
     undefined = tuple(p for p in key.outputs if undefined_kind(p))
 
     def chunk(start, stop, axes, sizes, total, base):
