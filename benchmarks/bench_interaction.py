@@ -1,15 +1,17 @@
 """Benchmark: the watched motion after the first exchange (``model.interaction.interact``) against the motion to rest
 of each vehicle alone.
 
-    .venv/bin/python benchmarks/bench_interaction.py [--cases 10000] [--repeats 3] [--seconds 10] [--slots 8]
+    .venv/bin/python benchmarks/bench_interaction.py [--cases 10000] [--repeats 3] [--seconds 10] [--slots 8] \
+        [--plan cpu|accelerator]
 
 Two-vehicle cases, float64, random (seed 0): car 0 (1100-2000 kg) at 8-20 m/s along +x from (-5, 0) into car 1
 (1100-2000 kg) at rest at (0, 0.8-2.2 m) turned 0.5-2.6 rad, restitution 0.05-0.3, friction 0.5 at the contact, on
 roads of friction 0.6-0.9 with every wheel braked by 0.5-1 (rolling resistance 0.015): oblique impacts of which
 some part after the first exchange and others meet again (side-slaps), up to ``slots`` exchanges each. The first
 exchange (automatic contact, ``contact.automatic_exchange``) and the vehicles' states at its instant are computed
-once, and then, from the same states, in blocks of 256 cases (``batch.stages.in_blocks``, as a case's pipeline runs
-a stage on a CPU), each block's loop stopping once its cases are at rest or at the time limit (``seconds``):
+once, and then, from the same states, as the plan of the default device runs a case's motion (``--plan`` to choose):
+on the CPU's path in blocks of 256 cases (``batch.stages.in_blocks``), each block's loop stopping once its cases are
+at rest or at the time limit (``seconds``); on the accelerator's path all cases in one loop:
 
 - watched: ``interact``: both vehicles move on, their pair is watched at every step and exchanges again where it
   overlaps and approaches;
@@ -42,6 +44,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 
+from ks_jax.backend import plan_for
 from ks_jax.batch.stages import BLOCK_ROWS, in_blocks
 from ks_jax.compilation import compiler_options
 from ks_jax.model import motion as M
@@ -92,9 +95,10 @@ def prepare(c):
     return start, first._replace(rest=None)
 
 
-def programs(seconds, slots):
+def programs(seconds, slots, plan):
     """(prepare, watched, watched packed, alone), each jitted over a batch of cases (the first with the quick
-    settings); the three variants in blocks of ``BLOCK_ROWS``."""
+    settings); the three variants in blocks of ``BLOCK_ROWS`` on the CPU's path (``plan``), all rows at once on the
+    accelerator's, as ``batch.stages.run`` runs a blocked stage."""
 
     def watched(c, start, first, packed=False):
         cars = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(_vehicle(c["mass"][k], c["izz"][k]) for k in range(2)))
@@ -112,7 +116,9 @@ def programs(seconds, slots):
                                                     time_limit=seconds))(c["mass"], c["izz"], start)
         return rest.rest_position, rest.time_to_rest
 
-    blocked = lambda f: jax.jit(in_blocks(jax.vmap(f), BLOCK_ROWS, (0, 0, 0)))  # noqa: E731
+    def blocked(f):
+        return jax.jit(in_blocks(jax.vmap(f), BLOCK_ROWS, (0, 0, 0)) if plan.cpu else jax.vmap(f))
+
     return (jax.jit(jax.vmap(prepare), compiler_options=compiler_options(True)), blocked(watched),
             blocked(functools.partial(watched, packed=True)), blocked(alone))
 
@@ -123,8 +129,10 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=10.0, help="the time limit of the motion, s")
     parser.add_argument("--slots", type=int, default=8, help="the exchanges a case may have (the first included)")
+    parser.add_argument("--plan", choices=("cpu", "accelerator"), help="the path (default: the default device's)")
     args = parser.parse_args(argv)
-    prep, watched, packed, alone = programs(args.seconds, args.slots)
+    plan = plan_for(args.plan)
+    prep, watched, packed, alone = programs(args.seconds, args.slots, plan)
     c = {k: jnp.asarray(v) for k, v in cases(args.cases).items()}
     t = time.perf_counter()
     start, first = jax.block_until_ready(prep(c))
@@ -150,7 +158,7 @@ def main(argv=None):
     touched = np.asarray(first.contact.status) == 0
     print(f"bench_interaction: {args.cases} two-vehicle cases ({int(touched.sum())} with a first exchange), up to "
           f"{args.slots} exchanges, motion to rest within {args.seconds:g} s at {M.TIME_STEP * 1000:g} ms, float64, "
-          f"blocks of {BLOCK_ROWS}")
+          + (f"the CPU's path, blocks of {BLOCK_ROWS}" if plan.cpu else "the accelerator's path, all cases at once"))
     print(f"  {datetime.date.today()}, {platform.node()}, {jax.devices()[0].device_kind}, {os.cpu_count()} CPUs, "
           f"jax {jax.__version__}; {' '.join([os.path.basename(sys.argv[0])] + (argv or sys.argv[1:]))}")
     print(f"  first exchange and states (once, not measured): {prepare_s:.2f} s with its compile")
