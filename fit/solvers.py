@@ -23,6 +23,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import optax
 
 HIGHEST = jax.lax.Precision.HIGHEST  # the products of J at their dtype's full precision (``model.linalg.mm``)
 
@@ -162,8 +163,6 @@ def _optax_rows(one_row, fun, z0, data, max_iter, z_min, z_max):
 
 
 def _lbfgs_row(cost_fn, z0, max_iter):
-    import optax
-
     ctol = tolerances(z0.dtype)[2]
     opt = optax.lbfgs()
     vg = optax.value_and_grad_from_state(cost_fn)
@@ -183,8 +182,6 @@ def _lbfgs_row(cost_fn, z0, max_iter):
 
 
 def _adam_row(cost_fn, z0, max_iter, learning_rate=0.05):
-    import optax
-
     ctol = tolerances(z0.dtype)[2]
     opt = optax.adam(learning_rate)
     grad_fn = jax.value_and_grad(cost_fn)

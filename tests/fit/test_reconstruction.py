@@ -266,6 +266,19 @@ def test_seed_001_recovers_the_kias_speed():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("solver", ["lbfgs", "adam"])
+def test_the_gradient_solvers_reach_the_least_squares_fit_of_seed_001(solver):
+    """L-BFGS and Adam (optax) minimise the same loss as the Levenberg-Marquardt default: the same estimate, within
+    their looser stopping tests, and so the chapter's 20 mph and the same Laplace standard error."""
+    lm = fit.reconstruct(load_case(FIT_SEED))
+    r = fit.reconstruct(load_case(FIT_SEED), solver=solver)
+    assert r.converged and r.status == "ok"
+    assert r.estimate["vehicles[1].speed"] == pytest.approx(lm.estimate["vehicles[1].speed"], rel=1e-6)
+    assert r.estimate["vehicles[1].speed"] / U.MPH == pytest.approx(20.0, abs=0.05)
+    assert r.std["vehicles[1].speed"] == pytest.approx(lm.std["vehicles[1].speed"], rel=1e-4)
+
+
+@pytest.mark.slow
 def test_seed_001_monte_carlo_agrees_with_laplace(blocks_of_8):
     r = fit.reconstruct(load_case(FIT_SEED), monte_carlo=64, seed=3)
     mc = r.monte_carlo
