@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -575,6 +576,47 @@ def test_float32_scene_far_from_the_origin_is_solved_as_at_the_origin():
                 v, w = np.asarray(v), np.asarray(far[kind][p]) - shift.get(p, 0.0)
                 scale = 1.0 if p.endswith("crush") or "point" in p else np.abs(v).max()  # lengths: 1 m
                 np.testing.assert_allclose(w, v, rtol=0, atol=5e-5 * scale, err_msg=f"{label} {kind} {p}")
+
+
+FAR_ROAD = r"""
+import json, sys, warnings
+import ks_jax
+from ks_jax.case import CaseWarning, case_from_dict
+out = {}
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    for name, d in json.loads(sys.argv[1]).items():
+        r = ks_jax.solve(case_from_dict(d)).result
+        out[name] = {"rest": [x.rest_position.tolist() for x in r.rest],
+                     "rest_dtype": str(r.rest[0].rest_position.dtype),
+                     "approach": [a.position.tolist() for a in r.approach], "point": r.contact.point[:2].tolist()}
+    out["warned"] = [str(w.message) for w in caught if w.category is CaseWarning]
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+def test_float32_scene_far_from_the_origin_with_a_road_comes_back_to_rest_where_it_would_at_the_origin():
+    """In float32, a scene in survey coordinates (300 km, 210 km) with a road and approaches is solved about its CGs'
+    midpoint, and its rest positions and its approaches' positions are moved back in float64, as its centroid is: each
+    is where the same scene at the origin puts it, moved by the same offset. Without the move back they would be
+    300 km off; solved where they are, float32 keeps 3 cm there."""
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "tbone_skids_before_impact.json"
+    d = json.loads(example.read_text())
+    shift = np.array([3e5, 2.1e5])
+    scenes = {"near": _moved(d, 0.0, 0.0), "far": _moved(d, *shift)}
+    proc = subprocess.run([sys.executable, "-c", FAR_ROAD, json.dumps(scenes)], capture_output=True, text=True,
+                          timeout=600, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    near, far = out["near"], out["far"]
+    assert out["warned"] == [] and near["rest_dtype"] == "float32" and far["rest_dtype"] == "float64"
+    for key in ("point", "rest", "approach"):
+        moved_back = [np.asarray(x) - shift for x in far[key]] if key != "point" else [np.asarray(far[key]) - shift]
+        at_origin = near[key] if key != "point" else [near[key]]
+        assert len(moved_back) == len(at_origin) == (1 if key == "point" else 2)
+        for w, v in zip(moved_back, at_origin):
+            np.testing.assert_allclose(w, np.asarray(v), rtol=0, atol=1e-4, err_msg=key)  # float32's rounding
 
 
 @pytest.mark.slow
