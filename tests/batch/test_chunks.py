@@ -20,6 +20,7 @@ from samples import assert_same_leaves, reference_jit, with_bad_rows
 import kit
 
 CHUNKS = importlib.import_module("ks_jax.batch.chunks")
+STAGES = importlib.import_module("ks_jax.batch.stages")
 
 # ``jax.vmap(exchange)`` jitted once for the file (one compile per batch shape and dtype; the trace, and so
 # whether it runs in chunks, is the one made under the test's CHUNK_ROWS)
@@ -192,3 +193,20 @@ def test_float32_inputs_stay_float32_with_x64(random_cases, small_chunks):
         floats = [x for x in jax.tree_util.tree_leaves(result) if np.asarray(x).dtype.kind == "f"]
         assert len(floats) == 38 and all(np.asarray(x).dtype == np.float32 for x in floats)
         kit.assert_matches(kit.engine_dict(result), kit.reference_batch(cases), kit.RTOL_FLOAT32, cases)
+
+
+def test_a_blocked_stage_over_more_rows_than_a_block_equals_it_over_all_rows_at_once():
+    """``stages.in_blocks`` (the CPU's path of a motion over a file or sweep of more than a block of cases): 10 rows in
+    blocks of 4, the last padded with copies of the last row, give each row what the vmapped stage gives it over all
+    the rows at once; arguments without rows (axis None, whole or as a leaf of a tree) reach every block whole."""
+    rng = np.random.default_rng(0)
+    x, scale = jnp.asarray(rng.normal(size=(10, 3))), jnp.asarray(1.5)
+    tree = {"a": jnp.asarray(rng.normal(size=10)), "b": jnp.asarray([2.0, -0.5])}
+    axes = (0, None, {"a": 0, "b": None})
+    stage = jax.vmap(lambda x, c, t: (jnp.sin(x).sum() * c + t["a"] * t["b"].sum(), x * t["a"]), in_axes=axes)
+    want = stage(x, scale, tree)
+    for rows in (4, 10, 16):  # three blocks, one, and more rows in a block than the batch has
+        got = jax.jit(STAGES.in_blocks(stage, rows, axes))(x, scale, tree)
+        for g, w in zip(got, want):
+            assert g.shape == w.shape
+            np.testing.assert_allclose(g, w, rtol=1e-14, atol=0)  # the same rows; vectorised apart, to rounding
