@@ -453,10 +453,38 @@ def test_seed_001_both_speeds_move_together():
     ({"vehicles[1].speed": {"bounds": [0, 30]}},
      [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6 mph", "sigma": "-0.5 mph"}],
      "sigma = -0.5 mph (-0.22352 m/s): must be positive"),
+    # the sections' shapes, as a case file may get them wrong
+    ({}, SEED_EVIDENCE, "unknowns: empty (name at least one input to fit)"),
+    ("vehicles[1].speed", SEED_EVIDENCE, "unknowns: must be a map from input paths to bounds, got 'vehicles[1].speed'"),
+    ({"vehicles[1].speed": 5}, SEED_EVIDENCE, "unknowns: vehicles[1].speed = 5: must be a map with 'bounds'"),
+    ({"vehicles[1].speed": {"bounds": [0, 30], "bound": 1}}, SEED_EVIDENCE,
+     "unknowns: vehicles[1].speed.bound: unknown field (known: bounds, start, prior)"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}, "vehicles[1]. speed": {"bounds": [0, 30]}}, SEED_EVIDENCE,
+     "unknowns: vehicles[1].speed is named twice"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}}, [], "evidence: must be a non-empty list"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}}, ["vehicles[0].delta_v_magnitude"],
+     "evidence[0] = 'vehicles[0].delta_v_magnitude': must be {"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}}, [dict(SEED_EVIDENCE[0], units="mph")],
+     "evidence[0].units: unknown field (known: quantity, value, sigma, time, note, source)"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}}, [{"quantity": "vehicles[0].delta_v_magnitude", "value": "6 mph"}],
+     "evidence[0]: needs quantity, value and sigma"),
+    # an event data recorder's table of speeds before the impact
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].speed", "time": ["-1 s", "-2 s"], "value": ["20 mph"], "sigma": "1 mph"}],
+     "evidence[0]: a table: time and value must be lists of the same length (1 to 200), got 2 time(s) and 1 value(s)"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].speed", "time": ["-1 s", "-2 s"], "value": ["20 mph", "21 mph"], "sigma": ["1 mph"]}],
+     "evidence[0].sigma: one sigma for the whole table, or a list as long as its times (2)"),
+    ({"vehicles[1].speed": {"bounds": [0, 30]}},
+     [{"quantity": "vehicles[0].speed@-1s", "time": "-1 s", "value": "20 mph", "sigma": "1 mph"}],
+     "evidence[0]: vehicles[0].speed@-1s: give the time once, either after '@' in the quantity or as \"time\""),
 ])
 def test_bad_unknowns_and_evidence_are_refused(unknowns, evidence, words):
-    with pytest.raises(CaseError, match=re.escape(words)):
-        fit.reconstruct(load_case(SEED), unknowns, evidence)
+    """Each refused with the case's name, the field, the value and the rule."""
+    case = load_case(SEED)
+    with pytest.raises(CaseError, match=re.escape(words)) as err:
+        fit.reconstruct(case, unknowns, evidence)
+    assert f"case '{case.name}'" in str(err.value)
 
 
 @jax.jit
