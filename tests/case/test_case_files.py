@@ -13,7 +13,7 @@ import pytest
 
 import ks_jax
 from ks_jax.case import CaseError, CaseWarning, at_rest_after, case_from_dict, defined_output
-from samples import US_CASE, run_cli, si_twin
+from samples import CASES, SEED0, US_CASE, run_cli, si_twin
 
 
 @pytest.mark.slow
@@ -138,6 +138,41 @@ def test_paths_refuse_unknown_names():
     for value in ("20 mph", None, [1.0, 2.0]):
         with pytest.raises(CaseError, match="the value must be one number, in SI units"):
             ks_jax.set_input(case.inputs, "vehicles[1].speed", value)
+
+
+NO_ROAD_WORDS = "the case has no road, so no motion to rest: give it one"
+
+
+@pytest.mark.parametrize("road, path, words", [
+    # inputs (get_input, set_input, a sweep's --over, a fit's unknowns read them so)
+    (True, "exchanges[0].time", "a result, not an input"),
+    (True, "interaction.foo", "the later exchanges' inputs are interaction.restitution, interaction.friction, "
+                              "interaction.penetration_time"),
+    (True, "vehicles[0].brake[4]", "'brake' holds four wheels' fractions: name one, brake[0] .. brake[3]"),
+    (True, "vehicles[0].brake", "'brake' holds four wheels' fractions"),
+    (True, "vehicles[0].approach[0].speed", "a result of vehicles[0]'s approach"),
+    (True, "road.grade", "the road's one input is road.friction"),
+    (True, "vehicles[0].weight", "a case's weight sets its mass: use vehicles[0].mass, in lb where weights are in lbf"),
+    (True, "vehicles[0].velocity", "(vary speed and course instead)"),
+    (False, "road.friction", NO_ROAD_WORDS),
+    (False, "interaction.restitution", NO_ROAD_WORDS),
+    # outputs (get_output, a sweep's outputs, a fit's evidence check them so)
+    (None, "vehicles[99].speed", "vehicle index must be 0 to 7 (a case has at most 8 vehicles)"),
+    (None, "road.friction", "road.friction is an input, not a result"),
+    (None, "vehicles[0].speed@1.0.x", "the time after '@' (1.0.x): '1.0.x' is not a '<number> <unit>' quantity"),
+    (None, "vehicles[0].speed@1e9 s", "the time after '@' must be finite, within +/-3600 s of the impact"),
+    (None, "vehicles[0].position@1 s", "'position' is a vector: name a component, e.g. vehicles[0].position[0]@1"),
+    (None, "vehicles[0].position[5]@1 s", "index out of range (0..1)"),
+    (None, "vehicles[0].speed[0]@1 s", "'speed' is a number and takes no index"),
+])
+def test_a_path_that_breaks_a_rule_is_refused_naming_the_path_and_the_rule(road, path, words):
+    """road: an input path read from a case with a road (True) or without (False); None: an output path checked."""
+    with pytest.raises(ks_jax.case.PathError) as err:
+        if road is None:
+            ks_jax.case.check_output_path(path)
+        else:
+            ks_jax.get_input(ks_jax.load_case(CASES / "rest_seed_000.json" if road else SEED0).inputs, path)
+    assert str(err.value).startswith(f"path '{path}': ") and words in str(err.value)
 
 
 def test_unknown_field_is_ignored_with_a_warning_naming_it(tmp_path, capsys):
