@@ -492,6 +492,25 @@ def test_a_long_sweep_shows_a_bar(capsys, monkeypatch):
     assert capsys.readouterr().err == ""
 
 
+def test_without_tqdm_progress_is_a_plain_line_on_stderr(monkeypatch, capsys):
+    """tqdm is an extra (``progress``): without it, long work shows a line that counts to its total and ends there,
+    at most once a second between, nothing before its delay, and nothing at all where progress is turned off."""
+    monkeypatch.setitem(sys.modules, "tqdm.auto", None)  # what "import tqdm.auto" finds: an ImportError
+    bar = ks_jax.progress.Progress(40, "ks-jax sweep", "rows", delay=0.0)
+    assert bar.bar is None
+    for _ in range(5):
+        bar.update(8)
+    bar.close()
+    err = capsys.readouterr().err
+    assert err.startswith("\rks-jax sweep: 8/40 rows (20%, ")  # the first update is shown, later ones once a second
+    assert re.search(r"\rks-jax sweep: 40/40 rows \(100%, [0-9.e+]+/s\)\n$", err) and err.count("\n") == 1
+    for quiet in (ks_jax.progress.Progress(40, "x", "rows", enabled=False),
+                  ks_jax.progress.Progress(40, "x", "rows", delay=60.0)):
+        quiet.update(40)
+        quiet.close()
+    assert capsys.readouterr().err == ""
+
+
 @pytest.mark.slow
 def test_a_product_of_inertia_keeps_the_tensor_symmetric():
     """Sweeping inertia[0][1] sets [1][0] too (a product of inertia is one number of a symmetric
