@@ -608,7 +608,7 @@ with warnings.catch_warnings(record=True) as caught:
         r = ks_jax.solve(case_from_dict(d)).result
         out[name] = {"rest": [x.rest_position.tolist() for x in r.rest],
                      "rest_dtype": str(r.rest[0].rest_position.dtype),
-                     "approach": [a.position.tolist() for a in r.approach], "point": r.contact.point[:2].tolist()}
+                     "approach": [a.position.tolist() for a in r.approach], "point": [r.contact.point[:2].tolist()]}
     out["warned"] = [str(w.message) for w in caught if w.category is CaseWarning]
 print(json.dumps(out))
 """
@@ -630,12 +630,10 @@ def test_float32_scene_far_from_the_origin_with_a_road_comes_back_to_rest_where_
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     near, far = out["near"], out["far"]
     assert out["warned"] == [] and near["rest_dtype"] == "float32" and far["rest_dtype"] == "float64"
-    for key in ("point", "rest", "approach"):
-        moved_back = [np.asarray(x) - shift for x in far[key]] if key != "point" else [np.asarray(far[key]) - shift]
-        at_origin = near[key] if key != "point" else [near[key]]
-        assert len(moved_back) == len(at_origin) == (1 if key == "point" else 2)
-        for w, v in zip(moved_back, at_origin):
-            np.testing.assert_allclose(w, np.asarray(v), rtol=0, atol=1e-4, err_msg=key)  # float32's rounding
+    for key, count in (("point", 1), ("rest", 2), ("approach", 2)):  # the centroid; each vehicle's rest, approach
+        assert len(far[key]) == len(near[key]) == count
+        for w, v in zip(far[key], near[key]):
+            np.testing.assert_allclose(np.asarray(w) - shift, v, rtol=0, atol=1e-4, err_msg=key)  # float32's rounding
 
 
 @pytest.mark.slow
